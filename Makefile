@@ -1,0 +1,41 @@
+# Two commands do everything on a fresh Debian/Ubuntu machine:
+#   make render   set up (OpenCL, venv, package) and render the default scene to out/
+#   make test     set up and run the test suite
+# Every step is idempotent: a second run only does what is missing.
+
+VENV   ?= .venv
+PYTHON ?= python3
+PY     := $(VENV)/bin/python
+SCENE  ?= scenes/cornell_box.toml
+
+.PHONY: render test bench setup opencl clean
+
+render: setup
+	$(VENV)/bin/oclgi render $(SCENE) -o out/$(basename $(notdir $(SCENE))).exr
+
+test: setup
+	$(PY) -m pytest -q
+
+bench: setup $(VENV)/.bench
+	$(PY) -m pytest bench -q --benchmark-json=bench/results/latest.json
+
+setup: $(VENV)/.installed opencl
+
+# The package and its test extras, reinstalled when the metadata changes.
+$(VENV)/.installed: setup.cfg pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test]'
+	touch $@
+
+$(VENV)/.bench: $(VENV)/.installed
+	$(PY) -m pip install -q -e '.[test,bench]'
+	touch $@
+
+# Debian's PoCL when no OpenCL CPU device answers (never the PyPI PoCL wheel:
+# its PoCL 3.0 fails on AVX-512 CPUs with "unknown target CPU 'generic'").
+opencl: $(VENV)/.installed
+	@sh tools/ensure-opencl.sh $(PY)
+
+clean:
+	rm -rf $(VENV) out build *.egg-info

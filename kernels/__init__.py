@@ -1,0 +1,1 @@
+"""OpenCL C sources of oclgi (installed as package data: *.cl and *.h)."""

@@ -1,0 +1,47 @@
+/* bvh_query.cl: batches of ray queries against the scene BVH.
+ *
+ * bvh_query_closest  one work-item per ray: origins (xyz, w = tmax) and
+ *                    directions (xyz) in, hits (t, u, v, as_float(tri)) out.
+ * bvh_query_any      one work-item per ray: 1 when anything is hit before tmax.
+ * bvh_query_locate   one work-item per point: the triangle under a point
+ *                    (within delta along its normal, either side) and the
+ *                    barycentrics of the foot point; tri = -1 when none.
+ */
+#include "bvh.h"
+
+__kernel void bvh_query_closest(__global const BvhNode *nodes, __global const Tri *tris,
+                                __global const float4 *origins, __global const float4 *dirs,
+                                int n, __global float4 *hits)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 o = origins[i];
+    Hit h;
+    bvh_closest_hit(nodes, tris, o.xyz, dirs[i].xyz, o.w, &h);
+    hits[i] = (float4)(h.tri >= 0 ? h.t : INFINITY, h.u, h.v, as_float(h.tri));
+}
+
+__kernel void bvh_query_any(__global const BvhNode *nodes, __global const Tri *tris,
+                            __global const float4 *origins, __global const float4 *dirs,
+                            int n, __global int *hit)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float4 o = origins[i];
+    hit[i] = bvh_any_hit(nodes, tris, o.xyz, dirs[i].xyz, o.w);
+}
+
+__kernel void bvh_query_locate(__global const BvhNode *nodes, __global const Tri *tris,
+                               __global float4 *positions, __global const float4 *normals,
+                               int n, float delta, __global float2 *barys)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float3 p = positions[i].xyz, nrm = normals[i].xyz;
+    Hit h;
+    /* from above the surface down, then from below up */
+    if (bvh_closest_hit(nodes, tris, p + delta * nrm, -nrm, 2.0f * delta, &h) < 0)
+        bvh_closest_hit(nodes, tris, p - delta * nrm, nrm, 2.0f * delta, &h);
+    positions[i].w = as_float(h.tri);
+    barys[i] = h.tri >= 0 ? (float2)(h.u, h.v) : (float2)(0.0f, 0.0f);
+}

@@ -1,0 +1,74 @@
+/* detp.cl: plain DETP, the oracle for every accelerated variant.
+ *
+ * detp_plain    one work-item per DETP_LANES (8) consecutive query points,
+ *               held in float8 lanes: every segment slot of a batch
+ *               (n_slots = paths * max_depth) is tested against the 8 discs
+ *               at once with DETP_TEST (detp.h), and the fixed-point power
+ *               of a crossing segment is added to that point's sums. A
+ *               work-item owns its points, so no atomics; batches run in
+ *               order. (PoCL does not vectorise loops across work-items, so
+ *               the lanes are explicit.)
+ * detp_resolve  one work-item per point: E = acc / (scale * pi d^2).
+ *
+ * count_emitted = 0 skips segments leaving the light (bounce 0), i.e. the
+ * estimate is of indirect light only.
+ */
+#include "oclgi_types.h"
+#include "detp.h"
+
+#define DETP_LANES 8
+
+__kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
+                         int n_points, __global const float4 *segments, int n_paths,
+                         int max_depth, int count_emitted, float radius2, float ext,
+                         float scale, __global long *acc)
+{
+    int base = get_global_id(0) * DETP_LANES;
+    if (base >= n_points) return;
+    float px[DETP_LANES], py[DETP_LANES], pz[DETP_LANES], qx[DETP_LANES], qy[DETP_LANES], qz[DETP_LANES];
+    for (int k = 0; k < DETP_LANES; ++k) {
+        int i = min(base + k, n_points - 1);
+        float4 p = positions[i], n = normals[i];
+        if (base + k >= n_points) n = (float4)(0.0f); /* padding lane: never crosses */
+        px[k] = p.x; py[k] = p.y; pz[k] = p.z; qx[k] = n.x; qy[k] = n.y; qz[k] = n.z;
+    }
+    float8 x = vload8(0, px), y = vload8(0, py), z = vload8(0, pz);
+    float8 nx = vload8(0, qx), ny = vload8(0, qy), nz = vload8(0, qz);
+    long8 sr = 0, sg = 0, sb = 0;
+    int b0 = count_emitted ? 0 : 1;
+    for (int p = 0; p < n_paths; ++p) {
+        __global const float4 *path = segments + (size_t)p * max_depth * 3;
+        for (int b = b0; b < max_depth; ++b) {
+            float4 f0 = path[3 * b], f1 = path[3 * b + 1];
+            if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* end of the path */
+            float tmax = f0.w + ext;
+            int8 hit;
+            DETP_TEST(float8, hit, x, y, z, nx, ny, nz, f0.x, f0.y, f0.z, f1.x, f1.y, f1.z, tmax, radius2);
+            if (any(hit)) {
+                float4 f2 = path[3 * b + 2];
+                long3 q = convert_long3_rte(f2.xyz * scale);
+                long8 m = convert_long8(hit) & 1;
+                sr += m * q.x;
+                sg += m * q.y;
+                sb += m * q.z;
+            }
+        }
+    }
+    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
+    vstore8(sr, 0, r); vstore8(sg, 0, g); vstore8(sb, 0, bl);
+    for (int k = 0; k < DETP_LANES && base + k < n_points; ++k) {
+        int i = base + k;
+        acc[3 * i + 0] += r[k];
+        acc[3 * i + 1] += g[k];
+        acc[3 * i + 2] += bl[k];
+    }
+}
+
+__kernel void detp_resolve(__global const long *acc, int n_points, float inv_norm,
+                           __global float4 *irradiance)
+{
+    int i = get_global_id(0);
+    if (i >= n_points) return;
+    irradiance[i] = (float4)((float)acc[3 * i], (float)acc[3 * i + 1], (float)acc[3 * i + 2], 0.0f)
+                    * inv_norm;
+}

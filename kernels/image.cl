@@ -1,0 +1,39 @@
+/* image.cl: radiance from irradiance, and tone mapping.
+ *
+ * image_shade     one work-item per pixel: L = Le (when the emitter's front
+ *                 is seen) + albedo * E / pi; background (tri = -1) is 0.
+ * image_tonemap   one work-item per pixel: exposure, clamp, sRGB encoding,
+ *                 8 bits per channel, alpha 255.
+ */
+#include "oclgi_types.h"
+
+__kernel void image_shade(__global const float4 *positions, __global const float4 *normals,
+                          __global const float4 *irradiance, __global const int *tri_material,
+                          __global const Material *materials, int n, __global float4 *radiance)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    int t = as_int(positions[i].w);
+    if (t < 0) { radiance[i] = (float4)(0.0f); return; }
+    __global const Material *m = &materials[tri_material[t]];
+    float3 L = vload3(0, m->albedo) * irradiance[i].xyz * (1.0f / OCLGI_PI);
+    if (normals[i].w > 0.5f) L += vload3(0, m->emission);
+    radiance[i] = (float4)(L, 1.0f);
+}
+
+inline float srgb_encode(float c)
+{
+    c = clamp(c, 0.0f, 1.0f);
+    return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
+}
+
+__kernel void image_tonemap(__global const float4 *radiance, int n, float exposure,
+                            __global uchar4 *pixels)
+{
+    int i = get_global_id(0);
+    if (i >= n) return;
+    float3 c = radiance[i].xyz * exposure;
+    pixels[i] = (uchar4)(convert_uchar_sat_rte(255.0f * srgb_encode(c.x)),
+                         convert_uchar_sat_rte(255.0f * srgb_encode(c.y)),
+                         convert_uchar_sat_rte(255.0f * srgb_encode(c.z)), (uchar)255);
+}

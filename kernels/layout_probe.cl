@@ -1,0 +1,21 @@
+/* layout_probe.cl: reports sizeof and offsetof of every shared struct, in
+ * the order of oclgi/cl/layout.py (struct by struct, size first, then each
+ * field), so tests/test_layout.py can compare them with the numpy dtypes.
+ * Entry point: layout_probe, one work-item. */
+#include "oclgi_types.h"
+
+#define SIZE(T) out[i++] = (int)sizeof(T)
+#define OFF(T, f) out[i++] = (int)offsetof(T, f)
+
+__kernel void layout_probe(__global int *out)
+{
+    int i = 0;
+    SIZE(BvhNode); OFF(BvhNode, lo); OFF(BvhNode, first); OFF(BvhNode, hi); OFF(BvhNode, count);
+    SIZE(Tri); OFF(Tri, v0); OFF(Tri, id); OFF(Tri, e1); OFF(Tri, pad1); OFF(Tri, e2); OFF(Tri, pad2);
+    SIZE(Segment); OFF(Segment, org); OFF(Segment, t_end); OFF(Segment, dir); OFF(Segment, tri);
+    OFF(Segment, power); OFF(Segment, path);
+    SIZE(Material); OFF(Material, albedo); OFF(Material, survive); OFF(Material, emission); OFF(Material, pad);
+    SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
+    OFF(Emitter, e2); OFF(Emitter, pad1); OFF(Emitter, power); OFF(Emitter, pad2);
+    out[i++] = -1; /* end marker */
+}

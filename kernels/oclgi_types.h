@@ -1,0 +1,74 @@
+/* oclgi_types.h: structs shared with the host, constants and defaults.
+ *
+ * Mirrors oclgi/cl/layout.py field for field; tests/test_layout.py checks
+ * sizes and offsets through layout_probe.cl. No float3 in these structs
+ * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3.
+ *
+ * Fixed-point sums (DESIGN.md section 2): every contribution is a power
+ * (watts, per channel) quantised once as convert_long_rte(power * scale),
+ * then added with 64-bit integer atomics, so sums are order-independent.
+ * The host picks scale = 2^OCLGI_FIXED_BITS / phi_max, phi_max the largest
+ * per-photon power of any channel. Russian roulette survives with the max
+ * albedo, so no segment carries more than phi_max: one contribution is at
+ * most 2^24, and a sum over n_paths * max_depth contributions stays below
+ * 2^(24 + 30 + 8) = 2^62 < 2^63 for 10^9 photons and max_depth <= 256 (the
+ * host enforces both limits). Resolution: 2^-24 of a photon's power.
+ */
+#ifndef OCLGI_TYPES_H
+#define OCLGI_TYPES_H
+
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+
+#ifndef OCLGI_BVH_STACK_SIZE
+#define OCLGI_BVH_STACK_SIZE 64
+#endif
+
+#define OCLGI_PI 3.14159265358979323846f
+
+typedef struct {
+    float lo[3];
+    int first;   /* inner: left child (right = first + 1); leaf: first triangle */
+    float hi[3];
+    int count;   /* 0 for inner nodes */
+} BvhNode;
+
+typedef struct {
+    float v0[3];
+    int id;      /* triangle id in scene order */
+    float e1[3];
+    int pad1;
+    float e2[3];
+    int pad2;
+} Tri;
+
+typedef struct {
+    float org[3];
+    float t_end; /* distance to the hit; INFINITY when the segment escapes */
+    float dir[3];
+    int tri;     /* hit triangle (scene order), -1 when none */
+    float power[3];
+    int path;    /* global path id */
+} Segment;
+
+typedef struct {
+    float albedo[3];
+    float survive;     /* Russian-roulette survival probability */
+    float emission[3]; /* radiance, emitted on the normal's side */
+    int pad;
+} Material;
+
+#define EMITTER_TRIANGLE 0
+#define EMITTER_POINT 1
+
+typedef struct {
+    float p[3];
+    int kind;
+    float e1[3];
+    int tri;
+    float e2[3];
+    int pad1;
+    float power[3]; /* emitter power / selection probability */
+    int pad2;
+} Emitter;
+
+#endif

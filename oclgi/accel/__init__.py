@@ -1,0 +1,1 @@
+"""Acceleration structures: the BVH builder (host) and its device form."""

@@ -1,0 +1,122 @@
+"""Linear BVH builder (Morton order, Karras-style splits), vectorised numpy.
+
+The builder sees only primitive boxes: it returns the flattened nodes and the
+primitive order, and the caller permutes its primitives (triangles now,
+instances in a top level later). Primitives are sorted by the 30-bit Morton
+code of their box centre; a node over a sorted range splits where the highest
+bit that differs across the range flips (the middle when all codes are
+equal), until at most ``leaf_size`` primitives remain. The tree is built one
+level at a time over all nodes of the level, so the cost is a sort plus
+O(depth) vector passes: about a second for a million triangles.
+
+Node layout (``oclgi.cl.layout.BvhNode``): children of an inner node are
+adjacent, nodes are numbered level by level, root 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cl.layout import BvhNode
+
+
+@dataclass
+class BvhData:
+    nodes: np.ndarray  # BvhNode records
+    order: np.ndarray  # primitive ids in leaf order
+    depth: int  # number of levels (root = 1)
+
+
+def _spread_bits(x: np.ndarray) -> np.ndarray:
+    """10-bit integers -> every third bit of a 30-bit word."""
+    x = x.astype(np.uint64) & 0x3FF
+    x = (x | (x << 16)) & 0x030000FF
+    x = (x | (x << 8)) & 0x0300F00F
+    x = (x | (x << 4)) & 0x030C30C3
+    x = (x | (x << 2)) & 0x09249249
+    return x
+
+
+def morton_codes(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    ext = np.maximum(hi - lo, 1e-30)
+    q = np.clip(((points - lo) / ext * 1024.0).astype(np.int64), 0, 1023)
+    return (_spread_bits(q[:, 0]) << 2) | (_spread_bits(q[:, 1]) << 1) | _spread_bits(q[:, 2])
+
+
+def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> BvhData:
+    box_lo = np.asarray(box_lo, dtype=np.float32)
+    box_hi = np.asarray(box_hi, dtype=np.float32)
+    n = len(box_lo)
+    if n == 0:
+        raise ValueError("cannot build a BVH over no primitives")
+    centres = 0.5 * (box_lo.astype(np.float64) + box_hi)
+    codes = morton_codes(centres, centres.min(axis=0), centres.max(axis=0))
+    order = np.argsort(codes, kind="stable")
+    codes = codes[order]
+
+    # Level by level: (start, end) ranges of the nodes of the current level.
+    first = [np.zeros(1, np.int64)]  # per level: child index or first primitive
+    count = [np.zeros(1, np.int64)]
+    starts, ends = np.zeros(1, np.int64), np.full(1, n, np.int64)
+    levels_se = [(starts, ends)]
+    next_id = 1
+    while True:
+        size = ends - starts
+        inner = size > leaf_size
+        f = starts.copy()
+        c = size.copy()
+        n_inner = int(inner.sum())
+        if n_inner == 0:
+            first[-1], count[-1] = f, c
+            break
+        s, e = starts[inner], ends[inner]
+        diff = codes[s] ^ codes[e - 1]
+        split = (s + e) // 2
+        nz = diff != 0
+        if nz.any():
+            _, exp = np.frexp(diff[nz].astype(np.float64))
+            bit = (exp - 1).astype(np.uint64)
+            target = ((codes[s[nz]] >> bit) | np.uint64(1)) << bit
+            split[nz] = np.searchsorted(codes, target, side="left")
+        child = next_id + 2 * np.arange(n_inner)
+        f[inner] = child
+        c[inner] = 0
+        first[-1], count[-1] = f, c
+        next_id += 2 * n_inner
+        starts = np.empty(2 * n_inner, np.int64)
+        ends = np.empty(2 * n_inner, np.int64)
+        starts[0::2], ends[0::2] = s, split
+        starts[1::2], ends[1::2] = split, e
+        first.append(None)
+        count.append(None)
+        levels_se.append((starts, ends))
+
+    first_all = np.concatenate(first)
+    count_all = np.concatenate(count)
+    n_nodes = len(first_all)
+    lo = np.empty((n_nodes, 3), np.float32)
+    hi = np.empty((n_nodes, 3), np.float32)
+    # leaves: reduce the sorted primitive boxes over their ranges (leaves tile [0, n))
+    leaf = count_all > 0
+    leaf_ids = np.nonzero(leaf)[0]
+    leaf_ids = leaf_ids[np.argsort(first_all[leaf_ids], kind="stable")]
+    slo, shi = box_lo[order], box_hi[order]
+    lo[leaf_ids] = np.minimum.reduceat(slo, first_all[leaf_ids], axis=0)
+    hi[leaf_ids] = np.maximum.reduceat(shi, first_all[leaf_ids], axis=0)
+    # inner nodes, deepest level first
+    level_start = np.cumsum([0] + [len(x) for x in first])
+    for lvl in range(len(first) - 1, -1, -1):
+        ids = np.arange(level_start[lvl], level_start[lvl + 1])
+        ids = ids[count_all[ids] == 0]
+        if len(ids) == 0:
+            continue
+        c0 = first_all[ids]
+        lo[ids] = np.minimum(lo[c0], lo[c0 + 1])
+        hi[ids] = np.maximum(hi[c0], hi[c0 + 1])
+
+    nodes = np.zeros(n_nodes, dtype=BvhNode)
+    nodes["lo"], nodes["hi"] = lo, hi
+    nodes["first"], nodes["count"] = first_all, count_all
+    return BvhData(nodes=nodes, order=order, depth=len(first))

@@ -1,0 +1,1 @@
+"""OpenCL plumbing: device choice, the program cache and shared struct layouts."""

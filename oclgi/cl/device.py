@@ -1,0 +1,107 @@
+"""Choosing the OpenCL device.
+
+Order of precedence: an explicit ``device`` argument (the CLI's ``--device``),
+then ``OCLGI_DEVICE``, then ``PYOPENCL_CTX`` (pyopencl's own convention), then
+the first CPU device of a PoCL platform, then the first device found.
+
+A device spec is ``"P:D"`` (platform and device indices, as ``oclgi info``
+lists them) or a case-insensitive substring of the platform or device name.
+"""
+
+from __future__ import annotations
+
+import os
+
+import pyopencl as cl
+
+from ..errors import OclgiError
+
+INSTALL_HINT = "install an OpenCL runtime, e.g. `apt-get install pocl-opencl-icd` (or run `make setup`)"
+
+
+def list_devices() -> list[tuple[int, int, cl.Device]]:
+    """All (platform index, device index, device) triples; empty when none."""
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return []
+    out = []
+    for pi, p in enumerate(platforms):
+        try:
+            devs = p.get_devices()
+        except cl.Error:
+            continue
+        out.extend((pi, di, d) for di, d in enumerate(devs))
+    return out
+
+
+def _match(spec: str, devices):
+    spec = spec.strip()
+    if ":" in spec and all(s.strip().isdigit() for s in spec.split(":", 1)):
+        pi, di = (int(s) for s in spec.split(":", 1))
+        for p, d, dev in devices:
+            if (p, d) == (pi, di):
+                return dev
+        raise OclgiError(f"no OpenCL device {spec!r}; `oclgi info` lists them")
+    if spec.isdigit():
+        # pyopencl's PYOPENCL_CTX accepts a bare platform index.
+        for p, _d, dev in devices:
+            if p == int(spec):
+                return dev
+        raise OclgiError(f"no OpenCL platform {spec!r}; `oclgi info` lists them")
+    low = spec.lower()
+    for _p, _d, dev in devices:
+        if low in dev.name.lower() or low in dev.platform.name.lower():
+            return dev
+    raise OclgiError(f"no OpenCL device matches {spec!r}; `oclgi info` lists them")
+
+
+def choose_device(spec: str | None = None) -> cl.Device:
+    devices = list_devices()
+    if not devices:
+        raise OclgiError(f"no OpenCL platform found: {INSTALL_HINT}")
+    spec = spec or os.environ.get("OCLGI_DEVICE") or os.environ.get("PYOPENCL_CTX")
+    if spec:
+        return _match(spec, devices)
+    for _p, _d, dev in devices:
+        if "portable computing language" in dev.platform.name.lower() and dev.type & cl.device_type.CPU:
+            return dev
+    return devices[0][2]
+
+
+def check_device(dev: cl.Device) -> None:
+    """The engine needs 64-bit integer atomics for its order-independent sums."""
+    ext = dev.extensions.split()
+    if "cl_khr_int64_base_atomics" not in ext:
+        raise OclgiError(
+            f"OpenCL device {dev.name!r} lacks cl_khr_int64_base_atomics, which oclgi's "
+            "fixed-point accumulation needs; choose another device with --device / OCLGI_DEVICE"
+        )
+
+
+def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
+    dev = choose_device(spec)
+    check_device(dev)
+    ctx = cl.Context([dev])
+    queue = cl.CommandQueue(ctx)
+    return ctx, queue
+
+
+def describe_devices() -> str:
+    devices = list_devices()
+    if not devices:
+        return f"no OpenCL platform found: {INSTALL_HINT}"
+    try:
+        chosen = choose_device()
+    except OclgiError:
+        chosen = None
+    lines = []
+    for pi, di, d in devices:
+        mark = "*" if chosen is not None and d.int_ptr == chosen.int_ptr else " "
+        lines.append(
+            f"{mark} {pi}:{di}  {d.platform.name} | {d.name} | {cl.device_type.to_string(d.type)} | "
+            f"{d.max_compute_units} units | {d.global_mem_size / 2**30:.1f} GiB "
+            f"(max alloc {d.max_mem_alloc_size / 2**30:.1f} GiB) | {d.version}"
+        )
+    lines.append("* = default (override with --device P:D, OCLGI_DEVICE or PYOPENCL_CTX)")
+    return "\n".join(lines)

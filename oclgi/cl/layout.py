@@ -1,0 +1,48 @@
+"""numpy dtypes of every struct shared with the kernels.
+
+The C side is ``kernels/oclgi_types.h``; ``tests/test_layout.py`` builds
+``kernels/layout_probe.cl`` and checks that sizes and field offsets agree, so
+a change on one side without the other fails the tests. Structs use
+``float[3]`` + a 4-byte field rather than ``float3`` (which OpenCL pads to 16
+bytes) so that every layout is plain and 16-byte aligned.
+"""
+
+import numpy as np
+
+f4, i4 = np.float32, np.int32
+
+# BVH node, 32 bytes. Inner node: count == 0, children at first and first+1
+# (siblings are adjacent). Leaf: triangles [first, first + count).
+BvhNode = np.dtype([("lo", f4, 3), ("first", i4), ("hi", f4, 3), ("count", i4)])
+
+# Triangle in BVH order, 48 bytes: vertex 0 and the two edges (Moller-Trumbore
+# needs nothing else), and the triangle's id in scene order.
+Tri = np.dtype([("v0", f4, 3), ("id", i4), ("e1", f4, 3), ("pad1", i4), ("e2", f4, 3), ("pad2", i4)])
+
+# One stored path segment, 48 bytes, at slot path * max_depth + bounce.
+# t_end is the distance to the hit (inf when the segment leaves the scene);
+# tri is the hit triangle (scene order) or -1; an empty slot is all zeros.
+Segment = np.dtype(
+    [("org", f4, 3), ("t_end", f4), ("dir", f4, 3), ("tri", i4), ("power", f4, 3), ("path", i4)]
+)
+
+# Diffuse material, 32 bytes: albedo, Russian-roulette survival probability
+# (max albedo, clamped to 1), emitted radiance (one-sided, along the normal).
+Material = np.dtype([("albedo", f4, 3), ("survive", f4), ("emission", f4, 3), ("pad", i4)])
+
+# Emitter, 64 bytes. kind 0: triangle (p = v0, e1, e2 its edges); kind 1:
+# point light at p. power = emitter power / its selection probability, so a
+# photon carries power / n_paths.
+Emitter = np.dtype(
+    [
+        ("p", f4, 3), ("kind", i4),
+        ("e1", f4, 3), ("tri", i4),
+        ("e2", f4, 3), ("pad1", i4),
+        ("power", f4, 3), ("pad2", i4),
+    ]
+)
+
+STRUCTS = {"BvhNode": BvhNode, "Tri": Tri, "Segment": Segment, "Material": Material, "Emitter": Emitter}
+
+EMITTER_TRIANGLE = 0
+EMITTER_POINT = 1

@@ -1,0 +1,202 @@
+"""The engine: a scene on an OpenCL device; trace, estimate, render.
+
+>>> import oclgi
+>>> scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
+>>> engine = oclgi.Engine(scene)
+>>> result = engine.render(photons=20_000, width=32, height=32)
+>>> result.radiance.shape
+(32, 32, 3)
+>>> bool(result.radiance.max() > 0)
+True
+>>> result.stats.segments > result.stats.photons
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from . import queries
+from .cl.device import create_context
+from .cl.programs import launch, programs
+from .errors import OclgiError
+from .estimators import ESTIMATORS
+from .photon_trace import PhotonTracer
+from .scene.compiled import CompiledScene
+from .scene.description import check_method, validate_camera
+from .scene.scene import MAX_PHOTONS, Camera, Scene
+
+DEFAULT_BATCH_BYTES = 256 << 20
+
+
+@dataclass
+class Stats:
+    photons: int = 0
+    segments: int = 0
+    points: int = 0
+    method: str = ""
+    radius: float = 0.0
+    seconds: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        t = " ".join(f"{k} {v:.2f}s" for k, v in self.seconds.items())
+        return (f"{self.method}: {self.photons:,} photons, {self.segments:,} segments, "
+                f"{self.points:,} points, radius {self.radius:.4g} | {t}")
+
+
+@dataclass
+class Estimate:
+    irradiance: np.ndarray  # (n, 3) float32, W/m^2 per channel
+    accumulators: np.ndarray  # int64 fixed-point sums (per point for DETP, per triangle for Impact Count)
+    scale: float  # fixed-point units per watt
+    stats: Stats
+    points: queries.QueryPoints
+
+
+@dataclass
+class Render:
+    radiance: np.ndarray  # (H, W, 3) float32
+    pixels: np.ndarray  # (H, W, 4) uint8, tone-mapped sRGB
+    estimate: Estimate
+
+    @property
+    def stats(self) -> Stats:
+        return self.estimate.stats
+
+
+class Engine:
+    """A scene compiled for one OpenCL device.
+
+    ``device``: a spec as ``oclgi info`` lists ("P:D" or a name substring);
+    default OCLGI_DEVICE / PYOPENCL_CTX / the PoCL CPU device.
+    ``local_size``: work-group size of the kernels (None: the runtime's
+    choice); results do not depend on it.
+    """
+
+    def __init__(self, scene: Scene, device: str | None = None, local_size: int | None = None,
+                 batch_bytes: int = DEFAULT_BATCH_BYTES, progress: bool | None = None):
+        self.scene = scene
+        self.ctx, self.queue = create_context(device)
+        self.local_size = local_size
+        self.batch_bytes = batch_bytes
+        self.progress = progress
+        t0 = time.perf_counter()
+        self.compiled = CompiledScene(self.ctx, scene)
+        self.setup_seconds = time.perf_counter() - t0
+        self._programs = programs(self.ctx)
+
+    # -- query points -------------------------------------------------------
+    def camera_points(self, camera: Camera | None = None, width: int | None = None,
+                      height: int | None = None) -> queries.QueryPoints:
+        cam = camera or self.scene.camera
+        if cam is None:
+            raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
+        if width or height:
+            cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
+        validate_camera(cam)
+        eye, fwd, right, up = cam.frame()
+        n = cam.width * cam.height
+        mf = cl.mem_flags
+        pos, nrm, bary = (cl.Buffer(self.ctx, mf.WRITE_ONLY, n * s) for s in (16, 16, 8))
+        k = self._programs.get("camera").camera_visible_points
+        c = self.compiled
+        as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
+        launch(self.queue, k, n, c.nodes, c.tris, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
+               np.int32(cam.width), np.int32(cam.height), pos, nrm, bary, local_size=self.local_size)
+        out = queries.QueryPoints(np.empty((n, 4), np.float32), np.empty((n, 4), np.float32),
+                                  np.empty((n, 2), np.float32), kind="camera", shape=(cam.height, cam.width))
+        for host, dev in ((out.positions, pos), (out.normals, nrm), (out.barys, bary)):
+            cl.enqueue_copy(self.queue, host, dev)
+        return out
+
+    def vertex_points(self) -> queries.QueryPoints:
+        return queries.vertex_points(self.scene)
+
+    # -- estimation -----------------------------------------------------------
+    def irradiance(self, points, method: str | None = None, photons: int | None = None,
+                   radius: float | None = None, seed: int | None = None, max_depth: int | None = None,
+                   extension: float | None = None, count_emitted: bool | None = None) -> Estimate:
+        """Irradiance at query points (a QueryPoints, or an (n, 6) array x y z nx ny nz)."""
+        if not isinstance(points, queries.QueryPoints):
+            a = np.asarray(points, dtype=np.float64)
+            if a.ndim != 2 or a.shape[1] != 6:
+                raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
+            points = queries.from_arrays(a[:, :3], a[:, 3:])
+        s = self.scene.settings
+        method = check_method(method or s.method)
+        photons = s.photons if photons is None else photons
+        if isinstance(photons, bool) or not isinstance(photons, (int, np.integer)) or not 0 < photons <= MAX_PHOTONS:
+            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {photons!r}")
+        radius = self.scene.radius if radius is None else radius
+        if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
+            raise OclgiError(f"radius must be a positive number, got {radius!r}")
+        seed = s.seed if seed is None else seed
+        max_depth = s.max_depth if max_depth is None else max_depth
+        extension = s.extension if extension is None else extension
+        count_emitted = s.count_emitted if count_emitted is None else count_emitted
+
+        stats = Stats(photons=int(photons), points=len(points), method=method, radius=float(radius))
+        t0 = time.perf_counter()
+        est = ESTIMATORS[method](self.queue, self.compiled, points, radius=radius, extension=extension,
+                                 count_emitted=count_emitted, local_size=self.local_size)
+        batch_paths = max(1, min(photons, self.batch_bytes // (max_depth * 48)))
+        tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, batch_paths, self.local_size)
+        scale = self.compiled.fixed_scale(photons)
+        from .progress import Progress
+
+        bar = Progress(f"{method}", photons, self.progress)
+        t_trace = t_est = 0.0
+        lens = np.empty(batch_paths, np.int32)
+        for offset in range(0, photons, batch_paths):
+            n = min(batch_paths, photons - offset)
+            ta = time.perf_counter()
+            batch = tracer.trace(offset, n, photons)
+            cl.enqueue_copy(self.queue, lens[:n], batch.path_len)  # also waits for the trace
+            stats.segments += int(lens[:n].sum())
+            tb = time.perf_counter()
+            est.accumulate(batch, scale)
+            self.queue.finish()
+            tc = time.perf_counter()
+            t_trace += tb - ta
+            t_est += tc - tb
+            bar.update(n)
+        bar.close()
+        irr_buf = est.resolve(scale)
+        irr = np.empty((len(points), 4), np.float32)
+        cl.enqueue_copy(self.queue, irr, irr_buf)
+        stats.seconds = {"setup": self.setup_seconds, "trace": t_trace, "estimate": t_est,
+                         "total": time.perf_counter() - t0}
+        self._last_irradiance = irr_buf
+        self._last_estimator = est
+        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points)
+
+    # -- images -----------------------------------------------------------------
+    def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
+               exposure: float = 1.0, **estimate_args) -> Render:
+        """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels."""
+        t0 = time.perf_counter()
+        pts = self.camera_points(camera, width, height)
+        t_cam = time.perf_counter() - t0
+        est = self.irradiance(pts, **estimate_args)
+        h, w = pts.shape
+        n = h * w
+        c = self.compiled
+        prog = self._programs.get("image")
+        mf = cl.mem_flags
+        pos = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.positions)
+        nrm = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.normals)
+        rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
+        pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
+        launch(self.queue, prog.image_shade, n, pos, nrm, self._last_irradiance, c.tri_material, c.materials,
+               np.int32(n), rad)
+        launch(self.queue, prog.image_tonemap, n, rad, np.int32(n), np.float32(exposure), pix)
+        radiance = np.empty((h, w, 4), np.float32)
+        pixels = np.empty((h, w, 4), np.uint8)
+        cl.enqueue_copy(self.queue, radiance, rad)
+        cl.enqueue_copy(self.queue, pixels, pix)
+        est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
+        return Render(radiance[:, :, :3].copy(), pixels, est)

@@ -1,0 +1,70 @@
+"""Photon tracing on the device (driver of ``kernels/photon_trace.cl``).
+
+Paths are traced in batches of at most ``batch_paths`` so that a run of any
+size fits in device memory: each batch is traced into one reused segment
+buffer and handed to the estimators before the next. Batching changes
+nothing in the result: a path's randomness depends only on (seed, path id),
+and sums are fixed point.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyopencl as cl
+
+from .cl.layout import Segment
+from .cl.programs import launch, programs
+
+
+@dataclass
+class PathBatch:
+    segments: cl.Buffer  # Segment[n_paths * max_depth], path-major
+    path_len: cl.Buffer  # int[n_paths]
+    path_offset: int  # global id of the batch's first path
+    n_paths: int
+    max_depth: int
+
+    @property
+    def n_slots(self) -> int:
+        return self.n_paths * self.max_depth
+
+    def read_segments(self, queue) -> np.ndarray:
+        out = np.empty(self.n_slots, dtype=Segment)
+        cl.enqueue_copy(queue, out, self.segments)
+        return out
+
+    def read_path_len(self, queue) -> np.ndarray:
+        out = np.empty(self.n_paths, dtype=np.int32)
+        cl.enqueue_copy(queue, out, self.path_len)
+        return out
+
+
+class PhotonTracer:
+    def __init__(self, queue: cl.CommandQueue, compiled, seed: int, max_depth: int,
+                 batch_paths: int, local_size: int | None = None):
+        self.queue = queue
+        self.compiled = compiled
+        self.seed = int(seed)
+        self.max_depth = int(max_depth)
+        self.batch_paths = int(batch_paths)
+        self.local_size = local_size
+        ctx = queue.context
+        self.kernel = programs(ctx).get("photon_trace").photon_trace
+        self.segments = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * self.max_depth * Segment.itemsize)
+        self.path_len = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * 4)
+
+    def trace(self, path_offset: int, n_paths: int, n_total: int) -> PathBatch:
+        assert 0 < n_paths <= self.batch_paths
+        c = self.compiled
+        launch(
+            self.queue, self.kernel, n_paths,
+            c.nodes, c.tris, c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf,
+            np.int32(c.n_emitters), np.uint32(self.seed & 0xFFFFFFFF), np.uint32(self.seed >> 32),
+            np.int32(path_offset), np.int32(n_paths), np.float32(1.0 / n_total),
+            np.int32(self.max_depth), np.float32(c.eps),
+            self.segments, self.path_len,
+            local_size=self.local_size,
+        )
+        return PathBatch(self.segments, self.path_len, path_offset, n_paths, self.max_depth)

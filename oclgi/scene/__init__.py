@@ -1,0 +1,1 @@
+"""Scenes: mesh loading, materials, emitters, camera, and the TOML/dict description."""

@@ -1,0 +1,270 @@
+"""Scene descriptions: a TOML file, or the same structure as a Python dict.
+
+    [[mesh]]                        # one or more; a file, or inline arrays
+    path = "cornell-box/CornellBox-Original.obj"   # relative to the TOML file
+    albedo = [0.5, 0.5, 0.5]        # faces the file gives no material (default 0.5)
+    emission = [0, 0, 0]
+    transform = { scale = 1.0, rotate = [0, 1, 0, 30], translate = [0, 0, 0] }
+    [mesh.materials.light]          # override one material the file names
+    emission = [17, 12, 4]
+
+    [[point_light]]
+    position = [0, 1.9, 0]
+    intensity = [1, 1, 1]           # W/sr
+
+    [camera]
+    position = [0, 1, 3.94]
+    look_at = [0, 1, 0]
+    up = [0, 1, 0]
+    fov = 39.3                      # vertical, degrees
+    width = 256
+    height = 256
+
+    [photons]
+    count = 100000
+    seed = 1
+    max_depth = 16
+
+    [estimator]
+    method = "detp"                 # detp | impact
+    radius = 0.04                   # disc radius; default 1% of the scene diagonal
+    extension = 0.0                 # DETP extension e past the hit point
+    count_emitted = true            # segments leaving the lights count (direct light)
+
+In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
+``path``. Unknown keys are errors, so a typo never passes silently.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OclgiError
+from .mesh import load_mesh
+from .scene import Camera, Material, PointLight, Scene, Settings
+
+METHODS = ("detp", "impact")
+
+_TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
+_MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform"}
+_MAT = {"albedo", "emission"}
+_CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
+_PHOTONS = {"count", "seed", "max_depth"}
+_ESTIMATOR = {"method", "radius", "extension", "count_emitted"}
+
+
+def load_file(path) -> Scene:
+    path = Path(path)
+    if not path.is_file():
+        raise OclgiError(f"scene file not found: {path}")
+    try:
+        desc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise OclgiError(f"{path}: malformed TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise OclgiError(f"{path}: not a text (TOML) file") from None
+    desc.setdefault("name", path.stem)
+    return load_dict(desc, base_dir=path.parent)
+
+
+def _check_keys(d, allowed, where):
+    if not isinstance(d, dict):
+        raise OclgiError(f"{where}: expected a table, got {type(d).__name__}")
+    unknown = set(d) - allowed
+    if unknown:
+        raise OclgiError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
+
+
+def _vec3(value, where):
+    try:
+        v = tuple(float(x) for x in value)
+    except (TypeError, ValueError):
+        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
+    return v
+
+
+def _number(value, where, kind=float):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise OclgiError(f"{where}: expected a number, got {value!r}")
+    if kind is int:
+        if float(value) != int(value):
+            raise OclgiError(f"{where}: expected an integer, got {value!r}")
+        return int(value)
+    return float(value)
+
+
+def _transform(t, where):
+    _check_keys(t, {"scale", "rotate", "translate"}, where)
+    m = np.eye(3)
+    if "scale" in t:
+        s = t["scale"]
+        m = np.diag(_vec3(s, where + ".scale") if isinstance(s, (list, tuple)) else (_number(s, where + ".scale"),) * 3) @ m
+    if "rotate" in t:
+        r = t["rotate"]
+        if not isinstance(r, (list, tuple)) or len(r) != 4:
+            raise OclgiError(f"{where}.rotate: expected [axis x, y, z, degrees], got {r!r}")
+        axis = np.asarray(_vec3(r[:3], where + ".rotate"))
+        if np.linalg.norm(axis) == 0:
+            raise OclgiError(f"{where}.rotate: zero axis")
+        axis /= np.linalg.norm(axis)
+        a = math.radians(_number(r[3], where + ".rotate"))
+        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        m = (np.eye(3) + math.sin(a) * k + (1 - math.cos(a)) * k @ k) @ m
+    shift = np.asarray(_vec3(t["translate"], where + ".translate")) if "translate" in t else np.zeros(3)
+    return m, shift
+
+
+def _mesh(desc, i, base_dir, materials, mat_index):
+    where = f"mesh[{i}]"
+    _check_keys(desc, _MESH, where)
+    default = Material(
+        name=f"{where}.default",
+        albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
+        emission=_vec3(desc.get("emission", (0, 0, 0)), where + ".emission"),
+    )
+    overrides = desc.get("materials", {})
+    _check_keys(overrides, set(overrides), where + ".materials")
+    if "path" in desc:
+        path = Path(desc["path"])
+        if not path.is_absolute() and base_dir is not None:
+            path = base_dir / path
+        loaded = load_mesh(path)
+        vertices, faces, fmat, names, file_mats = (
+            loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
+        label = path.name
+    elif "vertices" in desc and "faces" in desc:
+        vertices = np.asarray(desc["vertices"], dtype=np.float64)
+        faces = np.asarray(desc["faces"], dtype=np.int64)
+        fmat, names, file_mats, label = np.zeros(len(faces), np.int64), [""], {}, where
+        if vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.ndim != 2 or faces.shape[1:] != (3,):
+            raise OclgiError(f"{where}: vertices must be (V, 3) and faces (F, 3)")
+    else:
+        raise OclgiError(f"{where}: give either 'path' or 'vertices' and 'faces'")
+    unknown = set(overrides) - set(names)
+    if unknown:
+        raise OclgiError(f"{where}.materials: {sorted(unknown)} not in the mesh's materials {sorted(n for n in names if n)}")
+    # one scene material per material name of this mesh
+    local = []
+    for name in names:
+        if name == "":
+            mat = default
+        else:
+            fm = file_mats.get(name)
+            mat = Material(
+                name=f"{label}:{name}",
+                albedo=fm.albedo if fm and fm.albedo is not None else default.albedo,
+                emission=fm.emission if fm and fm.emission is not None else default.emission,
+            )
+            if name in overrides:
+                o = overrides[name]
+                _check_keys(o, _MAT, f"{where}.materials.{name}")
+                if "albedo" in o:
+                    mat.albedo = _vec3(o["albedo"], f"{where}.materials.{name}.albedo")
+                if "emission" in o:
+                    mat.emission = _vec3(o["emission"], f"{where}.materials.{name}.emission")
+        local.append(len(materials))
+        materials.append(mat)
+    if "transform" in desc:
+        m, shift = _transform(desc["transform"], where + ".transform")
+        vertices = vertices @ m.T + shift
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
+
+
+def load_dict(desc: dict, base_dir=None) -> Scene:
+    """Build a :class:`Scene` from a description dict (the TOML structure)."""
+    _check_keys(desc, _TOP, "scene")
+    base_dir = Path(base_dir) if base_dir is not None else None
+    meshes = desc.get("mesh", [])
+    if isinstance(meshes, dict):
+        meshes = [meshes]
+    if not meshes:
+        raise OclgiError("scene: no [[mesh]] given")
+    materials: list[Material] = []
+    verts, faces, fmats, offset = [], [], [], 0
+    for i, m in enumerate(meshes):
+        v, f, fm = _mesh(m, i, base_dir, materials, None)
+        if len(f) and (f.min() < 0 or f.max() >= len(v)):
+            raise OclgiError(f"mesh[{i}]: face indices out of range")
+        verts.append(v)
+        faces.append(f + offset)
+        fmats.append(fm)
+        offset += len(v)
+
+    lights = []
+    for i, pl in enumerate(desc.get("point_light", [])):
+        _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
+        lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position"),
+                                 _vec3(pl.get("intensity"), f"point_light[{i}].intensity")))
+
+    camera = None
+    if "camera" in desc:
+        c = desc["camera"]
+        _check_keys(c, _CAMERA, "camera")
+        if "position" not in c or "look_at" not in c:
+            raise OclgiError("camera: 'position' and 'look_at' are required")
+        camera = Camera(
+            position=_vec3(c["position"], "camera.position"),
+            look_at=_vec3(c["look_at"], "camera.look_at"),
+            up=_vec3(c.get("up", (0, 1, 0)), "camera.up"),
+            fov=_number(c.get("fov", 40.0), "camera.fov"),
+            width=_number(c.get("width", 256), "camera.width", int),
+            height=_number(c.get("height", 256), "camera.height", int),
+        )
+        validate_camera(camera)
+
+    settings = Settings()
+    ph = desc.get("photons", {})
+    _check_keys(ph, _PHOTONS, "photons")
+    if "count" in ph:
+        settings.photons = _number(ph["count"], "photons.count", int)
+    if "seed" in ph:
+        settings.seed = _number(ph["seed"], "photons.seed", int)
+    if "max_depth" in ph:
+        settings.max_depth = _number(ph["max_depth"], "photons.max_depth", int)
+    est = desc.get("estimator", {})
+    _check_keys(est, _ESTIMATOR, "estimator")
+    if "method" in est:
+        settings.method = check_method(est["method"])
+    if "radius" in est:
+        settings.radius = _number(est["radius"], "estimator.radius")
+    if "extension" in est:
+        settings.extension = _number(est["extension"], "estimator.extension")
+    if "count_emitted" in est:
+        if not isinstance(est["count_emitted"], bool):
+            raise OclgiError("estimator.count_emitted: expected true or false")
+        settings.count_emitted = est["count_emitted"]
+    if not 0 <= settings.seed < 2**64:
+        raise OclgiError(f"photons.seed must be in 0..2^64-1, got {settings.seed}")
+
+    return Scene(
+        vertices=np.concatenate(verts),
+        faces=np.concatenate(faces),
+        tri_material=np.concatenate(fmats),
+        materials=materials,
+        point_lights=lights,
+        camera=camera,
+        settings=settings,
+        name=str(desc.get("name", "scene")),
+    )
+
+
+def check_method(method) -> str:
+    if method not in METHODS:
+        raise OclgiError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    return method
+
+
+def validate_camera(c: Camera) -> None:
+    if not (0 < c.fov < 180):
+        raise OclgiError(f"camera.fov must be in (0, 180) degrees, got {c.fov}")
+    if not (1 <= c.width <= 16384 and 1 <= c.height <= 16384):
+        raise OclgiError(f"camera size must be 1..16384 pixels, got {c.width} x {c.height}")
+    fwd = np.subtract(c.look_at, c.position)
+    if np.linalg.norm(fwd) == 0 or np.linalg.norm(np.cross(fwd, c.up)) == 0:
+        raise OclgiError("camera: look_at must differ from position and not be along 'up'")

@@ -1,0 +1,133 @@
+"""A spec-following Wavefront OBJ/MTL reader.
+
+trimesh mis-reads files that use relative (negative) face indices or a TAB
+after ``v`` (McGuire's Cornell box among them: it loads 40 vertices, silently
+wrong). This reader follows the format: any whitespace separates fields,
+negative indices count back from the last vertex read so far, polygons are
+fan-triangulated, ``usemtl`` names the material of the faces that follow and
+``mtllib`` files give ``Kd`` (albedo) and ``Ke`` (emission).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OclgiError
+
+
+@dataclass
+class MtlMaterial:
+    albedo: tuple[float, float, float] | None = None
+    emission: tuple[float, float, float] | None = None
+
+
+@dataclass
+class ObjMesh:
+    vertices: np.ndarray  # (V, 3) float64
+    faces: np.ndarray  # (F, 3) int64, 0-based
+    face_material: np.ndarray  # (F,) int64 index into material_names, -1 = none
+    material_names: list[str] = field(default_factory=list)
+    materials: dict[str, MtlMaterial] = field(default_factory=dict)
+
+
+def _floats(parts, path, lineno, n):
+    try:
+        vals = [float(x) for x in parts[:n]]
+    except ValueError:
+        raise OclgiError(f"{path}:{lineno}: malformed number in {' '.join(parts)!r}") from None
+    if len(vals) < n:
+        raise OclgiError(f"{path}:{lineno}: expected {n} numbers, got {len(vals)}")
+    return vals
+
+
+def read_mtl(path: Path) -> dict[str, MtlMaterial]:
+    try:
+        text = path.read_text(errors="replace")
+    except OSError as exc:
+        raise OclgiError(f"cannot read material library {path}: {exc.strerror}") from None
+    mats: dict[str, MtlMaterial] = {}
+    cur = None
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].split()
+        if not line:
+            continue
+        key, args = line[0], line[1:]
+        if key == "newmtl":
+            name = " ".join(args)
+            cur = mats.setdefault(name, MtlMaterial())
+        elif cur is not None and key in ("Kd", "Ke"):
+            vals = _floats(args, path, lineno, 1)
+            if len(args) >= 3:
+                vals = _floats(args, path, lineno, 3)
+            else:
+                vals = vals * 3
+            if key == "Kd":
+                cur.albedo = tuple(vals)
+            else:
+                cur.emission = tuple(vals)
+    return mats
+
+
+def read_obj(path: Path, text: str | None = None) -> ObjMesh:
+    """Read an OBJ file (``text`` given: parse it, resolving ``mtllib`` next to ``path``)."""
+    if text is None:
+        try:
+            text = path.read_text(errors="replace")
+        except OSError as exc:
+            raise OclgiError(f"cannot read {path}: {exc.strerror}") from None
+    verts: list[list[float]] = []
+    faces: list[tuple[int, int, int]] = []
+    face_mat: list[int] = []
+    names: list[str] = []
+    name_index: dict[str, int] = {}
+    materials: dict[str, MtlMaterial] = {}
+    cur_mat = -1
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.split("#", 1)[0].split()
+        if not line:
+            continue
+        key = line[0]
+        if key == "v":
+            verts.append(_floats(line[1:], path, lineno, 3))
+        elif key == "f":
+            if len(line) < 4:
+                raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
+            idx = []
+            for tok in line[1:]:
+                try:
+                    k = int(tok.split("/", 1)[0])
+                except ValueError:
+                    raise OclgiError(f"{path}:{lineno}: malformed face index {tok!r}") from None
+                if k < 0:
+                    k = len(verts) + k  # relative: -1 is the last vertex read so far
+                else:
+                    k -= 1
+                if k < 0 or k >= len(verts) or tok.split("/", 1)[0] in ("0", "-0"):
+                    raise OclgiError(f"{path}:{lineno}: face index {tok!r} refers to no vertex")
+                idx.append(k)
+            for j in range(1, len(idx) - 1):
+                faces.append((idx[0], idx[j], idx[j + 1]))
+                face_mat.append(cur_mat)
+        elif key == "usemtl":
+            name = " ".join(line[1:])
+            if name not in name_index:
+                name_index[name] = len(names)
+                names.append(name)
+            cur_mat = name_index[name]
+        elif key == "mtllib":
+            for lib in line[1:]:
+                lib_path = path.parent / lib
+                if lib_path.is_file():
+                    materials.update(read_mtl(lib_path))
+    if not faces:
+        raise OclgiError(f"{path}: no faces")
+    return ObjMesh(
+        vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
+        faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+        face_material=np.asarray(face_mat, dtype=np.int64),
+        material_names=names,
+        materials=materials,
+    )

@@ -1,0 +1,197 @@
+"""The host-side scene: triangles, materials, emitters, camera and settings.
+
+A scene is built from a description (a TOML file or the same structure as a
+Python dict, see :mod:`oclgi.scene.description`). Geometry is validated here:
+non-finite vertices are an error, degenerate triangles are dropped with a
+warning that counts them, a scene without any emitter is an error.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import OclgiError
+
+
+class OclgiWarning(UserWarning):
+    """Something in the input was fixed up (e.g. degenerate triangles dropped)."""
+
+
+@dataclass
+class Material:
+    name: str
+    albedo: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class PointLight:
+    position: tuple[float, float, float]
+    intensity: tuple[float, float, float]  # W/sr per channel
+
+    @property
+    def power(self) -> np.ndarray:
+        return 4.0 * math.pi * np.asarray(self.intensity, dtype=np.float64)
+
+
+@dataclass
+class Camera:
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    fov: float = 40.0  # vertical, degrees
+    width: int = 256
+    height: int = 256
+
+    def frame(self):
+        """(eye, forward, right, up), right/up scaled to the image plane's half-extents."""
+        eye = np.asarray(self.position, dtype=np.float64)
+        fwd = np.asarray(self.look_at, dtype=np.float64) - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, np.asarray(self.up, dtype=np.float64))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        half_h = math.tan(math.radians(self.fov) / 2.0)
+        half_w = half_h * self.width / self.height
+        return eye, fwd, right * half_w, up * half_h
+
+
+@dataclass
+class Settings:
+    photons: int = 100_000
+    seed: int = 1
+    max_depth: int = 16
+    method: str = "detp"
+    radius: float | None = None  # None: 1% of the scene's bounding-box diagonal
+    extension: float = 0.0
+    count_emitted: bool = True
+
+
+MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63
+MAX_PHOTONS = 1 << 31
+
+
+@dataclass
+class Scene:
+    vertices: np.ndarray  # (V, 3) float64
+    faces: np.ndarray  # (F, 3) int64
+    tri_material: np.ndarray  # (F,) int64 into materials
+    materials: list[Material]
+    point_lights: list[PointLight] = field(default_factory=list)
+    camera: Camera | None = None
+    settings: Settings = field(default_factory=Settings)
+    name: str = "scene"
+
+    def __post_init__(self):
+        self._validate()
+
+    # -- derived geometry -------------------------------------------------
+    @property
+    def n_triangles(self) -> int:
+        return len(self.faces)
+
+    def bounds(self):
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    @property
+    def diagonal(self) -> float:
+        lo, hi = self.bounds()
+        return float(np.linalg.norm(hi - lo))
+
+    def triangle_areas(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+    def triangle_normals(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    @property
+    def radius(self) -> float:
+        s = self.settings
+        return s.radius if s.radius is not None else 0.01 * self.diagonal
+
+    # -- validation -------------------------------------------------------
+    def _validate(self):
+        v = np.asarray(self.vertices, dtype=np.float64)
+        f = np.asarray(self.faces, dtype=np.int64)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+            raise OclgiError(f"{self.name}: no vertices")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise OclgiError(f"{self.name}: no triangles")
+        if not np.isfinite(v).all():
+            bad = int((~np.isfinite(v).all(axis=1)).sum())
+            raise OclgiError(f"{self.name}: {bad} vertices have NaN or infinite coordinates")
+        if f.min() < 0 or f.max() >= len(v):
+            raise OclgiError(f"{self.name}: face indices out of range")
+        self.vertices, self.faces = v, f
+        self.tri_material = np.asarray(self.tri_material, dtype=np.int64)
+        areas = self.triangle_areas()
+        scale = max(self.diagonal, 1e-30)
+        degenerate = ~(areas > 1e-12 * scale * scale)
+        if degenerate.any():
+            n_bad = int(degenerate.sum())
+            keep = ~degenerate
+            self.faces, self.tri_material = self.faces[keep], self.tri_material[keep]
+            warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area)", OclgiWarning, stacklevel=3)
+            if len(self.faces) == 0:
+                raise OclgiError(f"{self.name}: every triangle is degenerate")
+        for m in self.materials:
+            a, e = np.asarray(m.albedo, float), np.asarray(m.emission, float)
+            if a.shape != (3,) or not np.isfinite(a).all() or (a < 0).any() or (a > 1).any():
+                raise OclgiError(f"material {m.name!r}: albedo must be 3 numbers in [0, 1], got {m.albedo}")
+            if e.shape != (3,) or not np.isfinite(e).all() or (e < 0).any():
+                raise OclgiError(f"material {m.name!r}: emission must be 3 numbers >= 0, got {m.emission}")
+        for pl in self.point_lights:
+            if not (np.isfinite(pl.position).all() and np.isfinite(pl.intensity).all()) or min(pl.intensity) < 0:
+                raise OclgiError(f"point light at {pl.position}: bad position or intensity")
+        s = self.settings
+        if not isinstance(s.photons, (int, np.integer)) or not 0 < s.photons <= MAX_PHOTONS:
+            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {s.photons!r}")
+        if not isinstance(s.max_depth, (int, np.integer)) or not 1 <= s.max_depth <= MAX_DEPTH_LIMIT:
+            raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {s.max_depth!r}")
+        if s.radius is not None and not (isinstance(s.radius, (int, float)) and math.isfinite(s.radius) and s.radius > 0):
+            raise OclgiError(f"radius must be a positive number, got {s.radius!r}")
+        if not (math.isfinite(s.extension) and s.extension >= 0):
+            raise OclgiError(f"extension must be a number >= 0, got {s.extension!r}")
+        if not self.has_emitter():
+            raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no point light)")
+
+    def has_emitter(self) -> bool:
+        if any(max(pl.intensity) > 0 for pl in self.point_lights):
+            return True
+        emissive = np.array([max(m.emission) > 0 for m in self.materials], dtype=bool)
+        return bool(len(self.tri_material) and emissive[self.tri_material].any())
+
+    # -- emitters -----------------------------------------------------------
+    def emitters(self):
+        """Emissive triangles and point lights with their power (RGB, watts).
+
+        Returns (kind, tri, p, e1, e2, power) arrays; an area light emits
+        pi * A * Le on the side of its normal.
+        """
+        emission = np.array([m.emission for m in self.materials], dtype=np.float64)
+        tri_le = emission[self.tri_material]
+        tri_ids = np.nonzero(tri_le.max(axis=1) > 0)[0]
+        v = self.vertices[self.faces[tri_ids]]
+        areas = self.triangle_areas()[tri_ids]
+        power = math.pi * areas[:, None] * tri_le[tri_ids]
+        kind = [np.zeros(len(tri_ids), np.int32)]
+        tri = [tri_ids.astype(np.int32)]
+        p, e1, e2, pw = [v[:, 0]], [v[:, 1] - v[:, 0]], [v[:, 2] - v[:, 0]], [power]
+        for pl in self.point_lights:
+            if max(pl.intensity) <= 0:
+                continue
+            kind.append(np.ones(1, np.int32))
+            tri.append(np.full(1, -1, np.int32))
+            p.append(np.asarray([pl.position], np.float64))
+            e1.append(np.zeros((1, 3)))
+            e2.append(np.zeros((1, 3)))
+            pw.append(pl.power[None, :])
+        return (np.concatenate(kind), np.concatenate(tri), np.concatenate(p), np.concatenate(e1),
+                np.concatenate(e2), np.concatenate(pw))
