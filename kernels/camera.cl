@@ -26,7 +26,7 @@ __kernel void camera_visible_points(__global const BvhNode *nodes, __global cons
     bvh_closest_hit(nodes, tris, eye.xyz, d, INFINITY, &h);
     if (h.tri < 0) {
         positions[i] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
-        normals[i] = (float4)(0.0f, 0.0f, 1.0f, 0.0f);
+        normals[i] = (float4)(0.0f); /* a zero normal: no estimator counts anything here */
         barys[i] = (float2)(0.0f);
         return;
     }

@@ -58,7 +58,7 @@ __kernel void impact_count_interpolate(__global const float4 *positions, __globa
     int i = get_global_id(0);
     if (i >= n_points) return;
     int t = as_int(positions[i].w);
-    if (t < 0) { irradiance[i] = (float4)(NAN); return; }
+    if (t < 0) { irradiance[i] = (float4)(0.0f); return; } /* camera miss */
     float2 b = barys[i];
     irradiance[i] = (1.0f - b.x - b.y) * vertex_irradiance[faces[3 * t]]
                   + b.x * vertex_irradiance[faces[3 * t + 1]]

@@ -11,6 +11,7 @@ OpenCL device) print one line and exit with status 2, leaving no output file.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 from pathlib import Path
@@ -18,13 +19,43 @@ from pathlib import Path
 from .errors import OclgiError
 
 
-def _positive_int(text):
+class _Parser(argparse.ArgumentParser):
+    """argparse with oclgi's error format: one line on stderr, exit status 2."""
+
+    def error(self, message):
+        print(f"oclgi: error: {message} (see `{self.prog} --help`)", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def _integer(text):
+    """An integer written plainly or in exponent form (``2e5``); never rounds."""
+    text = text.strip()
     try:
-        value = int(float(text)) if "e" in text.lower() else int(text)
+        return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value <= 0:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    if not math.isfinite(value) or not value.is_integer():
+        return None
+    return int(value)
+
+
+def _positive_int(text):
+    value = _integer(text)
+    if value is None or value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _max_depth(text):
+    from .scene.scene import MAX_DEPTH_LIMIT
+
+    value = _integer(text)
+    if value is None or not 1 <= value <= MAX_DEPTH_LIMIT:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1..{MAX_DEPTH_LIMIT}, got {text!r}")
     return value
 
 
@@ -38,13 +69,10 @@ def _positive_float(text):
     return value
 
 
-def _nonneg_int(text):
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+def _seed(text):
+    value = _integer(text)
+    if value is None or not 0 <= value < 2**64:
+        raise argparse.ArgumentTypeError(f"expected an integer in 0..2^64-1, got {text!r}")
     return value
 
 
@@ -53,15 +81,15 @@ def _estimate_args(p):
     p.add_argument("--method", choices=["detp", "impact"], help="estimator (default: the scene's, else detp)")
     p.add_argument("--photons", type=_positive_int, help="number of photon paths (default: the scene's)")
     p.add_argument("--radius", type=_positive_float, help="DETP disc radius (default: the scene's)")
-    p.add_argument("--seed", type=_nonneg_int, help="random seed (default: the scene's)")
-    p.add_argument("--max-depth", type=_positive_int, help="maximum path length in segments")
+    p.add_argument("--seed", type=_seed, help="random seed (default: the scene's)")
+    p.add_argument("--max-depth", type=_max_depth, help="maximum path length in segments")
     p.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
     p.add_argument("--local-size", type=_positive_int, help="work-group size (results do not depend on it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="oclgi", description="Global illumination by density estimation on OpenCL.")
+    ap = _Parser(prog="oclgi", description="Global illumination by density estimation on OpenCL.")
     sub = ap.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("render", help="render the scene's camera to EXR (linear) and PNG (sRGB)")
@@ -86,7 +114,15 @@ def _engine(args):
     from .scene.description import load_file
 
     scene = load_file(args.scene)
-    return Engine(scene, device=args.device, local_size=args.local_size, progress=None if not args.quiet else False)
+    engine = Engine(scene, device=args.device, local_size=args.local_size,
+                    progress=None if not args.quiet else False)
+    if args.local_size:
+        dev = engine.queue.device
+        limit = min(dev.max_work_group_size, dev.max_work_item_sizes[0])
+        if args.local_size > limit:
+            raise OclgiError(f"--local-size {args.local_size} is larger than {dev.name.strip()!r} "
+                             f"allows ({limit})")
+    return engine
 
 
 def _est_kwargs(args):
@@ -95,14 +131,17 @@ def _est_kwargs(args):
 
 
 def cmd_render(args):
-    from . import save_render
+    from .io import check_output, write_images
 
     out = args.output or Path("out") / f"{args.scene.stem}.exr"
     if out.suffix.lower() not in (".exr", ".png"):
         raise OclgiError(f"{out}: the output must end in .exr or .png")
+    exr, png = out.with_suffix(".exr"), out.with_suffix(".png")
+    check_output(exr)
+    check_output(png)
     engine = _engine(args)
     result = engine.render(width=args.width, height=args.height, exposure=args.exposure, **_est_kwargs(args))
-    exr, png = save_render(result, out)
+    write_images({exr: result.radiance, png: result.pixels})  # both or neither
     if not args.quiet:
         print(result.stats.summary(), file=sys.stderr)
     print(f"wrote {exr}")
@@ -110,11 +149,12 @@ def cmd_render(args):
 
 
 def cmd_irradiance(args):
-    from .io import write_array
+    from .io import check_output, write_array
     from .queries import from_file
 
     if args.output.suffix.lower() not in (".npy", ".csv"):
         raise OclgiError(f"{args.output}: the output must end in .npy or .csv")
+    check_output(args.output)
     points = from_file(args.points)
     engine = _engine(args)
     est = engine.irradiance(points, **_est_kwargs(args))
@@ -125,22 +165,29 @@ def cmd_irradiance(args):
 
 
 def cmd_info(_args):
-    from .cl.device import describe_devices
+    from .cl.device import INSTALL_HINT, describe_devices, list_devices
 
+    if not list_devices():
+        raise OclgiError(f"no OpenCL platform found: {INSTALL_HINT}")
     print(describe_devices())
 
 
+def _one_line(text) -> str:
+    return " ".join(str(text).split())
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None):
-    print(f"oclgi: warning: {message}", file=sys.stderr)
+    print(f"oclgi: warning: {_one_line(message)}", file=sys.stderr)
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _show_warning
     try:
-        {"render": cmd_render, "irradiance": cmd_irradiance, "info": cmd_info}[args.command](args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            {"render": cmd_render, "irradiance": cmd_irradiance, "info": cmd_info}[args.command](args)
     except OclgiError as exc:
-        print(f"oclgi: error: {exc}", file=sys.stderr)
+        print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("oclgi: interrupted", file=sys.stderr)

@@ -174,6 +174,25 @@ class Engine:
         self._last_estimator = est
         return Estimate(irr[:, :3], est.accumulators(), scale, stats, points)
 
+    def trace(self, photons: int | None = None, seed: int | None = None, max_depth: int | None = None):
+        """Trace photon paths and return their segments on the host.
+
+        Returns (segments, path_len): a ``Segment`` structured array of
+        photons * max_depth slots, path-major (empty slots are zeros), and the
+        number of segments of each path. For inspection and studies; the
+        estimators stream batches instead of keeping every segment.
+        """
+        s = self.scene.settings
+        photons = s.photons if photons is None else photons
+        seed = s.seed if seed is None else seed
+        max_depth = s.max_depth if max_depth is None else max_depth
+        if photons * max_depth * 48 > self.batch_bytes:
+            raise OclgiError(f"{photons:,} paths of up to {max_depth} segments do not fit one batch "
+                             f"({self.batch_bytes >> 20} MiB); trace fewer")
+        tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, photons, self.local_size)
+        batch = tracer.trace(0, photons, photons)
+        return batch.read_segments(self.queue), batch.read_path_len(self.queue)
+
     # -- images -----------------------------------------------------------------
     def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
                exposure: float = 1.0, **estimate_args) -> Render:

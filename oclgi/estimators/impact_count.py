@@ -51,7 +51,7 @@ class ImpactCount:
         self.n_vertices = len(scene.vertices)
         self.n = len(points)
         mf = cl.mem_flags
-        if (points.tri < 0).any():
+        if points.kind != "camera" and (points.tri < 0).any():  # camera misses stay background
             points = locate(queue, compiled, points)
         self.positions = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.positions)
         self.barys = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.barys)

@@ -62,11 +62,13 @@ def load_file(path) -> Scene:
     if not path.is_file():
         raise OclgiError(f"scene file not found: {path}")
     try:
-        desc = tomllib.loads(path.read_text())
+        desc = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise OclgiError(f"{path}: malformed TOML: {exc}") from None
     except UnicodeDecodeError:
         raise OclgiError(f"{path}: not a text (TOML) file") from None
+    except OSError as exc:
+        raise OclgiError(f"cannot read scene file {path}: {exc.strerror or exc}") from None
     desc.setdefault("name", path.stem)
     return load_dict(desc, base_dir=path.parent)
 
@@ -80,7 +82,11 @@ def _check_keys(d, allowed, where):
 
 
 def _vec3(value, where):
+    if isinstance(value, (str, bytes, dict)) or value is None:
+        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}")
     try:
+        if any(isinstance(x, bool) for x in value):
+            raise TypeError
         v = tuple(float(x) for x in value)
     except (TypeError, ValueError):
         raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
@@ -92,6 +98,8 @@ def _vec3(value, where):
 def _number(value, where, kind=float):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise OclgiError(f"{where}: expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise OclgiError(f"{where}: expected a finite number, got {value!r}")
     if kind is int:
         if float(value) != int(value):
             raise OclgiError(f"{where}: expected an integer, got {value!r}")
@@ -129,8 +137,11 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         emission=_vec3(desc.get("emission", (0, 0, 0)), where + ".emission"),
     )
     overrides = desc.get("materials", {})
-    _check_keys(overrides, set(overrides), where + ".materials")
+    if not isinstance(overrides, dict):
+        raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
     if "path" in desc:
+        if not isinstance(desc["path"], str) or not desc["path"].strip():
+            raise OclgiError(f"{where}.path: expected a file name, got {desc['path']!r}")
         path = Path(desc["path"])
         if not path.is_absolute() and base_dir is not None:
             path = base_dir / path
@@ -139,11 +150,8 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
         label = path.name
     elif "vertices" in desc and "faces" in desc:
-        vertices = np.asarray(desc["vertices"], dtype=np.float64)
-        faces = np.asarray(desc["faces"], dtype=np.int64)
+        vertices, faces = _inline_arrays(desc["vertices"], desc["faces"], where)
         fmat, names, file_mats, label = np.zeros(len(faces), np.int64), [""], {}, where
-        if vertices.ndim != 2 or vertices.shape[1:] != (3,) or faces.ndim != 2 or faces.shape[1:] != (3,):
-            raise OclgiError(f"{where}: vertices must be (V, 3) and faces (F, 3)")
     else:
         raise OclgiError(f"{where}: give either 'path' or 'vertices' and 'faces'")
     unknown = set(overrides) - set(names)
@@ -170,19 +178,44 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                     mat.emission = _vec3(o["emission"], f"{where}.materials.{name}.emission")
         local.append(len(materials))
         materials.append(mat)
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise OclgiError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
+                         f"(the first is vertex {int(np.argmax(bad)) + 1})")
     if "transform" in desc:
         m, shift = _transform(desc["transform"], where + ".transform")
         vertices = vertices @ m.T + shift
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
 
 
+def _inline_arrays(vertices, faces, where):
+    """A mesh given as ``vertices`` (V, 3) numbers and ``faces`` (F, 3) integer indices."""
+    def rows(value, name):
+        if not isinstance(value, (list, tuple, np.ndarray)) or not all(
+                isinstance(r, (list, tuple, np.ndarray)) and len(r) == 3 for r in value):
+            raise OclgiError(f"{where}.{name}: expected a list of [a, b, c] rows")
+        try:
+            a = np.asarray(value, dtype=np.float64).reshape(-1, 3)
+        except (TypeError, ValueError):
+            raise OclgiError(f"{where}.{name}: expected numbers only") from None
+        if isinstance(value, (list, tuple)) and any(isinstance(x, bool) for r in value for x in r):
+            raise OclgiError(f"{where}.{name}: expected numbers only")
+        return a
+
+    v = rows(vertices, "vertices")
+    f = rows(faces, "faces")
+    if not len(v) or not len(f):
+        raise OclgiError(f"{where}: vertices must be (V, 3) and faces (F, 3), both non-empty")
+    if not np.isfinite(f).all() or (f != np.round(f)).any():
+        raise OclgiError(f"{where}.faces: indices must be integers")
+    return v, f.astype(np.int64)
+
+
 def load_dict(desc: dict, base_dir=None) -> Scene:
     """Build a :class:`Scene` from a description dict (the TOML structure)."""
     _check_keys(desc, _TOP, "scene")
     base_dir = Path(base_dir) if base_dir is not None else None
-    meshes = desc.get("mesh", [])
-    if isinstance(meshes, dict):
-        meshes = [meshes]
+    meshes = _table_list(desc.get("mesh", []), "mesh")
     if not meshes:
         raise OclgiError("scene: no [[mesh]] given")
     materials: list[Material] = []
@@ -197,7 +230,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         offset += len(v)
 
     lights = []
-    for i, pl in enumerate(desc.get("point_light", [])):
+    for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
         _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
         lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position"),
                                  _vec3(pl.get("intensity"), f"point_light[{i}].intensity")))
@@ -252,6 +285,15 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         settings=settings,
         name=str(desc.get("name", "scene")),
     )
+
+
+def _table_list(value, name):
+    """``[[name]]`` (a list of tables) or a single ``[name]`` table, as a list."""
+    if isinstance(value, dict):
+        return [value]
+    if not isinstance(value, list):
+        raise OclgiError(f"{name}: expected [[{name}]] tables, got {value!r}")
+    return value
 
 
 def check_method(method) -> str:

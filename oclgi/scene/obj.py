@@ -5,17 +5,23 @@ after ``v`` (McGuire's Cornell box among them: it loads 40 vertices, silently
 wrong). This reader follows the format: any whitespace separates fields,
 negative indices count back from the last vertex read so far, polygons are
 fan-triangulated, ``usemtl`` names the material of the faces that follow and
-``mtllib`` files give ``Kd`` (albedo) and ``Ke`` (emission).
+``mtllib`` files give ``Kd`` (albedo) and ``Ke`` (emission). A material
+library that cannot be found is a warning (its materials keep the defaults);
+a NaN or infinite vertex coordinate is an error naming its line.
 """
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from ..errors import OclgiError
+from .scene import OclgiWarning
 
 
 @dataclass
@@ -43,11 +49,12 @@ def _floats(parts, path, lineno, n):
     return vals
 
 
-def read_mtl(path: Path) -> dict[str, MtlMaterial]:
-    try:
-        text = path.read_text(errors="replace")
-    except OSError as exc:
-        raise OclgiError(f"cannot read material library {path}: {exc.strerror}") from None
+def read_mtl(path: Path, text: str | None = None) -> dict[str, MtlMaterial]:
+    if text is None:
+        try:
+            text = path.read_text(errors="replace")
+        except OSError as exc:
+            raise OclgiError(f"cannot read material library {path}: {exc.strerror}") from None
     mats: dict[str, MtlMaterial] = {}
     cur = None
     for lineno, raw in enumerate(text.splitlines(), 1):
@@ -71,8 +78,38 @@ def read_mtl(path: Path) -> dict[str, MtlMaterial]:
     return mats
 
 
-def read_obj(path: Path, text: str | None = None) -> ObjMesh:
-    """Read an OBJ file (``text`` given: parse it, resolving ``mtllib`` next to ``path``)."""
+def _lib_from_disk(path: Path) -> Callable[[str], str | None]:
+    def read(name: str) -> str | None:
+        lib = path.parent / name
+        if not lib.is_file():
+            return None
+        try:
+            return lib.read_text(errors="replace")
+        except OSError as exc:
+            raise OclgiError(f"cannot read material library {lib}: {exc.strerror}") from None
+    return read
+
+
+def _mtllib_names(args: list[str], exists: Callable[[str], bool]) -> list[str]:
+    """The files an ``mtllib`` line names: whitespace-separated, unless the
+    whole (space-containing) name is one existing file."""
+    whole = " ".join(args)
+    if len(args) > 1 and exists(whole):
+        return [whole]
+    return args
+
+
+def read_obj(path: Path, text: str | None = None,
+             read_lib: Callable[[str], str | None] | None = None) -> ObjMesh:
+    """Read an OBJ file.
+
+    ``text`` given: parse it instead of reading ``path``. ``read_lib(name)``
+    returns the text of a material library named by ``mtllib`` or None when
+    it does not exist; by default libraries are read next to ``path``.
+    """
+    path = Path(path)
+    if read_lib is None:
+        read_lib = _lib_from_disk(path)
     if text is None:
         try:
             text = path.read_text(errors="replace")
@@ -91,7 +128,10 @@ def read_obj(path: Path, text: str | None = None) -> ObjMesh:
             continue
         key = line[0]
         if key == "v":
-            verts.append(_floats(line[1:], path, lineno, 3))
+            xyz = _floats(line[1:], path, lineno, 3)
+            if not all(math.isfinite(x) for x in xyz):
+                raise OclgiError(f"{path}:{lineno}: vertex coordinate is NaN or infinite: {' '.join(line[1:4])!r}")
+            verts.append(xyz)
         elif key == "f":
             if len(line) < 4:
                 raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
@@ -118,10 +158,15 @@ def read_obj(path: Path, text: str | None = None) -> ObjMesh:
                 names.append(name)
             cur_mat = name_index[name]
         elif key == "mtllib":
-            for lib in line[1:]:
-                lib_path = path.parent / lib
-                if lib_path.is_file():
-                    materials.update(read_mtl(lib_path))
+            texts = {}
+            for lib in _mtllib_names(line[1:], lambda n: texts.setdefault(n, read_lib(n)) is not None):
+                lib_text = texts[lib] if lib in texts else read_lib(lib)
+                if lib_text is None:
+                    warnings.warn(f"{path}:{lineno}: material library {lib!r} not found; "
+                                  "its materials get the mesh's default albedo and emission",
+                                  OclgiWarning, stacklevel=2)
+                    continue
+                materials.update(read_mtl(path.parent / lib, lib_text))
     if not faces:
         raise OclgiError(f"{path}: no faces")
     return ObjMesh(
