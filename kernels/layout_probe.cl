@@ -5,7 +5,8 @@
 #include "oclgi_types.h"
 
 #define SIZE(T) out[i++] = (int)sizeof(T)
-#define OFF(T, f) out[i++] = (int)offsetof(T, f)
+/* OpenCL C has no offsetof: measure the field address in a private object. */
+#define OFF(T, f) do { T t_; out[i++] = (int)((char *)&t_.f - (char *)&t_); } while (0)
 
 __kernel void layout_probe(__global int *out)
 {

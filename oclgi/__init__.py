@@ -30,11 +30,11 @@ def scene_path(name: str) -> _Path:
 
 def save_render(result: Render, path) -> tuple[_Path, _Path]:
     """Write the linear radiance as EXR and the tone-mapped image as PNG (same stem)."""
-    from .io import write_image
+    from .io import write_images
 
     path = _Path(path)
-    exr = write_image(path.with_suffix(".exr"), result.radiance)
-    png = write_image(path.with_suffix(".png"), result.pixels)
+    exr, png = path.with_suffix(".exr"), path.with_suffix(".png")
+    write_images({exr: result.radiance, png: result.pixels})  # all or nothing
     return exr, png
 
 

@@ -114,15 +114,8 @@ def _engine(args):
     from .scene.description import load_file
 
     scene = load_file(args.scene)
-    engine = Engine(scene, device=args.device, local_size=args.local_size,
-                    progress=None if not args.quiet else False)
-    if args.local_size:
-        dev = engine.queue.device
-        limit = min(dev.max_work_group_size, dev.max_work_item_sizes[0])
-        if args.local_size > limit:
-            raise OclgiError(f"--local-size {args.local_size} is larger than {dev.name.strip()!r} "
-                             f"allows ({limit})")
-    return engine
+    return Engine(scene, device=args.device, local_size=args.local_size,
+                  progress=None if not args.quiet else False)
 
 
 def _est_kwargs(args):
@@ -173,7 +166,8 @@ def cmd_info(_args):
 
 
 def _one_line(text) -> str:
-    return " ".join(str(text).split())
+    """A message on one line (compiler logs and library errors may span several)."""
+    return " ".join(part.strip() for part in str(text).splitlines() if part.strip())
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -28,7 +28,7 @@ from .estimators import ESTIMATORS
 from .photon_trace import PhotonTracer
 from .scene.compiled import CompiledScene
 from .scene.description import check_method, validate_camera
-from .scene.scene import MAX_PHOTONS, Camera, Scene
+from .scene.scene import MAX_DEPTH_LIMIT, MAX_PHOTONS, Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
 
@@ -68,6 +68,14 @@ class Render:
         return self.estimate.stats
 
 
+def _check_run(seed, max_depth):
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**64:
+        raise OclgiError(f"seed must be an integer in 0..2^64-1, got {seed!r}")
+    if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or \
+            not 1 <= max_depth <= MAX_DEPTH_LIMIT:
+        raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {max_depth!r}")
+
+
 class Engine:
     """A scene compiled for one OpenCL device.
 
@@ -81,6 +89,13 @@ class Engine:
                  batch_bytes: int = DEFAULT_BATCH_BYTES, progress: bool | None = None):
         self.scene = scene
         self.ctx, self.queue = create_context(device)
+        if local_size is not None:
+            dev = self.queue.device
+            limit = min(dev.max_work_group_size, dev.max_work_item_sizes[0])
+            if isinstance(local_size, bool) or not isinstance(local_size, int) or local_size < 1:
+                raise OclgiError(f"--local-size must be a positive integer, got {local_size!r}")
+            if local_size > limit:
+                raise OclgiError(f"--local-size {local_size} is larger than {dev.name.strip()!r} allows ({limit})")
         self.local_size = local_size
         self.batch_bytes = batch_bytes
         self.progress = progress
@@ -136,6 +151,7 @@ class Engine:
             raise OclgiError(f"radius must be a positive number, got {radius!r}")
         seed = s.seed if seed is None else seed
         max_depth = s.max_depth if max_depth is None else max_depth
+        _check_run(seed, max_depth)
         extension = s.extension if extension is None else extension
         count_emitted = s.count_emitted if count_emitted is None else count_emitted
 
@@ -186,6 +202,7 @@ class Engine:
         photons = s.photons if photons is None else photons
         seed = s.seed if seed is None else seed
         max_depth = s.max_depth if max_depth is None else max_depth
+        _check_run(seed, max_depth)
         if photons * max_depth * 48 > self.batch_bytes:
             raise OclgiError(f"{photons:,} paths of up to {max_depth} segments do not fit one batch "
                              f"({self.batch_bytes >> 20} MiB); trace fewer")

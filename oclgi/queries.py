@@ -74,38 +74,82 @@ def from_arrays(points, normals) -> QueryPoints:
 
 
 def from_file(path) -> QueryPoints:
-    """Points from ``.npy`` ((n, 6): x y z nx ny nz) or ``.csv`` (the same columns, optional header)."""
+    """Points from ``.npy`` ((n, 6): x y z nx ny nz) or ``.csv`` (the same columns, optional header).
+
+    CSV fields are separated by commas (or whitespace); blank lines and lines
+    starting with ``#`` are skipped; a first line that is not numbers is a
+    header. A malformed line is an error naming it.
+    """
     from pathlib import Path
 
     path = Path(path)
     if not path.is_file():
         raise OclgiError(f"points file not found: {path}")
     suffix = path.suffix.lower()
-    try:
-        if suffix == ".npy":
+    if suffix == ".npy":
+        try:
+            with open(path, "rb") as f:
+                if f.read(6) != b"\x93NUMPY":
+                    raise OclgiError(f"{path}: not a .npy file")
             a = np.load(path, allow_pickle=False)
-        elif suffix == ".csv":
-            text = path.read_text().splitlines()
-            rows = [r for r in text if r.strip() and not r.lstrip().startswith("#")]
-            if rows and not _is_numeric_row(rows[0]):
-                rows = rows[1:]  # header
-            a = np.array([[float(x) for x in r.split(",")] for r in rows], dtype=np.float64)
-        else:
-            raise OclgiError(f"{path}: points must be a .npy or .csv file")
-    except (ValueError, OSError) as exc:
-        raise OclgiError(f"{path}: cannot read points ({exc})") from None
-    a = np.asarray(a, dtype=np.float64)
+        except (ValueError, OSError, EOFError) as exc:
+            raise OclgiError(f"{path}: cannot read points ({exc})") from None
+        if not isinstance(a, np.ndarray) or a.dtype.kind not in "iuf":
+            raise OclgiError(f"{path}: expected an array of numbers, got {getattr(a, 'dtype', type(a).__name__)}")
+        a = a.astype(np.float64)
+    elif suffix == ".csv":
+        a = _read_csv(path)
+    else:
+        raise OclgiError(f"{path}: points must be a .npy or .csv file")
     if a.ndim != 2 or a.shape[1] != 6:
         raise OclgiError(f"{path}: expected n rows of 6 columns (x y z nx ny nz), got shape {a.shape}")
+    if len(a) == 0:
+        raise OclgiError(f"{path}: no points")
     return from_arrays(a[:, :3], a[:, 3:])
 
 
-def _is_numeric_row(row: str) -> bool:
+def _read_csv(path) -> np.ndarray:
     try:
-        [float(x) for x in row.split(",")]
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise OclgiError(f"{path}: not a text (CSV) file") from None
+    except OSError as exc:
+        raise OclgiError(f"{path}: cannot read points ({exc.strerror or exc})") from None
+    rows = []
+    first = True
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = _fields(line)
+        try:
+            values = [float(x) for x in fields]
+        except ValueError:
+            if first and not any(_is_number(x) for x in fields):  # a header
+                first = False
+                continue
+            raise OclgiError(f"{path}:{lineno}: expected 6 numbers (x,y,z,nx,ny,nz), got {raw.strip()!r}") from None
+        first = False
+        if len(values) != 6:
+            raise OclgiError(f"{path}:{lineno}: expected 6 columns (x,y,z,nx,ny,nz), got {len(values)}")
+        rows.append(values)
+    if not rows:
+        raise OclgiError(f"{path}: no points")
+    return np.array(rows, dtype=np.float64)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
         return True
     except ValueError:
         return False
+
+
+def _fields(line: str) -> list[str]:
+    if "," in line:
+        return [x.strip() for x in line.split(",")]
+    return line.split()
 
 
 def vertex_points(scene) -> QueryPoints:

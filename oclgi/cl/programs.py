@@ -88,8 +88,11 @@ _caches: dict[int, ProgramCache] = {}
 
 def programs(ctx: cl.Context) -> ProgramCache:
     """The program cache of a context (one per context, shared by all users)."""
+    # queue.context is a new Python object for the same context: compare
+    # contexts with ==, never `is`. The cache holds its context, so the
+    # pointer cannot be reused by another context while it lives.
     cache = _caches.get(ctx.int_ptr)
-    if cache is None or cache.ctx is not ctx:
+    if cache is None or cache.ctx != ctx:
         cache = ProgramCache(ctx)
         _caches[ctx.int_ptr] = cache
     return cache

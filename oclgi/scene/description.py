@@ -178,6 +178,9 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                     mat.emission = _vec3(o["emission"], f"{where}.materials.{name}.emission")
         local.append(len(materials))
         materials.append(mat)
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise OclgiError(f"{label}: face indices out of range (0..{len(vertices) - 1} for "
+                         f"{len(vertices)} vertices, found {faces.min()}..{faces.max()})")
     bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
         raise OclgiError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
@@ -191,16 +194,20 @@ def _mesh(desc, i, base_dir, materials, mat_index):
 def _inline_arrays(vertices, faces, where):
     """A mesh given as ``vertices`` (V, 3) numbers and ``faces`` (F, 3) integer indices."""
     def rows(value, name):
-        if not isinstance(value, (list, tuple, np.ndarray)) or not all(
+        if isinstance(value, np.ndarray):  # the dict form: arrays pass as they are
+            if value.ndim != 2 or value.shape[1] != 3 or value.dtype.kind not in "iuf":
+                raise OclgiError(f"{where}.{name}: expected a ({name[0].upper()}, 3) array of numbers, "
+                                 f"got {value.dtype} {value.shape}")
+            return value.astype(np.float64)
+        if not isinstance(value, (list, tuple)) or not all(
                 isinstance(r, (list, tuple, np.ndarray)) and len(r) == 3 for r in value):
             raise OclgiError(f"{where}.{name}: expected a list of [a, b, c] rows")
+        if any(isinstance(x, (bool, np.bool_)) for r in value for x in r):
+            raise OclgiError(f"{where}.{name}: expected numbers only")
         try:
-            a = np.asarray(value, dtype=np.float64).reshape(-1, 3)
+            return np.asarray(value, dtype=np.float64).reshape(-1, 3)
         except (TypeError, ValueError):
             raise OclgiError(f"{where}.{name}: expected numbers only") from None
-        if isinstance(value, (list, tuple)) and any(isinstance(x, bool) for r in value for x in r):
-            raise OclgiError(f"{where}.{name}: expected numbers only")
-        return a
 
     v = rows(vertices, "vertices")
     f = rows(faces, "faces")
@@ -222,8 +229,6 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     verts, faces, fmats, offset = [], [], [], 0
     for i, m in enumerate(meshes):
         v, f, fm = _mesh(m, i, base_dir, materials, None)
-        if len(f) and (f.min() < 0 or f.max() >= len(v)):
-            raise OclgiError(f"mesh[{i}]: face indices out of range")
         verts.append(v)
         faces.append(f + offset)
         fmats.append(fm)

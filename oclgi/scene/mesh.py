@@ -57,12 +57,21 @@ def _load_zip(path: Path) -> LoadedMesh:
             members = [m for m in z.namelist() if Path(m).suffix.lower() in MESH_TYPES]
             if len(members) != 1:
                 raise OclgiError(f"{path}: expected exactly one mesh file inside, found {len(members)}")
+            inner = Path(members[0])
             data = z.read(members[0])
-    except zipfile.BadZipFile:
-        raise OclgiError(f"{path}: not a valid zip file") from None
-    inner = Path(members[0])
-    if inner.suffix.lower() == ".obj":
-        return _from_obj(read_obj(path.parent / inner.name, data.decode("utf-8", errors="replace")))
+            if inner.suffix.lower() == ".obj":
+                # material libraries are looked up beside the OBJ inside the zip
+                names = set(z.namelist())
+
+                def read_lib(name):
+                    member = (inner.parent / name).as_posix()
+                    if member not in names:
+                        return None
+                    return z.read(member).decode("utf-8", errors="replace")
+
+                return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib))
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError) as exc:
+        raise OclgiError(f"{path}: not a readable zip file ({exc})") from None
     return _load_trimesh(path, data, inner.suffix.lower())
 
 
@@ -72,7 +81,7 @@ def _load_trimesh(path: Path, data: bytes, suffix: str) -> LoadedMesh:
     try:
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="scene")
     except Exception as exc:  # trimesh raises many types for malformed files
-        raise OclgiError(f"{path}: cannot read {suffix[1:].upper()} file ({exc})") from None
+        raise OclgiError(f"{path}: cannot read {suffix[1:].upper()} file ({type(exc).__name__}: {exc})") from None
     verts, faces, fmat, names, mats = [], [], [], [""], {}
     offset = 0
     for name, geom in loaded.geometry.items():

@@ -90,15 +90,6 @@ def _lib_from_disk(path: Path) -> Callable[[str], str | None]:
     return read
 
 
-def _mtllib_names(args: list[str], exists: Callable[[str], bool]) -> list[str]:
-    """The files an ``mtllib`` line names: whitespace-separated, unless the
-    whole (space-containing) name is one existing file."""
-    whole = " ".join(args)
-    if len(args) > 1 and exists(whole):
-        return [whole]
-    return args
-
-
 def read_obj(path: Path, text: str | None = None,
              read_lib: Callable[[str], str | None] | None = None) -> ObjMesh:
     """Read an OBJ file.
@@ -158,9 +149,11 @@ def read_obj(path: Path, text: str | None = None,
                 names.append(name)
             cur_mat = name_index[name]
         elif key == "mtllib":
-            texts = {}
-            for lib in _mtllib_names(line[1:], lambda n: texts.setdefault(n, read_lib(n)) is not None):
-                lib_text = texts[lib] if lib in texts else read_lib(lib)
+            # whitespace separates file names, unless the whole rest is one existing name
+            whole = " ".join(line[1:])
+            whole_text = read_lib(whole) if len(line) > 2 else None
+            libs = [(whole, whole_text)] if whole_text is not None else [(n, read_lib(n)) for n in line[1:]]
+            for lib, lib_text in libs:
                 if lib_text is None:
                     warnings.warn(f"{path}:{lineno}: material library {lib!r} not found; "
                                   "its materials get the mesh's default albedo and emission",

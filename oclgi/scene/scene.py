@@ -73,6 +73,7 @@ class Settings:
 
 MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63
 MAX_PHOTONS = 1 << 31
+MAX_COORDINATE = 1e18  # squared lengths stay finite in float32
 
 
 @dataclass
@@ -127,6 +128,9 @@ class Scene:
         if not np.isfinite(v).all():
             bad = int((~np.isfinite(v).all(axis=1)).sum())
             raise OclgiError(f"{self.name}: {bad} vertices have NaN or infinite coordinates")
+        if np.abs(v).max() > MAX_COORDINATE:
+            raise OclgiError(f"{self.name}: vertex coordinates reach {np.abs(v).max():.3g}; at most "
+                             f"{MAX_COORDINATE:.0e} is supported (the device computes in float32)")
         if f.min() < 0 or f.max() >= len(v):
             raise OclgiError(f"{self.name}: face indices out of range")
         self.vertices, self.faces = v, f

@@ -1,0 +1,524 @@
+"""Bad input: one clear line, exit status 2, no traceback, no output file.
+
+Every case runs the command line on a tiny scene written into tmp_path and
+checks that
+
+* stderr holds exactly one ``oclgi: error: ...`` line (warning lines may
+  precede it) and no traceback; nothing is printed on stdout;
+* the exit status is 2;
+* no file was created anywhere under tmp_path: no output, no temporary file.
+
+The cases the command line must handle run ``python -m oclgi`` in a
+subprocess (``SUB``); their many variants call ``oclgi.cli.main`` in-process
+(same code, same checks, without an interpreter start each), where an
+uncaught exception fails the test just as a traceback would.
+"""
+
+import os
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+from oclgi.errors import OclgiError
+
+# A floor quad and a small emissive quad above it, facing down.
+BOX_OBJ = """mtllib box.mtl
+v -1 0 -1
+v 1 0 -1
+v 1 0 1
+v -1 0 1
+v -0.2 1 -0.2
+v 0.2 1 -0.2
+v 0.2 1 0.2
+v -0.2 1 0.2
+usemtl floor
+f 1 4 3 2
+usemtl light
+f 5 6 7 8
+"""
+BOX_MTL = """newmtl floor
+Kd 0.5 0.5 0.5
+newmtl light
+Kd 0 0 0
+Ke 5 5 5
+"""
+SCENE = """[[mesh]]
+path = "{mesh}"
+
+[camera]
+position = [0, 0.5, 3]
+look_at = [0, 0.3, 0]
+width = 8
+height = 8
+
+[photons]
+count = {count}
+
+[estimator]
+radius = {radius}
+"""
+POINTS = "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0.5,0.01,0.5,0,1,0\n"
+
+
+def write_scene(d, obj=BOX_OBJ, mtl=BOX_MTL, mesh="box.obj", count="2000", radius="0.1", extra=""):
+    d.mkdir(parents=True, exist_ok=True)
+    if obj is not None:
+        (d / "box.obj").write_text(obj)
+    if mtl is not None:
+        (d / "box.mtl").write_text(mtl)
+    (d / "s.toml").write_text(SCENE.format(mesh=mesh, count=count, radius=radius) + extra)
+    (d / "p.csv").write_text(POINTS)
+    return d / "s.toml"
+
+
+SUB = True  # run this case in a subprocess
+INP = False  # run it in-process
+
+
+def run(cwd, *args):
+    """``python -m oclgi *args`` in ``cwd``."""
+    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture
+def run_inproc(monkeypatch, capsys):
+    """``oclgi.cli.main(args)`` in ``cwd``, as a CompletedProcess."""
+    from oclgi.cli import main
+
+    def run_(cwd, *args):
+        monkeypatch.chdir(cwd)
+        capsys.readouterr()
+        try:
+            rc = main([str(a) for a in args])
+        except SystemExit as exc:  # argparse
+            rc = exc.code
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(args, rc, out, err)
+
+    return run_
+
+
+@pytest.fixture
+def fails_cleanly(run_inproc):
+    return lambda tmp_path, *args, match=None, sub=SUB: _fails_cleanly(
+        run if sub else run_inproc, tmp_path, *args, match=match)
+
+
+def files_under(d):
+    return {p.relative_to(d) for p in d.rglob("*") if p.is_file()}
+
+
+def _fails_cleanly(runner, tmp_path, *args, match=None):
+    """Run ``oclgi *args`` in tmp_path; check the clean failure; return the error line."""
+    before = files_under(tmp_path)
+    res = runner(tmp_path, *args)
+    lines = res.stderr.splitlines()
+    assert "Traceback" not in res.stderr, res.stderr
+    assert res.returncode == 2, (res.returncode, res.stderr)
+    assert lines and lines[-1].startswith("oclgi: error: "), res.stderr
+    assert all(line.startswith("oclgi: warning: ") for line in lines[:-1]), res.stderr
+    assert res.stdout == "", res.stdout
+    assert files_under(tmp_path) == before, "files were left behind"
+    if match is not None:
+        import re
+
+        assert re.search(match, lines[-1]), lines[-1]
+    return lines[-1]
+
+
+@pytest.fixture
+def scene(tmp_path):
+    return write_scene(tmp_path)
+
+
+# -- scene files ----------------------------------------------------------------
+
+def test_missing_scene_file(fails_cleanly, tmp_path):
+    fails_cleanly(tmp_path, "render", "nope.toml", "-o", "out/x.exr", match=r"scene file not found: nope\.toml")
+
+
+def test_scene_file_is_a_folder(fails_cleanly, tmp_path):
+    (tmp_path / "d.toml").mkdir()
+    fails_cleanly(tmp_path, "render", "d.toml", "-o", "out/x.exr", match="scene file not found", sub=INP)
+
+
+def test_malformed_toml(fails_cleanly, tmp_path):
+    write_scene(tmp_path)
+    (tmp_path / "s.toml").write_text("[[mesh]\npath = 'box.obj'\n")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"s\.toml: malformed TOML.*line 1")
+
+
+def test_binary_scene_file(fails_cleanly, tmp_path):
+    (tmp_path / "s.toml").write_bytes(b"\xff\xfe\x00garbage")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="not a text", sub=INP)
+
+
+@pytest.mark.parametrize("sub, toml, match", [
+    (SUB, "mesh = 5\n", r"mesh: expected \[\[mesh\]\]"),
+    (INP, "[[mesh]]\npath = 5\n", r"mesh\[0\]\.path: expected a file name"),
+    (INP, "[[mesh]]\npath = 'box.obj'\nmaterials = 5\n", r"mesh\[0\]\.materials"),
+    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = '123'\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
+    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = [true, 0, 0]\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
+    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = [2, 0, 0]\n", r"albedo must be 3 numbers in \[0, 1\]"),
+    (INP, "[[mesh]]\npath = 'box.obj'\ncolour = [1, 0, 0]\n", r"unknown key\(s\) \['colour'\]"),
+    (INP, "[[mesh]]\npath = 'box.obj'\n[mesh.materials.nosuch]\nemission = [1, 1, 1]\n",
+     r"\['nosuch'\] not in the mesh's materials"),
+    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 'a']]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
+     r"mesh\[0\]\.vertices: expected numbers"),
+    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1]]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
+     r"mesh\[0\]\.vertices"),
+    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]\nfaces = [[0, 1, 2.5]]\nemission = [1, 1, 1]\n",
+     r"mesh\[0\]\.faces: indices must be integers"),
+    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]\nfaces = [[0, 1, 3]]\nemission = [1, 1, 1]\n",
+     r"mesh\[0\]: face indices out of range"),
+    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, nan], [0, 1, 0]]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
+     r"mesh\[0\]: 1 vertices have NaN or infinite"),
+    (INP, "[[mesh]]\npath = 'box.obj'\ntransform = {scale = 1e30}\n", r"coordinates reach 1e\+30"),
+    (INP, "[[mesh]]\npath = 'box.obj'\n[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 1]\n", r"camera: look_at must differ"),
+    (INP, "[[mesh]]\npath = 'box.obj'\n[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 0]\nwidth = 1e400\n",
+     r"camera\.width: expected a finite number"),
+    (INP, "[[mesh]]\npath = 'box.obj'\n[estimator]\nmethod = 'photonmap'\n", r"unknown method 'photonmap'"),
+    (INP, "[[mesh]]\npath = 'box.obj'\n[[point_light]]\nposition = [0, 1, 0]\n", r"point_light\[0\]\.intensity"),
+])
+def test_malformed_scene_structure(fails_cleanly, sub, tmp_path, toml, match):
+    write_scene(tmp_path)
+    (tmp_path / "s.toml").write_text(toml)
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+
+
+# -- mesh files -----------------------------------------------------------------
+
+def test_mesh_file_missing(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mesh="nowhere.obj")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"mesh file not found: .*nowhere\.obj")
+
+
+def test_mesh_type_unsupported(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mesh="box.fbx")
+    (tmp_path / "box.fbx").write_text("whatever")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"unsupported mesh type '\.fbx'", sub=INP)
+
+
+@pytest.mark.parametrize("sub, old, new, match", [
+    (SUB, "v 1 0 -1\n", "v 1 2 x\n", r"box\.obj:3: malformed number in '1 2 x'"),
+    (INP, "v 1 0 -1\n", "v 1 0\n", r"box\.obj:3: expected 3 numbers"),
+    (SUB, "f 5 6 7 8\n", "f 5 6 7 9\n", r"box\.obj:13: face index '9' refers to no vertex"),
+    (SUB, "f 5 6 7 8\n", "f 5 6 7 0\n", r"box\.obj:13: face index '0' refers to no vertex"),
+    (INP, "f 5 6 7 8\n", "f -9 6 7\n", r"box\.obj:13: face index '-9' refers to no vertex"),
+    (INP, "f 5 6 7 8\n", "f 5 6 x\n", r"box\.obj:13: malformed face index 'x'"),
+    (SUB, "v 1 0 -1\n", "v nan 0 -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
+    (SUB, "v 1 0 -1\n", "v inf 0 -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
+    (SUB, "v 1 0 -1\n", "v 1 -inf -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
+])
+def test_malformed_obj(fails_cleanly, sub, tmp_path, old, new, match):
+    assert old in BOX_OBJ
+    write_scene(tmp_path, obj=BOX_OBJ.replace(old, new, 1))
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+
+
+def test_malformed_mtl(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 5 five 5"))
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"box\.mtl:5: malformed number", sub=INP)
+
+
+def test_negative_emission_in_mtl(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 5 -5 5"))
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"emission must be 3 numbers >= 0", sub=INP)
+
+
+PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 1\nproperty list uchar int vertex_indices\nend_header\n")
+
+
+@pytest.mark.parametrize("sub, data, match", [
+    (SUB, bytes(range(256)) * 4, r"m\.ply: cannot read PLY file"),
+    (INP, b"", r"m\.ply: cannot read PLY file"),
+    (INP, b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n", r"m\.ply: cannot read PLY file"),
+    (INP, b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nproperty float y\n"
+     b"property float z\nend_header\n\x00\x01", r"m\.ply: cannot read PLY file"),
+    (INP, (PLY_HEAD + "0 0 0\nnan 1 0\n0 1 0\n3 0 1 2\n").encode(), r"m\.ply: 1 vertices have NaN or infinite"),
+    (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 7\n").encode(), r"m\.ply: face indices out of range"),
+])
+def test_malformed_ply(fails_cleanly, sub, tmp_path, data, match):
+    write_scene(tmp_path, mesh="m.ply", extra="")
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
+        'path = "m.ply"', 'path = "m.ply"\nemission = [1, 1, 1]'))
+    (tmp_path / "m.ply").write_bytes(data)
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+
+
+def test_malformed_zip(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mesh="m.zip")
+    (tmp_path / "m.zip").write_bytes(b"PK\x03\x04 not really a zip")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"m\.zip: not a readable zip file", sub=INP)
+
+
+def test_zip_with_two_meshes(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mesh="m.zip")
+    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
+        z.writestr("a.obj", BOX_OBJ)
+        z.writestr("b.obj", BOX_OBJ)
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr",
+                  match="expected exactly one mesh file inside, found 2", sub=INP)
+
+
+def test_zip_obj_error_names_member_line(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mesh="m.zip")
+    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
+        z.writestr("inner.obj", BOX_OBJ.replace("v 1 0 -1\n", "v 1 0 q\n"))
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"m\.zip.inner\.obj:3: malformed number", sub=INP)
+
+
+# -- emitters, degenerate triangles ---------------------------------------------------
+
+def test_no_emitter(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 0 0 0"))
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="the scene has no emitter")
+
+
+def test_no_emitter_point_light_of_zero_intensity(fails_cleanly, tmp_path):
+    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", ""),
+                extra="\n[[point_light]]\nposition = [0, 1, 0]\nintensity = [0, 0, 0]\n")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="the scene has no emitter", sub=INP)
+
+
+def test_missing_mtl_warns_then_no_emitter(tmp_path):
+    write_scene(tmp_path, mtl=None)
+    res = run(tmp_path, "render", "s.toml", "-o", "out/x.exr")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = res.stderr.splitlines()
+    assert len(lines) == 2, res.stderr
+    assert lines[0].startswith("oclgi: warning: ") and "material library 'box.mtl' not found" in lines[0]
+    assert lines[1].startswith("oclgi: error: ") and "no emitter" in lines[1]
+    assert not (tmp_path / "out").exists()
+
+
+def test_all_triangles_degenerate(fails_cleanly, tmp_path):
+    obj = "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n"
+    write_scene(tmp_path, obj=obj, mtl=None)
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
+        'path = "box.obj"', 'path = "box.obj"\nemission = [1, 1, 1]'))
+    line = fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="every triangle is degenerate")
+    assert "dropped" not in line
+
+
+def test_degenerate_triangles_dropped_with_warning(tmp_path):
+    extra = "v 0 0 0\nv 0 0 0\nf 9 10 1\nf 1 1 2\nf 1 2 3\nf 2 9 3\n"  # 2 degenerate, 2 fine
+    write_scene(tmp_path, obj=BOX_OBJ + extra)
+    res = run(tmp_path, "render", "s.toml", "-o", "out/x.exr", "--quiet")
+    assert res.returncode == 0, res.stderr
+    warn = [line for line in res.stderr.splitlines() if "degenerate" in line]
+    assert len(warn) == 1 and warn[0].startswith("oclgi: warning: "), res.stderr
+    assert "dropped 2 degenerate triangles" in warn[0]
+    assert (tmp_path / "out" / "x.exr").is_file() and (tmp_path / "out" / "x.png").is_file()
+
+
+# -- photon count, radius and other numbers --------------------------------------------
+
+@pytest.mark.parametrize("sub, count, match", [
+    (SUB, "0", "photon count must be a positive integer"),
+    (SUB, "-5", "photon count must be a positive integer"),
+    (INP, "2.5", r"photons\.count: expected an integer"),
+    (INP, "inf", r"photons\.count: expected a finite number"),
+    (INP, "nan", r"photons\.count: expected a finite number"),
+    (INP, "1e400", r"photons\.count: expected a finite number"),
+    (INP, "'many'", r"photons\.count: expected a number"),
+    (INP, "true", r"photons\.count: expected a number"),
+    (INP, "3000000000", r"up to 2\^31"),
+])
+def test_bad_photon_count_in_toml(fails_cleanly, sub, tmp_path, count, match):
+    write_scene(tmp_path, count=count)
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+
+
+@pytest.mark.parametrize("sub, radius, match", [
+    (SUB, "0", "radius must be a positive number"),
+    (SUB, "-1", "radius must be a positive number"),
+    (INP, "-0.5", "radius must be a positive number"),
+    (INP, "inf", r"estimator\.radius: expected a finite number"),
+    (INP, "nan", r"estimator\.radius: expected a finite number"),
+    (INP, "'big'", r"estimator\.radius: expected a number"),
+])
+def test_bad_radius_in_toml(fails_cleanly, sub, tmp_path, radius, match):
+    write_scene(tmp_path, radius=radius)
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+
+
+@pytest.mark.parametrize("sub, args, match", [
+    (SUB, ["--photons", "0"], r"argument --photons: expected a positive integer, got '0'"),
+    (INP, ["--photons", "-5"], r"argument --photons"),
+    (INP, ["--photons", "2.5"], r"argument --photons"),
+    (INP, ["--photons", "2.5e0"], r"argument --photons"),  # was silently truncated to 2
+    (INP, ["--photons", "1e400"], r"argument --photons"),  # was a traceback
+    (INP, ["--photons", "many"], r"argument --photons"),
+    (INP, ["--photons", "99999999999"], r"up to 2\^31"),
+    (SUB, ["--radius", "-1"], r"argument --radius: expected a positive number, got '-1'"),
+    (INP, ["--radius", "0"], r"argument --radius"),
+    (INP, ["--radius", "nan"], r"argument --radius"),
+    (INP, ["--radius", "inf"], r"argument --radius"),
+    (INP, ["--radius", "1e400"], r"argument --radius"),
+    (INP, ["--max-depth", "0"], r"argument --max-depth"),
+    (INP, ["--max-depth", "1000"], r"argument --max-depth: expected an integer in 1\.\.256"),  # was accepted
+    (INP, ["--seed", "-1"], r"argument --seed"),
+    (INP, ["--seed", str(2**64)], r"argument --seed"),  # was a traceback
+    (INP, ["--width", "0"], r"argument --width"),
+    (INP, ["--width", "100000"], r"camera size must be 1\.\.16384"),
+    (INP, ["--exposure", "0"], r"argument --exposure"),
+    (INP, ["--method", "photonmap"], r"argument --method: invalid choice"),
+    (INP, ["--device", "no-such-device-anywhere"], r"no OpenCL device matches"),
+    (INP, ["--bogus"], r"unrecognized arguments: --bogus"),
+])
+def test_bad_cli_numbers(fails_cleanly, sub, scene, tmp_path, args, match):
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", *args, match=match, sub=sub)
+
+
+def test_local_size_too_large(fails_cleanly, scene, tmp_path):
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", "--local-size", "1000000",
+                  match=r"--local-size 1000000 is larger than", sub=INP)
+
+
+def test_no_command(fails_cleanly, tmp_path):
+    fails_cleanly(tmp_path, match=r"required: command")
+
+
+# -- outputs --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("sub, out, match", [
+    (INP, "out/x.jpg", r"must end in \.exr or \.png"),
+    (INP, "out/x", r"must end in \.exr or \.png"),
+])
+def test_bad_render_output_name(fails_cleanly, sub, scene, tmp_path, out, match):
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", out, match=match, sub=sub)
+
+
+def test_render_output_is_a_folder(fails_cleanly, scene, tmp_path):
+    (tmp_path / "out" / "x.png").mkdir(parents=True)  # the PNG cannot be written: no EXR either
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"x\.png: it is a folder")
+    assert os.listdir(tmp_path / "out") == ["x.png"]
+
+
+def test_render_output_parent_is_a_file(fails_cleanly, scene, tmp_path):
+    (tmp_path / "out").write_text("")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="is not a folder", sub=INP)
+
+
+def test_irradiance_output_is_a_folder(fails_cleanly, scene, tmp_path):
+    (tmp_path / "e.npy").mkdir()
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", match="it is a folder", sub=INP)
+
+
+def test_irradiance_output_suffix(fails_cleanly, scene, tmp_path):
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.txt",
+                  match=r"must end in \.npy or \.csv", sub=INP)
+
+
+# -- points files for `oclgi irradiance` ---------------------------------------------------
+
+@pytest.mark.parametrize("sub, text, match", [
+    (SUB, "nan,0.01,0,0,1,0\n", r"query point 0 has a NaN or infinite coordinate"),
+    (INP, "0,0.01,0,0,1,0\n0,inf,0,0,1,0\n", r"query point 1 has a NaN or infinite coordinate"),
+    (SUB, "0,0.01,0,0,0,0\n", r"query point 0 has a zero, NaN or infinite normal"),
+    (INP, "0,0.01,0,0,nan,0\n", r"query point 0 has a zero, NaN or infinite normal"),
+    (SUB, "0,0.01,0,0,1\n", r"p\.csv:1: expected 6 columns .*got 5"),
+    (INP, "0,0.01,0,0,1,0,7\n", r"p\.csv:1: expected 6 columns .*got 7"),
+    (INP, "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0,0.01,0,0,1\n", r"p\.csv:3: expected 6 columns .*got 5"),
+    (INP, "0,0.01,0,0,1,0\n0,0.01,zero,0,1,0\n", r"p\.csv:2: expected 6 numbers"),
+    (INP, "0,0.01,zero,0,1,0\n", r"p\.csv:1: expected 6 numbers"),
+    (INP, "x,y,z,nx,ny,nz\n", r"p\.csv: no points"),
+    (INP, "", r"p\.csv: no points"),
+])
+def test_bad_points_csv(fails_cleanly, sub, scene, tmp_path, text, match):
+    (tmp_path / "p.csv").write_text(text)
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv", match=match, sub=sub)
+
+
+def _npy(tmp_path, array, **kw):
+    np.save(tmp_path / "p.npy", array, **kw)
+
+
+@pytest.mark.parametrize("sub, make, match", [
+    (INP, lambda d: _npy(d, np.array([[np.nan, 0.01, 0, 0, 1, 0]])), r"query point 0 has a NaN"),
+    (INP, lambda d: _npy(d, np.array([[0, 0.01, 0, 0, 0, 0.0]])), r"query point 0 has a zero"),
+    (INP, lambda d: _npy(d, np.zeros((2, 5))), r"expected n rows of 6 columns .*\(2, 5\)"),
+    (INP, lambda d: _npy(d, np.zeros(6)), r"expected n rows of 6 columns .*\(6,\)"),
+    (INP, lambda d: _npy(d, np.zeros((0, 6))), r"p\.npy: no points"),
+    (INP, lambda d: _npy(d, np.array([["a"] * 6])), r"expected an array of numbers"),
+    (INP, lambda d: _npy(d, np.array([[0, 0.01, 0, 0, 1, 0]], dtype=object), allow_pickle=True), "cannot read points"),
+    (INP, lambda d: (d / "p.npy").write_bytes(bytes(range(200))), r"p\.npy: not a \.npy file"),
+])
+def test_bad_points_npy(fails_cleanly, sub, scene, tmp_path, make, match):
+    make(tmp_path)
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", match=match, sub=sub)
+
+
+def test_points_file_missing(fails_cleanly, scene, tmp_path):
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "nope.csv", "-o", "e.npy",
+                  match=r"points file not found: nope\.csv", sub=INP)
+
+
+def test_points_file_suffix(fails_cleanly, scene, tmp_path):
+    (tmp_path / "p.txt").write_text(POINTS)
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.txt", "-o", "e.npy",
+                  match=r"points must be a \.npy or \.csv file", sub=INP)
+
+
+def test_points_binary_csv(fails_cleanly, scene, tmp_path):
+    (tmp_path / "p.csv").write_bytes(b"\xff\xfe\x00\x01")
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", match="not a text", sub=INP)
+
+
+# -- the writers themselves: all or nothing, no temporary files, normal permissions ----------
+
+def test_write_images_all_or_nothing(tmp_path, monkeypatch):
+    from oclgi import io
+
+    real = io._write_image_file
+
+    def fail_on_png(tmp, path, pixels):
+        if path.suffix == ".png":
+            raise OclgiError(f"cannot write {path}: disk full")
+        real(tmp, path, pixels)
+
+    monkeypatch.setattr(io, "_write_image_file", fail_on_png)
+    img = np.ones((2, 3, 3), np.float32)
+    with pytest.raises(OclgiError, match="disk full"):
+        io.write_images({tmp_path / "x.exr": img, tmp_path / "x.png": (img * 255).astype(np.uint8)})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_array_interrupted_leaves_nothing(tmp_path, monkeypatch):
+    from oclgi import io
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "save", boom)
+    with pytest.raises(KeyboardInterrupt):
+        io.write_array(tmp_path / "e.npy", np.zeros((2, 3)))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_outputs_get_normal_permissions(tmp_path):
+    from oclgi import io
+
+    mask = os.umask(0o022)
+    try:
+        p = io.write_array(tmp_path / "e.npy", np.zeros((2, 3)))
+        q = io.write_image(tmp_path / "x.exr", np.zeros((2, 2, 3), np.float32))
+    finally:
+        os.umask(mask)
+    assert p.stat().st_mode & 0o777 == 0o644  # mkstemp alone gives 0600
+    assert q.stat().st_mode & 0o777 == 0o644
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["e.npy", "x.exr"]
+
+
+def test_write_error_is_an_oclgi_error(tmp_path):
+    from oclgi import io
+
+    (tmp_path / "f").write_text("")
+    with pytest.raises(OclgiError, match="is not a folder"):
+        io.write_array(tmp_path / "f" / "e.npy", np.zeros((2, 3)))

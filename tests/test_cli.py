@@ -1,0 +1,181 @@
+"""The ``oclgi`` command line, successful runs (bad input: test_bad_input.py).
+
+Each run is ``python -m oclgi`` in a subprocess, on a tiny scene written
+into tmp_path (2,000 photons, an 8 x 8 camera), about a second each.
+"""
+
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from oclgi.io import read_image
+
+# A floor quad and a small quad light above it facing down; the light's
+# emission comes from the TOML (materials.light), the floor's albedo from Kd.
+BOX_OBJ = """mtllib box.mtl
+v -1 0 -1
+v 1 0 -1
+v 1 0 1
+v -1 0 1
+v -0.2 1 -0.2
+v 0.2 1 -0.2
+v 0.2 1 0.2
+v -0.2 1 0.2
+usemtl floor
+f 1 4 3 2
+usemtl light
+f 5 6 7 8
+"""
+BOX_MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\n"
+SCENE = """[[mesh]]
+path = "box.obj"
+[mesh.materials.light]
+emission = [5, 5, 5]
+
+[[point_light]]
+position = [0.5, 0.8, 0.5]
+intensity = [0.2, 0.1, 0.05]
+
+[camera]
+position = [0, 0.5, 3]
+look_at = [0, 0.3, 0]
+width = 8
+height = 8
+
+[photons]
+count = 2000
+seed = 7
+
+[estimator]
+radius = 0.1
+"""
+POINTS = [[0, 0.01, 0, 0, 1, 0], [0.5, 0.01, 0.5, 0, 1, 0], [-0.7, 0.01, 0.3, 0, 2, 0], [0, 0.5, 0, 1, 0, 0]]
+
+
+def run(cwd, *args):
+    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, timeout=300)
+
+
+def ok(res):
+    assert res.returncode == 0, res.stderr
+    assert "Traceback" not in res.stderr
+    return res
+
+
+@pytest.fixture
+def scene(tmp_path):
+    (tmp_path / "box.obj").write_text(BOX_OBJ)
+    (tmp_path / "box.mtl").write_text(BOX_MTL)
+    (tmp_path / "s.toml").write_text(SCENE)
+    return tmp_path / "s.toml"
+
+
+def _check_image_pair(exr, png, w, h):
+    rad = read_image(exr)
+    assert rad.shape == (h, w, 3)
+    assert rad.dtype == np.float32
+    assert np.isfinite(rad).all() and (rad >= 0).all()
+    assert rad.max() > 0  # the floor is lit and the light is in view
+    pix = read_image(png)
+    assert pix.shape[:2] == (h, w) and pix.shape[2] in (3, 4)
+    assert np.isfinite(pix).all() and (pix >= 0).all()
+
+
+def test_render_writes_exr_and_png(scene, tmp_path):
+    res = ok(run(tmp_path, "render", "s.toml", "-o", "imgs/x.exr", "--photons", "2000"))
+    exr, png = tmp_path / "imgs" / "x.exr", tmp_path / "imgs" / "x.png"
+    _check_image_pair(exr, png, 8, 8)
+    # says where it wrote them, on stdout; the summary goes to stderr
+    assert res.stdout.splitlines() == [f"wrote {os.path.join('imgs', 'x.exr')}", f"wrote {os.path.join('imgs', 'x.png')}"]
+    assert re.search(r"2,000 photons", res.stderr)
+    assert sorted(p.name for p in (tmp_path / "imgs").iterdir()) == ["x.exr", "x.png"]  # no temporary files
+    mask = 0o777 & ~_umask()
+    assert (exr.stat().st_mode & 0o777) == (0o666 & mask)
+
+
+def _umask():
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def test_render_png_name_size_flags_and_default_output(scene, tmp_path):
+    # -o with .png writes the same pair; --width/--height override the camera; --quiet prints no summary
+    res = ok(run(tmp_path, "render", "s.toml", "-o", "y.png", "--width", "6", "--height", "4", "--quiet",
+                 "--photons", "2e3", "--method", "impact"))
+    _check_image_pair(tmp_path / "y.exr", tmp_path / "y.png", 6, 4)
+    assert res.stderr == ""
+    assert res.stdout.split() == ["wrote", "y.exr", "wrote", "y.png"]
+    # without -o: out/SCENE.exr under the working folder
+    ok(run(tmp_path, "render", "s.toml", "--quiet"))
+    _check_image_pair(tmp_path / "out" / "s.exr", tmp_path / "out" / "s.png", 8, 8)
+
+
+def _csv_points(path, rows):
+    path.write_text("x,y,z,nx,ny,nz\n" + "\n".join(",".join(str(v) for v in r) for r in rows) + "\n")
+
+
+def test_irradiance_csv_and_npy(scene, tmp_path):
+    _csv_points(tmp_path / "p.csv", POINTS)
+    np.save(tmp_path / "p.npy", np.array(POINTS, np.float64))
+
+    res = ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv"))
+    assert res.stdout.strip() == "wrote e.csv"
+    lines = (tmp_path / "e.csv").read_text().splitlines()
+    assert lines[0] == "x,y,z,nx,ny,nz,E_r,E_g,E_b"
+    table = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1)
+    assert table.shape == (len(POINTS), 9)
+    np.testing.assert_allclose(table[:, :3], np.array(POINTS)[:, :3], atol=1e-6)
+    normals = np.array(POINTS, np.float64)[:, 3:]
+    np.testing.assert_allclose(table[:, 3:6], normals / np.linalg.norm(normals, axis=1, keepdims=True), atol=1e-6)
+    e_csv = table[:, 6:]
+
+    ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", "--quiet"))
+    e_npy = np.load(tmp_path / "e.npy")
+    assert e_npy.shape == (len(POINTS), 3) and e_npy.dtype == np.float64
+    for e in (e_csv, e_npy):
+        assert np.isfinite(e).all() and (e >= 0).all()
+        assert (e[:3].sum(axis=1) > 0).all()  # floor points under the light receive light
+    # same scene, same seed: the same numbers whatever the points file format
+    np.testing.assert_allclose(e_npy, e_csv, rtol=1e-6, atol=1e-9)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+
+
+def test_irradiance_flags_change_the_estimate(scene, tmp_path):
+    np.save(tmp_path / "p.npy", np.array(POINTS, np.float64))
+    ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "a.npy", "--quiet"))
+    ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "b.npy", "--quiet",
+           "--seed", "8", "--radius", "0.2", "--max-depth", "3", "--local-size", "8"))
+    a, b = np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy")
+    assert a.shape == b.shape == (len(POINTS), 3)
+    assert np.isfinite(b).all() and (b >= 0).all()
+    assert not np.array_equal(a, b)
+
+
+def test_info_lists_a_device(tmp_path):
+    res = ok(run(tmp_path, "info"))
+    devices = [line for line in res.stdout.splitlines() if re.match(r"^[* ] \d+:\d+ ", line)]
+    assert devices, res.stdout
+    assert any(line.startswith("*") for line in devices)  # the default is marked
+
+
+def test_help(tmp_path):
+    res = ok(run(tmp_path, "--help"))
+    for cmd in ("render", "irradiance", "info"):
+        assert cmd in res.stdout
+    res = ok(run(tmp_path, "render", "--help"))
+    for flag in ("--photons", "--radius", "--method", "-o"):
+        assert flag in res.stdout
+
+
+def test_console_script_installed():
+    """The ``oclgi`` entry point of the installed package runs the same main()."""
+    from importlib.metadata import entry_points
+
+    eps = [ep for ep in entry_points(group="console_scripts") if ep.name == "oclgi"]
+    assert eps and eps[0].value == "oclgi.cli:main"
