@@ -8,6 +8,7 @@
  *               work-item owns its points, so no atomics; batches run in
  *               order. (PoCL does not vectorise loops across work-items, so
  *               the lanes are explicit.)
+ *               Counts u = segment-disc tests (work.h).
  * detp_resolve  one work-item per point: E = acc / (scale * pi d^2).
  *
  * count_emitted = 0 skips segments leaving the light (bounce 0), i.e. the
@@ -15,16 +16,19 @@
  */
 #include "oclgi_types.h"
 #include "detp.h"
+#include "work.h"
 
 #define DETP_LANES 8
 
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
                          int n_points, __global const float4 *segments, int n_paths,
                          int max_depth, int count_emitted, float radius2, float ext,
-                         float scale, __global long *acc)
+                         float scale, __global long *acc, __global ulong *work)
 {
     int base = get_global_id(0) * DETP_LANES;
     if (base >= n_points) return;
+    WORK_DECL;
+    int lanes = min(DETP_LANES, n_points - base); /* real points in this work-item */
     float px[DETP_LANES], py[DETP_LANES], pz[DETP_LANES], qx[DETP_LANES], qy[DETP_LANES], qz[DETP_LANES];
     for (int k = 0; k < DETP_LANES; ++k) {
         int i = min(base + k, n_points - 1);
@@ -42,6 +46,7 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             float4 f0 = path[3 * b], f1 = path[3 * b + 1];
             if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* end of the path */
             float tmax = f0.w + ext;
+            WORK_U(lanes);
             int8 hit;
             DETP_TEST(float8, hit, x, y, z, nx, ny, nz, f0.x, f0.y, f0.z, f1.x, f1.y, f1.z, tmax, radius2);
             if (any(hit)) {
@@ -62,6 +67,7 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
         acc[3 * i + 1] += g[k];
         acc[3 * i + 2] += bl[k];
     }
+    WORK_FLUSH(work);
 }
 
 __kernel void detp_resolve(__global const long *acc, int n_points, float inv_norm,

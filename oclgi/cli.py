@@ -17,6 +17,7 @@ import warnings
 from pathlib import Path
 
 from .errors import OclgiError
+from .estimators import METHODS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -78,7 +79,7 @@ def _seed(text):
 
 def _estimate_args(p):
     p.add_argument("scene", type=Path, help="scene file (TOML)")
-    p.add_argument("--method", choices=["detp", "impact"], help="estimator (default: the scene's, else detp)")
+    p.add_argument("--method", choices=METHODS, help="estimator (default: the scene's, else detp)")
     p.add_argument("--photons", type=_positive_int, help="number of photon paths (default: the scene's)")
     p.add_argument("--radius", type=_positive_float, help="DETP disc radius (default: the scene's)")
     p.add_argument("--seed", type=_seed, help="random seed (default: the scene's)")

@@ -55,6 +55,7 @@ class Estimate:
     scale: float  # fixed-point units per watt
     stats: Stats
     points: queries.QueryPoints
+    work: dict | None = None  # exact work counts (t, u, nodes) when count_work=True
 
 
 @dataclass
@@ -74,6 +75,20 @@ def _check_run(seed, max_depth):
     if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or \
             not 1 <= max_depth <= MAX_DEPTH_LIMIT:
         raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {max_depth!r}")
+
+
+def _check_options(cls, options):
+    import inspect
+
+    accepted = set()
+    for klass in cls.__mro__:
+        init = klass.__dict__.get("__init__")
+        if init is not None:
+            accepted |= {p.name for p in inspect.signature(init).parameters.values()
+                         if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
+    unknown = set(options) - (accepted - {"self", "queue", "compiled", "points"})
+    if unknown:
+        raise OclgiError(f"method {cls.name!r} takes no option(s) {sorted(unknown)}")
 
 
 class Engine:
@@ -134,8 +149,14 @@ class Engine:
     # -- estimation -----------------------------------------------------------
     def irradiance(self, points, method: str | None = None, photons: int | None = None,
                    radius: float | None = None, seed: int | None = None, max_depth: int | None = None,
-                   extension: float | None = None, count_emitted: bool | None = None) -> Estimate:
-        """Irradiance at query points (a QueryPoints, or an (n, 6) array x y z nx ny nz)."""
+                   extension: float | None = None, count_emitted: bool | None = None,
+                   count_work: bool = False, **options) -> Estimate:
+        """Irradiance at query points (a QueryPoints, or an (n, 6) array x y z nx ny nz).
+
+        ``count_work`` builds the kernels with exact work counters (returned
+        in ``Estimate.work``); ``options`` go to the estimator (its own
+        parameters, e.g. the sphere cache's ``q``).
+        """
         if not isinstance(points, queries.QueryPoints):
             a = np.asarray(points, dtype=np.float64)
             if a.ndim != 2 or a.shape[1] != 6:
@@ -157,8 +178,10 @@ class Engine:
 
         stats = Stats(photons=int(photons), points=len(points), method=method, radius=float(radius))
         t0 = time.perf_counter()
+        _check_options(ESTIMATORS[method], options)
         est = ESTIMATORS[method](self.queue, self.compiled, points, radius=radius, extension=extension,
-                                 count_emitted=count_emitted, local_size=self.local_size)
+                                 count_emitted=count_emitted, local_size=self.local_size,
+                                 count_work=count_work, **options)
         batch_paths = max(1, min(photons, self.batch_bytes // (max_depth * 48)))
         tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, batch_paths, self.local_size)
         scale = self.compiled.fixed_scale(photons)
@@ -188,7 +211,7 @@ class Engine:
                          "total": time.perf_counter() - t0}
         self._last_irradiance = irr_buf
         self._last_estimator = est
-        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points)
+        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points, est.work())
 
     def trace(self, photons: int | None = None, seed: int | None = None, max_depth: int | None = None):
         """Trace photon paths and return their segments on the host.

@@ -18,6 +18,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from .base import Estimator
 
 
 def vertex_triangles(faces: np.ndarray, n_vertices: int):
@@ -31,17 +32,13 @@ def vertex_triangles(faces: np.ndarray, n_vertices: int):
     return starts, lists
 
 
-class ImpactCount:
+class ImpactCount(Estimator):
     name = "impact"
 
-    def __init__(self, queue, compiled, points, count_emitted: bool = True,
-                 local_size: int | None = None, **_ignored):
-        self.queue = queue
-        self.compiled = compiled
-        self.count_emitted = bool(count_emitted)
-        self.local_size = local_size
-        ctx = queue.context
-        prog = programs(ctx).get("impact_count")
+    def __init__(self, queue, compiled, points, radius=None, extension=None, **kw):
+        # radius and extension are DETP parameters; Impact Count has none
+        super().__init__(queue, compiled, points, **kw)
+        prog = self.program("impact_count")
         self.k_acc = prog.impact_count_accumulate
         self.k_tri = prog.impact_count_triangles
         self.k_vert = prog.impact_count_vertices
@@ -49,20 +46,17 @@ class ImpactCount:
         scene = compiled.scene
         self.n_tris = scene.n_triangles
         self.n_vertices = len(scene.vertices)
-        self.n = len(points)
-        mf = cl.mem_flags
         if points.kind != "camera" and (points.tri < 0).any():  # camera misses stay background
             points = locate(queue, compiled, points)
-        self.positions = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.positions)
-        self.barys = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.barys)
+        self.positions = self.upload(points.positions)
+        self.barys = self.upload(points.barys)
         starts, lists = vertex_triangles(scene.faces, self.n_vertices)
-        self.starts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=starts)
-        self.lists = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=lists)
-        self.acc = cl.Buffer(ctx, mf.READ_WRITE, self.n_tris * 3 * 8)
-        cl.enqueue_fill_buffer(queue, self.acc, np.int64(0), 0, self.n_tris * 3 * 8)
-        self.tri_irr = cl.Buffer(ctx, mf.READ_WRITE, self.n_tris * 16)
-        self.vert_irr = cl.Buffer(ctx, mf.READ_WRITE, self.n_vertices * 16)
-        self.irr = cl.Buffer(ctx, mf.READ_WRITE, max(1, self.n) * 16)
+        self.starts = self.upload(starts)
+        self.lists = self.upload(lists)
+        self.acc = self.zeros(self.n_tris * 3 * 8)
+        self.tri_irr = self.zeros(self.n_tris * 16)
+        self.vert_irr = self.zeros(self.n_vertices * 16)
+        self.irr = self.zeros(self.n * 16)
 
     def accumulate(self, batch, scale: float):
         launch(self.queue, self.k_acc, batch.n_slots, batch.segments, np.int32(batch.n_slots),

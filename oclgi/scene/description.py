@@ -44,10 +44,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
+from ..estimators import METHODS
 from .mesh import load_mesh
 from .scene import Camera, Material, PointLight, Scene, Settings
 
-METHODS = ("detp", "impact")
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform"}

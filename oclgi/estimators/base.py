@@ -1,0 +1,99 @@
+"""What every estimator provides, and the parts all DETP variants share.
+
+An estimator is built for one set of query points, then ``accumulate`` is
+called once per batch of traced paths (fixed-point sums on the device), and
+``resolve`` turns the sums into irradiance. ``work()`` returns the exact work
+counts (t segment-sphere tests, u segment-disc tests, BVH node visits) when
+the estimator was built with ``count_work=True`` (kernels/work.h).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyopencl as cl
+
+from ..cl.programs import launch, programs
+
+
+class Estimator:
+    name = ""
+
+    def __init__(self, queue, compiled, points, count_emitted: bool = True,
+                 local_size: int | None = None, count_work: bool = False):
+        self.queue = queue
+        self.ctx = queue.context
+        self.compiled = compiled
+        self.points = points
+        self.n = len(points)
+        self.count_emitted = bool(count_emitted)
+        self.local_size = local_size
+        self.count_work = bool(count_work)
+        self.defines = {"count_work": 1} if count_work else {}
+        self.work_buf = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, 3 * 8)
+        cl.enqueue_fill_buffer(queue, self.work_buf, np.uint64(0), 0, 3 * 8)
+
+    def program(self, stem: str):
+        return programs(self.ctx).get(stem, **self.defines)
+
+    def zeros(self, nbytes: int) -> cl.Buffer:
+        buf = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, max(nbytes, 8))
+        cl.enqueue_fill_buffer(self.queue, buf, np.uint8(0), 0, max(nbytes, 8))
+        return buf
+
+    def upload(self, array) -> cl.Buffer:
+        array = np.ascontiguousarray(array)
+        if array.nbytes == 0:
+            array = np.zeros(1, array.dtype)
+        return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
+
+    def work(self) -> dict | None:
+        if not self.count_work:
+            return None
+        out = np.empty(3, np.uint64)
+        cl.enqueue_copy(self.queue, out, self.work_buf)
+        return {"t": int(out[0]), "u": int(out[1]), "nodes": int(out[2])}
+
+    def accumulate(self, batch, scale: float):
+        raise NotImplementedError
+
+    def resolve(self, scale: float) -> cl.Buffer:
+        raise NotImplementedError
+
+    def accumulators(self) -> np.ndarray:
+        raise NotImplementedError
+
+
+class DetpEstimator(Estimator):
+    """Shared by every DETP variant: the discs, the per-point sums, resolve.
+
+    Parameters: ``radius`` d; ``extension`` e (segments may end up to e past
+    the disc's plane and still count; for concave surfaces); ``count_emitted``
+    (segments leaving the lights count, i.e. direct light included). Every
+    variant selects segments with ``detp_crosses``/``DETP_TEST`` (kernels/
+    detp.h), so all give the same sums, bit for bit.
+    """
+
+    def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0, **kw):
+        super().__init__(queue, compiled, points, **kw)
+        self.radius = float(radius)
+        # The user's extension plus a scene-relative tolerance, so segments
+        # ending on the disc's own surface survive float rounding.
+        self.ext = float(extension) + 10.0 * compiled.eps
+        self.positions = self.upload(points.positions)
+        self.normals = self.upload(points.normals)
+        self.acc = self.zeros(self.n * 3 * 8)
+        self.irr = self.zeros(self.n * 16)
+        self.k_resolve = programs(self.ctx).get("detp").detp_resolve
+
+    def resolve(self, scale: float) -> cl.Buffer:
+        """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
+        inv = 1.0 / (scale * math.pi * self.radius**2)
+        launch(self.queue, self.k_resolve, self.n, self.acc, np.int32(self.n), np.float32(inv), self.irr)
+        return self.irr
+
+    def accumulators(self) -> np.ndarray:
+        out = np.empty((self.n, 3), np.int64)
+        cl.enqueue_copy(self.queue, out, self.acc)
+        return out
