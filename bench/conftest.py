@@ -8,8 +8,8 @@ build has its own benchmark). Scenes:
 - ``bunny``: the Stanford bunny alone (69k triangles) with a point light,
   which adds no geometry, so oclgi and Embree see exactly the same triangles.
 - ``bunny_in_box``: the bunny, scaled up, inside a closed box lit by an area
-  light under the ceiling: a real mesh where every photon path ends by
-  absorption (Russian roulette) and never by escaping.
+  light under the ceiling: a real mesh where photon paths end by absorption
+  (Russian roulette) or at ``max_depth``, never by escaping.
 - ``sponza``: Dabrovic's Sponza atrium (66k triangles) with a point light in
   the atrium; its roof is open, so paths end both ways.
 
@@ -19,8 +19,10 @@ build has its own benchmark). Scenes:
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import os
+import time
 import warnings
 
 import numpy as np
@@ -41,11 +43,15 @@ def scale(request):
     return lambda n: max(1000, int(n * factor))
 
 
-def _engine(desc: dict) -> oclgi.Engine:
+def _engine(desc) -> oclgi.Engine:
+    """An engine on a shipped scene file (its name) or a scene dict."""
     with warnings.catch_warnings():
         # Sponza has one zero-area triangle; the scene drops it with a warning.
         warnings.simplefilter("ignore", oclgi.OclgiWarning)
-        scene = oclgi.load_dict(desc, base_dir=oclgi.scene_path("."))
+        if isinstance(desc, str):
+            scene = oclgi.load_file(oclgi.scene_path(desc))
+        else:
+            scene = oclgi.load_dict(desc, base_dir=oclgi.scene_path("."))
     return oclgi.Engine(scene, progress=False)
 
 
@@ -60,10 +66,7 @@ def _box(lo, hi):
 
 @pytest.fixture(scope="session")
 def cornell():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", oclgi.OclgiWarning)
-        scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
-    return oclgi.Engine(scene, progress=False)
+    return _engine("cornell_box.toml")
 
 
 @pytest.fixture(scope="session")
@@ -105,9 +108,30 @@ def sponza():
     })
 
 
+_LOADAVG_AT_START = []
+
+
+def pytest_sessionstart(session):
+    _LOADAVG_AT_START[:] = os.getloadavg()
+
+
+@pytest.fixture
+def cores_used(benchmark):
+    """``with cores_used(): ...`` records the CPU time of this process over the
+    wall time of the block, i.e. how many cores the timed work really got.
+    The machine may be shared: on 2 cores, about 2 means nothing else ran,
+    about 1 means another process held a core and the rates are halved."""
+
+    @contextlib.contextmanager
+    def meter():
+        wall, cpu = time.perf_counter(), time.process_time()
+        yield
+        benchmark.extra_info["cores_used"] = round((time.process_time() - cpu) / (time.perf_counter() - wall), 2)
+
+    return meter
+
+
 def pytest_benchmark_update_machine_info(config, machine_info):
-    """Record the OpenCL device and the load: the machine may be shared, and a
-    busy core halves what a 2-core CPU device can do."""
     from oclgi.cl.device import choose_device
 
     dev = choose_device()
@@ -115,13 +139,10 @@ def pytest_benchmark_update_machine_info(config, machine_info):
     machine_info["opencl_platform"] = dev.platform.version
     machine_info["opencl_compute_units"] = dev.max_compute_units
     machine_info["cpu_count"] = os.cpu_count()
-    machine_info["loadavg_at_start"] = os.getloadavg()
+    machine_info["loadavg_at_start"] = _LOADAVG_AT_START
     for pkg in ("oclgi", "pyopencl", "numpy", "embreex"):
         try:
             machine_info[f"{pkg}_version"] = importlib.metadata.version(pkg)
         except importlib.metadata.PackageNotFoundError:
             machine_info[f"{pkg}_version"] = None
-
-
-def pytest_benchmark_update_json(config, benchmarks, output_json):
-    output_json["machine_info"]["loadavg_at_end"] = os.getloadavg()
+    machine_info["loadavg_at_end"] = os.getloadavg()

@@ -37,7 +37,7 @@ def trace_all(engine, tracer, lens, n_paths):
 
 
 @pytest.mark.parametrize("scene", ["cornell", "bunny_in_box", "sponza"])
-def test_photon_trace(benchmark, request, scale, scene):
+def test_photon_trace(benchmark, request, scale, cores_used, scene):
     engine = request.getfixturevalue(scene)
     n_paths = scale(PATHS)
     # The engine's batch rule: a batch's segment buffer fits in batch_bytes.
@@ -47,7 +47,8 @@ def test_photon_trace(benchmark, request, scale, scene):
 
     benchmark.group = "photon trace"
     # The warmup round builds the kernel (PoCL compiles on first use).
-    segments = benchmark.pedantic(trace_all, args=(engine, tracer, lens, n_paths), rounds=3, warmup_rounds=1)
+    with cores_used():
+        segments = benchmark.pedantic(trace_all, args=(engine, tracer, lens, n_paths), rounds=3, warmup_rounds=1)
 
     assert segments >= n_paths  # every path has at least its emission segment
     info = benchmark.extra_info
