@@ -37,6 +37,7 @@ inline int bvh_traverse(__global const BvhNode *nodes, __global const Tri *tris,
                         float3 o, float3 d, float tmax, int any_hit, Hit *hit)
 {
     float3 inv = 1.0f / d;
+    RayShear shear = ray_shear(d);
     int stack[OCLGI_BVH_STACK_SIZE];
     float stack_t[OCLGI_BVH_STACK_SIZE];
     int sp = 0;
@@ -51,7 +52,7 @@ inline int bvh_traverse(__global const BvhNode *nodes, __global const Tri *tris,
             for (int i = n->first; i < end; ++i) {
                 __global const Tri *tr = &tris[i];
                 float t, u, v;
-                if (tri_intersect(o, d, vload3(0, tr->v0), vload3(0, tr->e1), vload3(0, tr->e2),
+                if (tri_intersect(o, shear, vload3(0, tr->v0), vload3(0, tr->v1), vload3(0, tr->v2),
                                   hit->t, &t, &u, &v)) {
                     hit->t = t; hit->u = u; hit->v = v; hit->tri = tr->id;
                     if (any_hit) return hit->tri;

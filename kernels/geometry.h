@@ -2,24 +2,64 @@
 #ifndef OCLGI_GEOMETRY_H
 #define OCLGI_GEOMETRY_H
 
-/* Moller-Trumbore. Returns 1 and sets t, u, v when the ray hits the
- * triangle at 0 < t < tmax; both faces count (surfaces are two-sided). */
-inline int tri_intersect(float3 o, float3 d, float3 v0, float3 e1, float3 e2,
+/* Watertight ray-triangle intersection (Woop, Benthin & Wald 2013).
+ *
+ * The ray is sheared so that it runs along +z; a triangle's vertices are
+ * then tested with 2-D edge functions. The edge function of an edge depends
+ * only on its two vertices and the ray, so two triangles sharing an edge
+ * compute it identically (no FMA contraction: FP_CONTRACT OFF), and a ray
+ * through the edge hits at least one of them: no light leaks between
+ * triangles. Both faces count (surfaces are two-sided). The shear depends
+ * only on the ray: compute it once with ray_shear. */
+#pragma OPENCL FP_CONTRACT OFF
+
+typedef struct {
+    int kx, ky, kz;   /* axes: kz the largest |d| component */
+    float sx, sy, sz; /* shear constants */
+} RayShear;
+
+inline float axis_of(float3 v, int k)
+{
+    return k == 0 ? v.x : (k == 1 ? v.y : v.z);
+}
+
+inline RayShear ray_shear(float3 d)
+{
+    RayShear r;
+    float3 ad = fabs(d);
+    r.kz = ad.x > ad.y ? (ad.x > ad.z ? 0 : 2) : (ad.y > ad.z ? 1 : 2);
+    r.kx = r.kz == 2 ? 0 : r.kz + 1;
+    r.ky = r.kx == 2 ? 0 : r.kx + 1;
+    float dz = axis_of(d, r.kz);
+    if (dz < 0.0f) { int k = r.kx; r.kx = r.ky; r.ky = k; } /* keep the winding */
+    r.sx = axis_of(d, r.kx) / dz;
+    r.sy = axis_of(d, r.ky) / dz;
+    r.sz = 1.0f / dz;
+    return r;
+}
+
+/* Returns 1 and sets t and the barycentrics (u of v1, v of v2) when the ray
+ * hits the triangle at 0 < t < tmax. */
+inline int tri_intersect(float3 o, RayShear r, float3 v0, float3 v1, float3 v2,
                          float tmax, float *t, float *u, float *v)
 {
-    float3 p = cross(d, e2);
-    float det = dot(e1, p);
-    if (fabs(det) < 1e-12f) return 0;
+    float3 a = v0 - o, b = v1 - o, c = v2 - o;
+    float az = axis_of(a, r.kz), bz = axis_of(b, r.kz), cz = axis_of(c, r.kz);
+    float ax = axis_of(a, r.kx) - r.sx * az, ay = axis_of(a, r.ky) - r.sy * az;
+    float bx = axis_of(b, r.kx) - r.sx * bz, by = axis_of(b, r.ky) - r.sy * bz;
+    float cx = axis_of(c, r.kx) - r.sx * cz, cy = axis_of(c, r.ky) - r.sy * cz;
+    float U = cx * by - cy * bx;
+    float V = ax * cy - ay * cx;
+    float W = bx * ay - by * ax;
+    if ((U < 0.0f || V < 0.0f || W < 0.0f) && (U > 0.0f || V > 0.0f || W > 0.0f)) return 0;
+    float det = U + V + W;
+    if (det == 0.0f) return 0;
     float inv = 1.0f / det;
-    float3 s = o - v0;
-    float uu = dot(s, p) * inv;
-    if (uu < 0.0f || uu > 1.0f) return 0;
-    float3 q = cross(s, e1);
-    float vv = dot(d, q) * inv;
-    if (vv < 0.0f || uu + vv > 1.0f) return 0;
-    float tt = dot(e2, q) * inv;
+    float tt = (U * az + V * bz + W * cz) * r.sz * inv;
     if (!(tt > 0.0f && tt < tmax)) return 0;
-    *t = tt; *u = uu; *v = vv;
+    *t = tt;
+    *u = V * inv;
+    *v = W * inv;
     return 1;
 }
 

@@ -35,9 +35,9 @@ typedef struct {
 typedef struct {
     float v0[3];
     int id;      /* triangle id in scene order */
-    float e1[3];
+    float v1[3]; /* vertices, not edges: shared vertices stay bit-identical */
     int pad1;
-    float e2[3];
+    float v2[3];
     int pad2;
 } Tri;
 

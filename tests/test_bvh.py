@@ -101,3 +101,26 @@ def test_bvh_structure_invariants(rng):
         ids = bvh.order[nodes["first"][i]:nodes["first"][i] + nodes["count"][i]]
         assert (nodes["lo"][i] <= lo[ids].astype(np.float32)).all()
         assert (nodes["hi"][i] >= hi[ids].astype(np.float32)).all()
+
+
+def test_watertight_shared_edges(rng):
+    """Rays aimed exactly at the edge shared by two triangles never slip
+    through. (The same rays through a float32 Moller-Trumbore test, as numpy
+    computes it, leak about 5%; the watertight test lets none through.)"""
+    # a skewed, tilted quad split along its diagonal, plus a backstop far behind
+    quad = np.array([[0.1, 0.2, 0.3], [1.7, 0.25, 0.5], [1.9, 1.3, 0.9], [0.3, 1.1, 0.6]])
+    back = np.array([[-50, -50, -20], [50, -50, -20], [50, 50, -20], [-50, 50, -20.0]])
+    v = np.vstack([quad, back])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    engine = oclgi.Engine(oclgi.load_dict({
+        "mesh": [{"vertices": v, "faces": faces}],
+        "point_light": [{"position": [0, 0, 5], "intensity": [1, 1, 1]}],
+    }))
+    n = 1_000_000
+    s = rng.random(n)
+    targets = quad[0] + s[:, None] * (quad[2] - quad[0])  # on the diagonal edge
+    origins = targets + np.array([0.3, -0.2, 4.0]) + rng.normal(scale=0.5, size=(n, 3))
+    dirs = targets - origins
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    _t, _u, _v, tri = closest_hits(engine.queue, engine.compiled, origins, dirs)
+    assert np.isin(tri, [0, 1]).all(), f"{int((~np.isin(tri, [0, 1])).sum())} rays leaked through the edge"

@@ -15,9 +15,10 @@ f4, i4 = np.float32, np.int32
 # (siblings are adjacent). Leaf: triangles [first, first + count).
 BvhNode = np.dtype([("lo", f4, 3), ("first", i4), ("hi", f4, 3), ("count", i4)])
 
-# Triangle in BVH order, 48 bytes: vertex 0 and the two edges (Moller-Trumbore
-# needs nothing else), and the triangle's id in scene order.
-Tri = np.dtype([("v0", f4, 3), ("id", i4), ("e1", f4, 3), ("pad1", i4), ("e2", f4, 3), ("pad2", i4)])
+# Triangle in BVH order, 48 bytes: its three vertices (not edges, so that
+# triangles sharing an edge see bit-identical vertices and the watertight
+# test holds) and its id in scene order.
+Tri = np.dtype([("v0", f4, 3), ("id", i4), ("v1", f4, 3), ("pad1", i4), ("v2", f4, 3), ("pad2", i4)])
 
 # One stored path segment, 48 bytes, at slot path * max_depth + bounce.
 # t_end is the distance to the hit (inf when the segment leaves the scene);

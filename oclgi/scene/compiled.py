@@ -42,9 +42,7 @@ class CompiledScene:
         self.n_nodes = len(bvh.nodes)
         tris = np.zeros(len(v), dtype=Tri)
         vo = v[bvh.order]
-        tris["v0"] = vo[:, 0]
-        tris["e1"] = vo[:, 1] - vo[:, 0]
-        tris["e2"] = vo[:, 2] - vo[:, 0]
+        tris["v0"], tris["v1"], tris["v2"] = vo[:, 0], vo[:, 1], vo[:, 2]
         tris["id"] = bvh.order
         self.build_seconds = time.perf_counter() - t0
 
