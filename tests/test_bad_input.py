@@ -21,24 +21,11 @@ import zipfile
 
 import numpy as np
 import pytest
+from small_scene import BOX_OBJ
 
 from oclgi.errors import OclgiError
 
 # A floor quad and a small emissive quad above it, facing down.
-BOX_OBJ = """mtllib box.mtl
-v -1 0 -1
-v 1 0 -1
-v 1 0 1
-v -1 0 1
-v -0.2 1 -0.2
-v 0.2 1 -0.2
-v 0.2 1 0.2
-v -0.2 1 0.2
-usemtl floor
-f 1 4 3 2
-usemtl light
-f 5 6 7 8
-"""
 BOX_MTL = """newmtl floor
 Kd 0.5 0.5 0.5
 newmtl light

@@ -11,25 +11,12 @@ import sys
 
 import numpy as np
 import pytest
+from small_scene import BOX_OBJ
 
 from oclgi.io import read_image
 
 # A floor quad and a small quad light above it facing down; the light's
 # emission comes from the TOML (materials.light), the floor's albedo from Kd.
-BOX_OBJ = """mtllib box.mtl
-v -1 0 -1
-v 1 0 -1
-v 1 0 1
-v -1 0 1
-v -0.2 1 -0.2
-v 0.2 1 -0.2
-v 0.2 1 0.2
-v -0.2 1 0.2
-usemtl floor
-f 1 4 3 2
-usemtl light
-f 5 6 7 8
-"""
 BOX_MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\n"
 SCENE = """[[mesh]]
 path = "box.obj"
