@@ -9,7 +9,7 @@
  */
 #include "bvh.h"
 
-__kernel void bvh_query_closest(__global const BvhNode *nodes, __global const Tri *tris,
+__kernel void bvh_query_closest(SCENE_ARGS,
                                 __global const float4 *origins, __global const float4 *dirs,
                                 int n, __global float4 *hits)
 {
@@ -17,21 +17,21 @@ __kernel void bvh_query_closest(__global const BvhNode *nodes, __global const Tr
     if (i >= n) return;
     float4 o = origins[i];
     Hit h;
-    bvh_closest_hit(nodes, tris, o.xyz, dirs[i].xyz, o.w, &h);
+    scene_closest_hit(SCENE_PASS, o.xyz, dirs[i].xyz, o.w, &h);
     hits[i] = (float4)(h.tri >= 0 ? h.t : INFINITY, h.u, h.v, as_float(h.tri));
 }
 
-__kernel void bvh_query_any(__global const BvhNode *nodes, __global const Tri *tris,
+__kernel void bvh_query_any(SCENE_ARGS,
                             __global const float4 *origins, __global const float4 *dirs,
                             int n, __global int *hit)
 {
     int i = get_global_id(0);
     if (i >= n) return;
     float4 o = origins[i];
-    hit[i] = bvh_any_hit(nodes, tris, o.xyz, dirs[i].xyz, o.w);
+    hit[i] = scene_any_hit(SCENE_PASS, o.xyz, dirs[i].xyz, o.w);
 }
 
-__kernel void bvh_query_locate(__global const BvhNode *nodes, __global const Tri *tris,
+__kernel void bvh_query_locate(SCENE_ARGS,
                                __global float4 *positions, __global const float4 *normals,
                                int n, float delta, __global float2 *barys)
 {
@@ -40,8 +40,8 @@ __kernel void bvh_query_locate(__global const BvhNode *nodes, __global const Tri
     float3 p = positions[i].xyz, nrm = normals[i].xyz;
     Hit h;
     /* from above the surface down, then from below up */
-    if (bvh_closest_hit(nodes, tris, p + delta * nrm, -nrm, 2.0f * delta, &h) < 0)
-        bvh_closest_hit(nodes, tris, p - delta * nrm, nrm, 2.0f * delta, &h);
+    if (scene_closest_hit(SCENE_PASS, p + delta * nrm, -nrm, 2.0f * delta, &h) < 0)
+        scene_closest_hit(SCENE_PASS, p - delta * nrm, nrm, 2.0f * delta, &h);
     positions[i].w = as_float(h.tri);
     barys[i] = h.tri >= 0 ? (float2)(h.u, h.v) : (float2)(0.0f, 0.0f);
 }

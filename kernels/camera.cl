@@ -8,7 +8,7 @@
  */
 #include "bvh.h"
 
-__kernel void camera_visible_points(__global const BvhNode *nodes, __global const Tri *tris,
+__kernel void camera_visible_points(SCENE_ARGS,
                                     __global const float4 *tri_normals,
                                     float4 eye, float4 forward, float4 right, float4 up,
                                     int width, int height,
@@ -23,7 +23,7 @@ __kernel void camera_visible_points(__global const BvhNode *nodes, __global cons
     float sy = 1.0f - 2.0f * ((float)py + 0.5f) / (float)height;
     float3 d = normalize(forward.xyz + sx * right.xyz + sy * up.xyz);
     Hit h;
-    bvh_closest_hit(nodes, tris, eye.xyz, d, INFINITY, &h);
+    scene_closest_hit(SCENE_PASS, eye.xyz, d, INFINITY, &h);
     if (h.tri < 0) {
         positions[i] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
         normals[i] = (float4)(0.0f); /* a zero normal: no estimator counts anything here */

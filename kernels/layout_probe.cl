@@ -13,6 +13,8 @@ __kernel void layout_probe(__global int *out)
     int i = 0;
     SIZE(BvhNode); OFF(BvhNode, lo); OFF(BvhNode, first); OFF(BvhNode, hi); OFF(BvhNode, count);
     SIZE(Tri); OFF(Tri, v0); OFF(Tri, id); OFF(Tri, v1); OFF(Tri, pad1); OFF(Tri, v2); OFF(Tri, pad2);
+    SIZE(Instance); OFF(Instance, world_from_object); OFF(Instance, object_from_world); OFF(Instance, lo);
+    OFF(Instance, root); OFF(Instance, hi); OFF(Instance, first_tri); OFF(Instance, n_tris); OFF(Instance, pad);
     SIZE(Segment); OFF(Segment, org); OFF(Segment, t_end); OFF(Segment, dir); OFF(Segment, tri);
     OFF(Segment, power); OFF(Segment, path);
     SIZE(Material); OFF(Material, albedo); OFF(Material, survive); OFF(Material, emission); OFF(Material, pad);

@@ -50,6 +50,18 @@ typedef struct {
     int path;    /* global path id */
 } Segment;
 
+/* One object placed in the world (the top level of the scene's BVH). */
+typedef struct {
+    float world_from_object[12]; /* rows (a b c t): p_world = A p_object + t */
+    float object_from_world[12]; /* its inverse */
+    float lo[3];                 /* world-space box of the moved object */
+    int root;                    /* root node of the object's BVH */
+    float hi[3];
+    int first_tri;               /* the object's triangles: [first_tri, first_tri + n_tris) */
+    int n_tris;
+    int pad[3];
+} Instance;
+
 typedef struct {
     float albedo[3];
     float survive;     /* Russian-roulette survival probability */

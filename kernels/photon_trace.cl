@@ -27,7 +27,7 @@ inline int emitter_pick(__global const float *cdf, int n, float u)
     return lo;
 }
 
-__kernel void photon_trace(__global const BvhNode *nodes, __global const Tri *tris,
+__kernel void photon_trace(SCENE_ARGS,
                            __global const float4 *tri_normals, __global const int *tri_material,
                            __global const Material *materials,
                            __global const Emitter *emitters, __global const float *emitter_cdf,
@@ -60,7 +60,7 @@ __kernel void photon_trace(__global const BvhNode *nodes, __global const Tri *tr
     int len = 0;
     for (int b = 0; b < max_depth; ++b) {
         Hit h;
-        bvh_closest_hit(nodes, tris, o, d, INFINITY, &h);
+        scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
         vstore3(o, 0, out[b].org);
         out[b].t_end = h.tri >= 0 ? h.t : INFINITY;
         vstore3(d, 0, out[b].dir);

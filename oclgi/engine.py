@@ -119,6 +119,14 @@ class Engine:
         self.setup_seconds = time.perf_counter() - t0
         self._programs = programs(self.ctx)
 
+    # -- objects -----------------------------------------------------------------
+    def move(self, name: str, matrix) -> None:
+        """Place movable object ``name`` by a 4x4 (or 3x4) world-from-object
+        matrix, relative to where the scene file put it (identity = back home).
+        Later traces and renders see the object there; nothing is rebuilt but
+        its instance record."""
+        self.compiled.set_transform(self.queue, self.scene.object_id(name), matrix)
+
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
                       height: int | None = None) -> queries.QueryPoints:
@@ -135,7 +143,7 @@ class Engine:
         k = self._programs.get("camera").camera_visible_points
         c = self.compiled
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
-        launch(self.queue, k, n, c.nodes, c.tris, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
+        launch(self.queue, k, n, *c.scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
                np.int32(cam.width), np.int32(cam.height), pos, nrm, bary, local_size=self.local_size)
         out = queries.QueryPoints(np.empty((n, 4), np.float32), np.empty((n, 4), np.float32),
                                   np.empty((n, 2), np.float32), kind="camera", shape=(cam.height, cam.width))

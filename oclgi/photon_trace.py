@@ -60,7 +60,7 @@ class PhotonTracer:
         c = self.compiled
         launch(
             self.queue, self.kernel, n_paths,
-            c.nodes, c.tris, c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf,
+            *c.scene_args, c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf,
             np.int32(c.n_emitters), np.uint32(self.seed & 0xFFFFFFFF), np.uint32(self.seed >> 32),
             np.int32(path_offset), np.int32(n_paths), np.float32(1.0 / n_total),
             np.int32(self.max_depth), np.float32(c.eps),

@@ -20,6 +20,16 @@ BvhNode = np.dtype([("lo", f4, 3), ("first", i4), ("hi", f4, 3), ("count", i4)])
 # test holds) and its id in scene order.
 Tri = np.dtype([("v0", f4, 3), ("id", i4), ("v1", f4, 3), ("pad1", i4), ("v2", f4, 3), ("pad2", i4)])
 
+# An object placed in the world, 144 bytes: affine transforms as 3x4 rows
+# (a b c t) both ways, the world box, the root of the object's BVH and its
+# triangle range (scene order).
+Instance = np.dtype(
+    [
+        ("world_from_object", f4, (3, 4)), ("object_from_world", f4, (3, 4)),
+        ("lo", f4, 3), ("root", i4), ("hi", f4, 3), ("first_tri", i4), ("n_tris", i4), ("pad", i4, 3),
+    ]
+)
+
 # One stored path segment, 48 bytes, at slot path * max_depth + bounce.
 # t_end is the distance to the hit (inf when the segment leaves the scene);
 # tri is the hit triangle (scene order) or -1; an empty slot is all zeros.
@@ -43,7 +53,7 @@ Emitter = np.dtype(
     ]
 )
 
-STRUCTS = {"BvhNode": BvhNode, "Tri": Tri, "Segment": Segment, "Material": Material, "Emitter": Emitter}
+STRUCTS = {"BvhNode": BvhNode, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter}
 
 EMITTER_TRIANGLE = 0
 EMITTER_POINT = 1

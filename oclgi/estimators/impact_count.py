@@ -97,7 +97,7 @@ def locate(queue, compiled, points):
     bary = np.empty((len(points), 2), np.float32)
     bary_buf = cl.Buffer(ctx, mf.WRITE_ONLY, bary.nbytes)
     delta = 1e-4 * compiled.scene.diagonal
-    launch(queue, k, len(points), compiled.nodes, compiled.tris, pos_buf, nrm_buf, np.int32(len(points)),
+    launch(queue, k, len(points), *compiled.scene_args, pos_buf, nrm_buf, np.int32(len(points)),
            np.float32(delta), bary_buf)
     cl.enqueue_copy(queue, pos, pos_buf)
     cl.enqueue_copy(queue, bary, bary_buf)

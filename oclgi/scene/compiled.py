@@ -14,7 +14,8 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
-from ..cl.layout import Emitter, Material, Tri
+from ..cl.layout import Emitter, Instance, Material, Tri
+from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .scene import Scene
 
@@ -35,19 +36,11 @@ class CompiledScene:
         self.scene = scene
         t0 = time.perf_counter()
         v = scene.vertices[scene.faces]  # (F, 3, 3) float64
-        bvh = build_bvh(v.min(axis=1), v.max(axis=1))
-        if bvh.depth > BVH_STACK_SIZE:
-            raise OclgiError(f"BVH depth {bvh.depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
-        self.bvh_depth = bvh.depth
-        self.n_nodes = len(bvh.nodes)
-        tris = np.zeros(len(v), dtype=Tri)
-        vo = v[bvh.order]
-        tris["v0"], tris["v1"], tris["v2"] = vo[:, 0], vo[:, 1], vo[:, 2]
-        tris["id"] = bvh.order
+        self._build_objects(v)
         self.build_seconds = time.perf_counter() - t0
 
         normals = np.zeros((len(v), 4), np.float32)
-        normals[:, :3] = scene.triangle_normals()
+        normals[:, :3] = scene.triangle_normals()  # object space = world space until a move
         self.areas = scene.triangle_areas().astype(np.float32)
 
         mats = np.zeros(len(scene.materials), dtype=Material)
@@ -71,9 +64,11 @@ class CompiledScene:
         # Largest power any photon carries, times n_paths (fixed-point scale).
         self.photon_power_max = float(em["power"].max())
 
-        self.nodes = _buffer(ctx, bvh.nodes)
-        self.tris = _buffer(ctx, tris)
-        self.tri_normals = _buffer(ctx, normals)
+        self.nodes = _buffer(ctx, self._nodes)
+        self.tris = _buffer(ctx, self._tris)
+        self.instances = _buffer(ctx, self.instances_host, cl.mem_flags.READ_WRITE)
+        self.object_normals = _buffer(ctx, normals)
+        self.tri_normals = _buffer(ctx, normals, cl.mem_flags.READ_WRITE)  # world space
         self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
         self.materials = _buffer(ctx, mats)
         self.emitters = _buffer(ctx, em)
@@ -83,6 +78,76 @@ class CompiledScene:
         self.materials_host = mats
         # scene scale for ray offsets and the DETP tolerance
         self.eps = 1e-5 * scene.diagonal
+
+    @property
+    def scene_args(self) -> tuple:
+        """The kernels' SCENE_ARGS (kernels/bvh.h): nodes, triangles, instances, count."""
+        return (self.nodes, self.tris, self.instances, np.int32(len(self.instances_host)))
+
+    def _build_objects(self, v):
+        """One BVH per object, in one node array and one triangle array; one
+        Instance per object, placed where the scene file put it (identity)."""
+        ranges = self.scene.object_ranges()
+        nodes_all, tris = [], np.zeros(len(v), dtype=Tri)
+        self.instances_host = np.zeros(len(ranges), dtype=Instance)
+        self.object_boxes = []
+        n_nodes, depth = 0, 0
+        for k, (a, b) in enumerate(ranges):
+            vk = v[a:b]
+            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1))
+            nodes = bvh.nodes.copy()
+            inner = nodes["count"] == 0
+            nodes["first"][inner] += n_nodes  # children in the joint node array
+            nodes["first"][~inner] += a  # triangle runs in the joint triangle array
+            vo = vk[bvh.order]
+            tris["v0"][a:b], tris["v1"][a:b], tris["v2"][a:b] = vo[:, 0], vo[:, 1], vo[:, 2]
+            tris["id"][a:b] = a + bvh.order
+            inst = self.instances_host[k]
+            inst["root"], inst["first_tri"], inst["n_tris"] = n_nodes, a, b - a
+            self.object_boxes.append((vk.min(axis=(0, 1)), vk.max(axis=(0, 1))))
+            self._place(k, np.eye(4))
+            nodes_all.append(nodes)
+            n_nodes += len(nodes)
+            depth = max(depth, bvh.depth)
+        if depth > BVH_STACK_SIZE:
+            raise OclgiError(f"BVH depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
+        self.bvh_depth = depth
+        self._nodes = np.concatenate(nodes_all)
+        self.n_nodes = len(self._nodes)
+        self._tris = tris
+
+    def _place(self, k: int, m: np.ndarray):
+        """Set object k's transform (4x4, world from object) in the host record."""
+        inv = np.linalg.inv(m)
+        inst = self.instances_host[k]
+        inst["world_from_object"] = m[:3]
+        inst["object_from_world"] = inv[:3]
+        lo, hi = self.object_boxes[k]
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        world = corners @ m[:3, :3].T + m[:3, 3]
+        # The world box only culls; pad it for float rounding of the transform.
+        pad = 1e-6 * (np.abs(world).max() + np.abs(hi - lo).max())
+        inst["lo"], inst["hi"] = world.min(axis=0) - pad, world.max(axis=0) + pad
+
+    def set_transform(self, queue, obj: int, matrix) -> None:
+        """Move object ``obj``: ``matrix`` (4x4 or 3x4, world from the object as
+        loaded) replaces its transform. Only its Instance record and the world
+        normals of its triangles change; no BVH is rebuilt."""
+        m = np.asarray(matrix, dtype=np.float64)
+        if m.shape == (3, 4):
+            m = np.vstack([m, [0, 0, 0, 1]])
+        if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
+            raise OclgiError(f"a transform must be a finite affine 4x4 or 3x4 matrix, got shape {m.shape}")
+        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+            raise OclgiError("the transform is singular (it flattens the object)")
+        if not self.scene.objects[obj].movable:
+            raise OclgiError(f"object {self.scene.objects[obj].name!r} is static")
+        self._place(obj, m)
+        item = self.instances_host.dtype.itemsize
+        cl.enqueue_copy(queue, self.instances, self.instances_host[obj:obj + 1], dst_offset=obj * item)
+        inst = self.instances_host[obj]
+        k = programs(self.ctx).get("instances").instances_normals
+        launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, np.int32(obj), self.tri_normals)
 
     def fixed_scale(self, n_paths: int) -> float:
         """Fixed-point units per watt for a run of n_paths (oclgi_types.h)."""

@@ -5,6 +5,8 @@
     albedo = [0.5, 0.5, 0.5]        # faces the file gives no material (default 0.5)
     emission = [0, 0, 0]
     transform = { scale = 1.0, rotate = [0, 1, 0, 30], translate = [0, 0, 0] }
+    movable = false                 # true: an object of its own that Engine.move places
+    name = "bunny"                  # a movable object's name (default: the file's stem)
     [mesh.materials.light]          # override one material the file names
     emission = [17, 12, 4]
 
@@ -46,11 +48,11 @@ import numpy as np
 from ..errors import OclgiError
 from ..estimators import METHODS
 from .mesh import load_mesh
-from .scene import Camera, Material, PointLight, Scene, Settings
+from .scene import Camera, Material, PointLight, Scene, SceneObject, Settings
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
-_MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform"}
+_MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 _PHOTONS = {"count", "seed", "max_depth"}
@@ -226,12 +228,27 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     if not meshes:
         raise OclgiError("scene: no [[mesh]] given")
     materials: list[Material] = []
-    verts, faces, fmats, offset = [], [], [], 0
-    for i, m in enumerate(meshes):
+    verts, faces, fmats, fobjs, offset = [], [], [], [], 0
+    # Static meshes form object 0; each movable mesh is an object of its own
+    # (an instance with a transform over its own BVH). Triangles are stored
+    # object by object, static first, so each object is one contiguous run.
+    movable = [_movable(m, i) for i, m in enumerate(meshes)]
+    order = [i for i in range(len(meshes)) if not movable[i]] + [i for i in range(len(meshes)) if movable[i]]
+    objects: list[SceneObject] = []
+    for i in order:
+        m = meshes[i]
         v, f, fm = _mesh(m, i, base_dir, materials, None)
+        if movable[i]:
+            name = _object_name(m, i)
+            if any(o.name == name for o in objects):
+                raise OclgiError(f"mesh[{i}]: another movable mesh is already named {name!r}; give each a 'name'")
+            objects.append(SceneObject(name, movable=True))
+        elif not objects:
+            objects.append(SceneObject("static", movable=False))
         verts.append(v)
         faces.append(f + offset)
         fmats.append(fm)
+        fobjs.append(np.full(len(f), len(objects) - 1, np.int64))
         offset += len(v)
 
     lights = []
@@ -285,11 +302,32 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         faces=np.concatenate(faces),
         tri_material=np.concatenate(fmats),
         materials=materials,
+        tri_object=np.concatenate(fobjs),
+        objects=objects,
         point_lights=lights,
         camera=camera,
         settings=settings,
         name=str(desc.get("name", "scene")),
     )
+
+
+def _movable(desc, i) -> bool:
+    if not isinstance(desc, dict):
+        return False  # _mesh reports the type error
+    value = desc.get("movable", False)
+    if not isinstance(value, bool):
+        raise OclgiError(f"mesh[{i}].movable: expected true or false, got {value!r}")
+    return value
+
+
+def _object_name(desc, i) -> str:
+    if "name" in desc:
+        if not isinstance(desc["name"], str) or not desc["name"]:
+            raise OclgiError(f"mesh[{i}].name: expected a non-empty string")
+        return desc["name"]
+    if "path" in desc and isinstance(desc["path"], str):
+        return Path(desc["path"]).stem
+    return f"mesh[{i}]"
 
 
 def _table_list(value, name):

@@ -39,6 +39,18 @@ class PointLight:
 
 
 @dataclass
+class SceneObject:
+    """A group of triangles that moves as one (an instance over its own BVH).
+
+    Object 0 holds the static geometry when there is any; each mesh marked
+    ``movable`` is an object of its own, named for ``move`` calls.
+    """
+
+    name: str
+    movable: bool = False
+
+
+@dataclass
 class Camera:
     position: tuple[float, float, float]
     look_at: tuple[float, float, float]
@@ -86,9 +98,26 @@ class Scene:
     camera: Camera | None = None
     settings: Settings = field(default_factory=Settings)
     name: str = "scene"
+    tri_object: np.ndarray | None = None  # (F,) int64 into objects; None: one static object
+    objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
 
     def __post_init__(self):
+        if self.tri_object is None:
+            self.tri_object = np.zeros(len(self.faces), np.int64)
         self._validate()
+
+    def object_ranges(self) -> np.ndarray:
+        """(n_objects, 2): each object's contiguous run [start, end) of triangles."""
+        ids = np.arange(len(self.objects))
+        return np.stack([np.searchsorted(self.tri_object, ids, "left"),
+                         np.searchsorted(self.tri_object, ids, "right")], axis=1)
+
+    def object_id(self, name: str) -> int:
+        for i, o in enumerate(self.objects):
+            if o.name == name and o.movable:
+                return i
+        movable = [o.name for o in self.objects if o.movable]
+        raise OclgiError(f"no movable object named {name!r} (movable: {movable or 'none'})")
 
     # -- derived geometry -------------------------------------------------
     @property
@@ -142,6 +171,7 @@ class Scene:
             n_bad = int(degenerate.sum())
             keep = ~degenerate
             self.faces, self.tri_material = self.faces[keep], self.tri_material[keep]
+            self.tri_object = np.asarray(self.tri_object)[keep]
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
                 raise OclgiError(f"{self.name}: every triangle is degenerate")
@@ -163,6 +193,17 @@ class Scene:
             raise OclgiError(f"radius must be a positive number, got {s.radius!r}")
         if not (math.isfinite(s.extension) and s.extension >= 0):
             raise OclgiError(f"extension must be a number >= 0, got {s.extension!r}")
+        self.tri_object = np.asarray(self.tri_object, dtype=np.int64)
+        if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
+            raise OclgiError(f"{self.name}: triangles must be grouped object by object")
+        counts = np.bincount(self.tri_object, minlength=len(self.objects))
+        if len(counts) != len(self.objects) or (counts == 0).any():
+            raise OclgiError(f"{self.name}: every object needs at least one (non-degenerate) triangle")
+        emissive = np.array([max(m.emission) > 0 for m in self.materials], dtype=bool)[self.tri_material]
+        for i, o in enumerate(self.objects):
+            if o.movable and emissive[self.tri_object == i].any():
+                raise OclgiError(f"{self.name}: movable object {o.name!r} emits light; moving lights are not "
+                                 "supported yet (they need path reuse, not incremental update)")
         if not self.has_emitter():
             raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no point light)")
 
