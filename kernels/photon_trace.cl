@@ -1,12 +1,19 @@
 /* photon_trace.cl: light paths from the emitters, every segment stored.
  *
- * photon_trace  one work-item per path. Path p (global id path_offset + i)
- *               writes its segments to slots i * max_depth + b of this
- *               batch (path-major, DESIGN.md section 2), zero-fills the
- *               slots past its end and records its length. Randomness comes
- *               from rng.h keyed by (seed, p, bounce, block), so a batch of
- *               paths is the same whatever the batch size or device.
+ * photon_trace    one work-item per path. Path p (global id path_offset + i)
+ *                 writes its segments to slots i * max_depth + b of the
+ *                 store (path-major, DESIGN.md section 2), zero-fills the
+ *                 slots past its end and records its length.
+ * photon_retrace  one work-item per listed path: re-traces path p from its
+ *                 bounce b on (the suffix), overwriting its own slots b.. and
+ *                 nothing else. Used after a move: the segments before b are
+ *                 unchanged, and the suffix is the one a full trace of the
+ *                 moved scene gives, bit for bit: both kernels run the same
+ *                 path_scatter / path_trace_from code on the same stored
+ *                 float values with the same random numbers.
  *
+ * Randomness comes from rng.h keyed by (seed, path, bounce, block), so a
+ * path is the same whatever the batch, the device or the kernel tracing it.
  * Emission: emitter chosen from a CDF proportional to power; area lights
  * emit from a uniform point of the triangle with a cosine-distributed
  * direction about its normal (one-sided); point lights emit uniformly over
@@ -16,6 +23,17 @@
  */
 #include "bvh.h"
 #include "rng.h"
+
+#define TRACE_ARGS __global const float4 *tri_normals, __global const int *tri_material,     \
+                   __global const Material *materials, __global const Emitter *emitters,   \
+                   __global const float *emitter_cdf, int n_emitters, uint seed_lo,        \
+                   uint seed_hi, float inv_n_total, int max_depth, float eps
+#define TRACE_PASS tri_normals, tri_material, materials, emitters, emitter_cdf, n_emitters, \
+                   seed_lo, seed_hi, inv_n_total, max_depth, eps
+
+typedef struct {
+    float3 o, d, power; /* the next segment's origin, direction and power */
+} PathState;
 
 inline int emitter_pick(__global const float *cdf, int n, float u)
 {
@@ -27,65 +45,109 @@ inline int emitter_pick(__global const float *cdf, int n, float u)
     return lo;
 }
 
-__kernel void photon_trace(SCENE_ARGS,
-                           __global const float4 *tri_normals, __global const int *tri_material,
-                           __global const Material *materials,
-                           __global const Emitter *emitters, __global const float *emitter_cdf,
-                           int n_emitters, uint seed_lo, uint seed_hi,
-                           int path_offset, int n_paths, float inv_n_total,
-                           int max_depth, float eps,
+/* Event 0: the photon leaves a light. */
+inline PathState path_emit(TRACE_ARGS, uint path)
+{
+    float4 r0 = rng_uniform4(seed_lo, seed_hi, path, 0, 0);
+    float4 r1 = rng_uniform4(seed_lo, seed_hi, path, 0, 1);
+    __global const Emitter *em = &emitters[emitter_pick(emitter_cdf, n_emitters, r0.x)];
+    PathState s;
+    if (em->kind == EMITTER_TRIANGLE) {
+        float3 e1 = vload3(0, em->e1), e2 = vload3(0, em->e2);
+        float3 n = normalize(cross(e1, e2));
+        float su = sqrt(r0.y);
+        s.o = vload3(0, em->p) + su * (1.0f - r0.z) * e1 + su * r0.z * e2 + eps * n;
+        s.d = sample_cosine(n, r0.w, r1.x);
+    } else {
+        s.o = vload3(0, em->p);
+        s.d = sample_sphere(r0.y, r0.z);
+    }
+    s.power = vload3(0, em->power) * inv_n_total;
+    return s;
+}
+
+/* Event b >= 1: the photon that ran along segment (o, d, t) to triangle tri
+ * with the given power scatters there, or is absorbed (returns 0). */
+inline int path_scatter(TRACE_ARGS, uint path, int b, float3 o, float3 d, float t, int tri,
+                        float3 power, PathState *s)
+{
+    if (tri < 0 || b >= max_depth) return 0;
+    __global const Material *m = &materials[tri_material[tri]];
+    float4 r = rng_uniform4(seed_lo, seed_hi, path, (uint)b, 0);
+    if (!(r.z < m->survive)) return 0;
+    s->power = power * vload3(0, m->albedo) / m->survive;
+    float3 n = tri_normals[tri].xyz;
+    if (dot(n, d) > 0.0f) n = -n;
+    s->o = o + t * d + eps * n;
+    s->d = sample_cosine(n, r.x, r.y);
+    return 1;
+}
+
+inline void segment_store(__global Segment *sg, float3 o, float t, float3 d, int tri, float3 power, uint path)
+{
+    vstore3(o, 0, sg->org);
+    sg->t_end = t;
+    vstore3(d, 0, sg->dir);
+    sg->tri = tri;
+    vstore3(power, 0, sg->power);
+    sg->path = (int)path;
+}
+
+/* Trace from event b in state s to the path's end: slots b.. of `out`
+ * (the path's own slots) are written, the rest zero-filled. Returns the
+ * path's length in segments. */
+inline int path_trace_from(SCENE_ARGS, TRACE_ARGS, uint path, int b, PathState s, __global Segment *out)
+{
+    int len = b;
+    for (;;) {
+        Hit h;
+        scene_closest_hit(SCENE_PASS, s.o, s.d, INFINITY, &h);
+        float t = h.tri >= 0 ? h.t : INFINITY;
+        segment_store(&out[b], s.o, t, s.d, h.tri, s.power, path);
+        len = b + 1;
+        PathState next;
+        if (!path_scatter(TRACE_PASS, path, b + 1, s.o, s.d, h.t, h.tri, s.power, &next)) break;
+        s = next;
+        ++b;
+    }
+    for (int k = len; k < max_depth; ++k)
+        segment_store(&out[k], (float3)(0.0f), 0.0f, (float3)(0.0f), -1, (float3)(0.0f), path);
+    return len;
+}
+
+__kernel void photon_trace(SCENE_ARGS, TRACE_ARGS, int path_offset, int n_paths,
                            __global Segment *segments, __global int *path_len)
 {
     int i = get_global_id(0);
     if (i >= n_paths) return;
     uint path = (uint)(path_offset + i);
+    PathState s = path_emit(TRACE_PASS, path);
+    path_len[i] = path_trace_from(SCENE_PASS, TRACE_PASS, path, 0, s, &segments[(size_t)i * max_depth]);
+}
 
-    float4 r0 = rng_uniform4(seed_lo, seed_hi, path, 0, 0);
-    float4 r1 = rng_uniform4(seed_lo, seed_hi, path, 0, 1);
-    __global const Emitter *em = &emitters[emitter_pick(emitter_cdf, n_emitters, r0.x)];
-    float3 o, d;
-    if (em->kind == EMITTER_TRIANGLE) {
-        float3 e1 = vload3(0, em->e1), e2 = vload3(0, em->e2);
-        float3 n = normalize(cross(e1, e2));
-        float su = sqrt(r0.y);
-        o = vload3(0, em->p) + su * (1.0f - r0.z) * e1 + su * r0.z * e2 + eps * n;
-        d = sample_cosine(n, r0.w, r1.x);
-    } else {
-        o = vload3(0, em->p);
-        d = sample_sphere(r0.y, r0.z);
-    }
-    float3 power = vload3(0, em->power) * inv_n_total;
-
+/* paths[k]: index of a path in the store (its global id is path_offset +
+ * that index); starts[k]: the first bounce to re-trace. */
+__kernel void photon_retrace(SCENE_ARGS, TRACE_ARGS, int path_offset,
+                             __global const int *paths, __global const int *starts, int n_list,
+                             __global Segment *segments, __global int *path_len)
+{
+    int k = get_global_id(0);
+    if (k >= n_list) return;
+    int i = paths[k], b = starts[k];
+    uint path = (uint)(path_offset + i);
     __global Segment *out = &segments[(size_t)i * max_depth];
-    int len = 0;
-    for (int b = 0; b < max_depth; ++b) {
-        Hit h;
-        scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
-        vstore3(o, 0, out[b].org);
-        out[b].t_end = h.tri >= 0 ? h.t : INFINITY;
-        vstore3(d, 0, out[b].dir);
-        out[b].tri = h.tri;
-        vstore3(power, 0, out[b].power);
-        out[b].path = (int)path;
-        len = b + 1;
-        if (h.tri < 0 || b + 1 == max_depth) break;
-
-        __global const Material *m = &materials[tri_material[h.tri]];
-        float4 r = rng_uniform4(seed_lo, seed_hi, path, (uint)(b + 1), 0);
-        if (!(r.z < m->survive)) break;
-        power *= vload3(0, m->albedo) / m->survive;
-        float3 n = tri_normals[h.tri].xyz;
-        if (dot(n, d) > 0.0f) n = -n;
-        o = o + h.t * d + eps * n;
-        d = sample_cosine(n, r.x, r.y);
+    PathState s;
+    if (b == 0) {
+        s = path_emit(TRACE_PASS, path);
+    } else {
+        __global const Segment *prev = &out[b - 1];
+        if (!path_scatter(TRACE_PASS, path, b, vload3(0, prev->org), vload3(0, prev->dir), prev->t_end,
+                          prev->tri, vload3(0, prev->power), &s)) {
+            for (int j = b; j < max_depth; ++j)
+                segment_store(&out[j], (float3)(0.0f), 0.0f, (float3)(0.0f), -1, (float3)(0.0f), path);
+            path_len[i] = b;
+            return;
+        }
     }
-    for (int b = len; b < max_depth; ++b) {
-        vstore3((float3)(0.0f), 0, out[b].org);
-        out[b].t_end = 0.0f;
-        vstore3((float3)(0.0f), 0, out[b].dir);
-        out[b].tri = -1;
-        vstore3((float3)(0.0f), 0, out[b].power);
-        out[b].path = (int)path;
-    }
-    path_len[i] = len;
+    path_len[i] = path_trace_from(SCENE_PASS, TRACE_PASS, path, b, s, out);
 }

@@ -51,20 +51,28 @@ class PhotonTracer:
         self.batch_paths = int(batch_paths)
         self.local_size = local_size
         ctx = queue.context
-        self.kernel = programs(ctx).get("photon_trace").photon_trace
+        prog = programs(ctx).get("photon_trace")
+        self.kernel, self.k_retrace = prog.photon_trace, prog.photon_retrace
         self.segments = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * self.max_depth * Segment.itemsize)
         self.path_len = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * 4)
 
+    def _trace_args(self, n_total: int) -> tuple:
+        """TRACE_ARGS of kernels/photon_trace.cl."""
+        c = self.compiled
+        return (c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf, np.int32(c.n_emitters),
+                np.uint32(self.seed & 0xFFFFFFFF), np.uint32(self.seed >> 32), np.float32(1.0 / n_total),
+                np.int32(self.max_depth), np.float32(c.eps))
+
     def trace(self, path_offset: int, n_paths: int, n_total: int) -> PathBatch:
         assert 0 < n_paths <= self.batch_paths
-        c = self.compiled
-        launch(
-            self.queue, self.kernel, n_paths,
-            *c.scene_args, c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf,
-            np.int32(c.n_emitters), np.uint32(self.seed & 0xFFFFFFFF), np.uint32(self.seed >> 32),
-            np.int32(path_offset), np.int32(n_paths), np.float32(1.0 / n_total),
-            np.int32(self.max_depth), np.float32(c.eps),
-            self.segments, self.path_len,
-            local_size=self.local_size,
-        )
+        launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(n_total),
+               np.int32(path_offset), np.int32(n_paths), self.segments, self.path_len,
+               local_size=self.local_size)
         return PathBatch(self.segments, self.path_len, path_offset, n_paths, self.max_depth)
+
+    def retrace(self, batch: PathBatch, n_total: int, paths: cl.Buffer, starts: cl.Buffer, n_list: int):
+        """Re-trace the suffixes of listed paths of ``batch`` in place: path
+        ``paths[k]`` (an index into the batch) from bounce ``starts[k]`` on."""
+        launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(n_total),
+               np.int32(batch.path_offset), paths, starts, np.int32(n_list), batch.segments, batch.path_len,
+               local_size=self.local_size)
