@@ -44,7 +44,10 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
         __global const float4 *path = segments + (size_t)p * max_depth * 3;
         for (int b = b0; b < max_depth; ++b) {
             float4 f0 = path[3 * b], f1 = path[3 * b + 1];
-            if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* end of the path */
+            if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) {
+                if (as_int(f1.w) == SEGMENT_HOLE) continue;
+                break; /* end of the path */
+            }
             float tmax = f0.w + ext;
             WORK_U(lanes);
             int8 hit;

@@ -41,6 +41,11 @@ typedef struct {
     int pad2;
 } Tri;
 
+/* A slot with a zero direction ends its path, unless its tri is
+ * SEGMENT_HOLE: then it is a hole (a slot left out of an update's scratch
+ * store) and the path goes on after it. */
+#define SEGMENT_HOLE (-2)
+
 typedef struct {
     float org[3];
     float t_end; /* distance to the hit; INFINITY when the segment escapes */

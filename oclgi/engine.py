@@ -48,6 +48,27 @@ class Stats:
                 f"{self.points:,} points, radius {self.radius:.4g} | {t}")
 
 
+@dataclass(frozen=True)
+class RunParams:
+    method: str
+    photons: int
+    radius: float
+    seed: int
+    max_depth: int
+    extension: float
+    count_emitted: bool
+
+
+def as_query_points(points) -> queries.QueryPoints:
+    """QueryPoints as given, or from an (n, 6) array of x y z nx ny nz."""
+    if isinstance(points, queries.QueryPoints):
+        return points
+    a = np.asarray(points, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 6:
+        raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
+    return queries.from_arrays(a[:, :3], a[:, 3:])
+
+
 @dataclass
 class Estimate:
     irradiance: np.ndarray  # (n, 3) float32, W/m^2 per channel
@@ -165,31 +186,14 @@ class Engine:
         in ``Estimate.work``); ``options`` go to the estimator (its own
         parameters, e.g. the sphere cache's ``q``).
         """
-        if not isinstance(points, queries.QueryPoints):
-            a = np.asarray(points, dtype=np.float64)
-            if a.ndim != 2 or a.shape[1] != 6:
-                raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
-            points = queries.from_arrays(a[:, :3], a[:, 3:])
-        s = self.scene.settings
-        method = check_method(method or s.method)
-        photons = s.photons if photons is None else photons
-        if isinstance(photons, bool) or not isinstance(photons, (int, np.integer)) or not 0 < photons <= MAX_PHOTONS:
-            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {photons!r}")
-        radius = self.scene.radius if radius is None else radius
-        if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
-            raise OclgiError(f"radius must be a positive number, got {radius!r}")
-        seed = s.seed if seed is None else seed
-        max_depth = s.max_depth if max_depth is None else max_depth
-        _check_run(seed, max_depth)
-        extension = s.extension if extension is None else extension
-        count_emitted = s.count_emitted if count_emitted is None else count_emitted
+        points = as_query_points(points)
+        r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
+        method, photons, radius, seed, max_depth = r.method, r.photons, r.radius, r.seed, r.max_depth
+        extension, count_emitted = r.extension, r.count_emitted
 
         stats = Stats(photons=int(photons), points=len(points), method=method, radius=float(radius))
         t0 = time.perf_counter()
-        _check_options(ESTIMATORS[method], options)
-        est = ESTIMATORS[method](self.queue, self.compiled, points, radius=radius, extension=extension,
-                                 count_emitted=count_emitted, local_size=self.local_size,
-                                 count_work=count_work, **options)
+        est = self.estimator(points, r, count_work=count_work, **options)
         batch_paths = max(1, min(photons, self.batch_bytes // (max_depth * 48)))
         tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, batch_paths, self.local_size)
         scale = self.compiled.fixed_scale(photons)
@@ -220,6 +224,33 @@ class Engine:
         self._last_irradiance = irr_buf
         self._last_estimator = est
         return Estimate(irr[:, :3], est.accumulators(), scale, stats, points, est.work())
+
+    def run_params(self, method=None, photons=None, radius=None, seed=None, max_depth=None, extension=None,
+                   count_emitted=None) -> RunParams:
+        """The parameters of a run: the given ones, else the scene's, validated."""
+        s = self.scene.settings
+        method = check_method(method or s.method)
+        photons = s.photons if photons is None else photons
+        if isinstance(photons, bool) or not isinstance(photons, (int, np.integer)) or not 0 < photons <= MAX_PHOTONS:
+            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {photons!r}")
+        radius = self.scene.radius if radius is None else radius
+        if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
+            raise OclgiError(f"radius must be a positive number, got {radius!r}")
+        seed = s.seed if seed is None else seed
+        max_depth = s.max_depth if max_depth is None else max_depth
+        _check_run(seed, max_depth)
+        extension = s.extension if extension is None else extension
+        count_emitted = s.count_emitted if count_emitted is None else count_emitted
+        return RunParams(method, int(photons), float(radius), int(seed), int(max_depth), float(extension),
+                         bool(count_emitted))
+
+    def estimator(self, points, params: RunParams, count_work: bool = False, **options):
+        """A fresh estimator of ``params.method`` over ``points``."""
+        cls = ESTIMATORS[params.method]
+        _check_options(cls, options)
+        return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
+                   count_emitted=params.count_emitted, local_size=self.local_size, count_work=count_work,
+                   **options)
 
     def trace(self, photons: int | None = None, seed: int | None = None, max_depth: int | None = None):
         """Trace photon paths and return their segments on the host.

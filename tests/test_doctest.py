@@ -2,10 +2,14 @@
 
 import doctest
 
+import pytest
+
 import oclgi.engine
+import oclgi.session
 
 
-def test_engine_docstring_example():
-    result = doctest.testmod(oclgi.engine, verbose=False)
-    assert result.attempted >= 4
+@pytest.mark.parametrize("module", [oclgi.engine, oclgi.session])
+def test_docstring_examples(module):
+    result = doctest.testmod(module, verbose=False)
+    assert result.attempted >= 2
     assert result.failed == 0

@@ -1,0 +1,150 @@
+"""Interactive sessions: illumination kept up to date as objects move.
+
+A session traces every photon path once and keeps all segments on the
+device (path-major, DESIGN.md section 2). After ``move(name, matrix)`` only
+the paths the move touches change (DESIGN.md section 4, García 2004/2007):
+
+1. ``update_first_affected`` finds, per path, the first segment that hit the
+   object at its old pose or meets it at its new pose;
+2. the affected suffixes are gathered with negated power and accumulated
+   (their old contributions leave the sums exactly);
+3. the suffixes are re-traced in place (``photon_retrace``: the same code
+   and random numbers as a full trace);
+4. the new suffixes are gathered and accumulated.
+
+Sums are fixed point, so the result equals a recomputation from scratch at
+the new pose bit for bit, however many moves came before: errors never
+accumulate. The query points are static (sensors, or points of static
+surfaces); points carried by a moving object are a later step.
+
+    >>> import numpy as np, oclgi
+    >>> scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
+    >>> session = oclgi.Session(oclgi.Engine(scene), np.array([[0, 0.01, 0, 0, 1, 0]]), photons=5000)
+    >>> session.irradiance().shape
+    (1, 3)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from .cl.layout import Segment
+from .cl.programs import launch, programs
+from .engine import as_query_points
+from .errors import OclgiError
+from .photon_trace import PathBatch, PhotonTracer
+
+
+@dataclass
+class UpdateStats:
+    paths: int  # paths re-traced
+    segments_removed: int  # old suffix segments taken away (n_Rec)
+    segments_added: int  # new suffix segments added
+    seconds: dict = field(default_factory=dict)
+
+
+class Session:
+    """A scene, an estimator and query points, kept up to date under moves.
+
+    ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz); the other
+    arguments as for :meth:`oclgi.Engine.irradiance`. Every segment of every
+    path stays on the device: memory is photons x max_depth x 48 bytes.
+    """
+
+    def __init__(self, engine, points, method=None, photons=None, radius=None, seed=None, max_depth=None,
+                 extension=None, count_emitted=None, count_work=False, **options):
+        self.engine = engine
+        self.queue = engine.queue
+        self.points = as_query_points(points)
+        self.params = engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
+        p = self.params
+        store_bytes = p.photons * p.max_depth * Segment.itemsize
+        limit = engine.queue.device.max_mem_alloc_size
+        if store_bytes > limit:
+            raise OclgiError(f"a session keeps every segment: {p.photons:,} paths x {p.max_depth} slots need "
+                             f"{store_bytes / 2**30:.2f} GiB, more than one device allocation "
+                             f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
+        self.store_bytes = store_bytes
+        self.scale = engine.compiled.fixed_scale(p.photons)
+        self.estimator = engine.estimator(self.points, p, count_work=count_work, **options)
+        self.tracer = PhotonTracer(self.queue, engine.compiled, p.seed, p.max_depth, p.photons, engine.local_size)
+        t0 = time.perf_counter()
+        self.store = self.tracer.trace(0, p.photons, p.photons)
+        self.estimator.accumulate(self.store, self.scale)
+        self.queue.finish()
+        self.setup_seconds = time.perf_counter() - t0
+        prog = programs(engine.ctx).get("update")
+        self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
+        mf = cl.mem_flags
+        self.first = cl.Buffer(engine.ctx, mf.READ_WRITE, p.photons * 4)
+        self.first_host = np.empty(p.photons, np.int32)
+        self.scratch = None  # grown on demand: gathered suffixes
+
+    # -- reading ------------------------------------------------------------
+    def irradiance(self) -> np.ndarray:
+        """(n, 3) irradiance at the query points, W/m^2."""
+        buf = self.estimator.resolve(self.scale)
+        out = np.empty((len(self.points), 4), np.float32)
+        cl.enqueue_copy(self.queue, out, buf)
+        return out[:, :3]
+
+    def accumulators(self) -> np.ndarray:
+        """The exact fixed-point sums behind the irradiance."""
+        return self.estimator.accumulators()
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray]:
+        """The stored segments (path-major) and path lengths, on the host."""
+        return self.store.read_segments(self.queue), self.store.read_path_len(self.queue)
+
+    # -- moving -----------------------------------------------------------------
+    def move(self, name: str, matrix) -> UpdateStats:
+        """Place object ``name`` (4x4 world-from-object matrix) and update."""
+        engine, p, q = self.engine, self.params, self.queue
+        obj = engine.scene.object_id(name)
+        t0 = time.perf_counter()
+        engine.move(name, matrix)
+        launch(q, self.k_first, p.photons, *engine.compiled.scene_args, np.int32(obj), self.store.segments,
+               np.int32(p.photons), np.int32(p.max_depth), self.first, local_size=engine.local_size)
+        cl.enqueue_copy(q, self.first_host, self.first)
+        paths = np.nonzero(self.first_host >= 0)[0].astype(np.int32)
+        starts = self.first_host[paths]
+        t1 = time.perf_counter()
+        stats = UpdateStats(paths=len(paths), segments_removed=0, segments_added=0)
+        if len(paths):
+            lens = self.store.read_path_len(q)[paths]
+            stats.segments_removed = int((lens - starts).sum())
+            mf = cl.mem_flags
+            paths_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=paths)
+            starts_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=starts)
+            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), -1.0)
+            t2 = time.perf_counter()
+            self.tracer.retrace(self.store, p.photons, paths_buf, starts_buf, len(paths))
+            q.finish()
+            t3 = time.perf_counter()
+            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), 1.0)
+            q.finish()
+            stats.segments_added = int((self.store.read_path_len(q)[paths] - starts).sum())
+            t4 = time.perf_counter()
+            stats.seconds = {"find": t1 - t0, "subtract": t2 - t1, "retrace": t3 - t2, "add": t4 - t3}
+        else:
+            stats.seconds = {"find": t1 - t0}
+        stats.seconds["total"] = time.perf_counter() - t0
+        return stats
+
+    def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float):
+        p = self.params
+        nbytes = n_list * p.max_depth * Segment.itemsize
+        if self.scratch is None or self.scratch.size < nbytes:
+            # grow geometrically, never past the store itself
+            size = max(nbytes, min(2 * (self.scratch.size if self.scratch else 0), self.store_bytes))
+            self.scratch = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_WRITE, size)
+        launch(self.queue, self.k_gather, n_list, self.store.segments, np.int32(p.max_depth), paths_buf,
+               starts_buf, np.int32(n_list), np.float32(sign), self.scratch)
+        # Path ids stay in the gathered slots; the scratch store is a batch
+        # of n_list paths like any other.
+        batch = PathBatch(self.scratch, self.store.path_len, 0, n_list, p.max_depth)
+        self.estimator.accumulate(batch, self.scale)
