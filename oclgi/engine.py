@@ -280,21 +280,26 @@ class Engine:
         pts = self.camera_points(camera, width, height)
         t_cam = time.perf_counter() - t0
         est = self.irradiance(pts, **estimate_args)
-        h, w = pts.shape
+        radiance, pixels = self.shade(pts, self._last_irradiance, exposure)
+        est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
+        return Render(radiance, pixels, est)
+
+    def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0):
+        """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
+        pixels, from the irradiance (a device float4 buffer, one per point)."""
+        h, w = points.shape
         n = h * w
         c = self.compiled
         prog = self._programs.get("image")
         mf = cl.mem_flags
-        pos = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.positions)
-        nrm = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pts.normals)
+        pos = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.positions)
+        nrm = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.normals)
         rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
         pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
-        launch(self.queue, prog.image_shade, n, pos, nrm, self._last_irradiance, c.tri_material, c.materials,
-               np.int32(n), rad)
+        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, np.int32(n), rad)
         launch(self.queue, prog.image_tonemap, n, rad, np.int32(n), np.float32(exposure), pix)
         radiance = np.empty((h, w, 4), np.float32)
         pixels = np.empty((h, w, 4), np.uint8)
         cl.enqueue_copy(self.queue, radiance, rad)
         cl.enqueue_copy(self.queue, pixels, pix)
-        est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
-        return Render(radiance[:, :, :3].copy(), pixels, est)
+        return radiance[:, :, :3].copy(), pixels

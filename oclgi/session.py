@@ -14,8 +14,11 @@ the paths the move touches change (DESIGN.md section 4, García 2004/2007):
 
 Sums are fixed point, so the result equals a recomputation from scratch at
 the new pose bit for bit, however many moves came before: errors never
-accumulate. The query points are static (sensors, or points of static
-surfaces); points carried by a moving object are a later step.
+accumulate. Query points are either fixed (sensors: an array of points and
+normals) or the visible points of a camera (``points=None``); then the
+pixels whose visible point a move changed (they see the object, or saw it)
+get their sums recomputed from the whole store, the thesis' "dynamic
+points", and ``render()`` shades the current view.
 
     >>> import numpy as np, oclgi
     >>> scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
@@ -37,6 +40,7 @@ from .cl.programs import launch, programs
 from .engine import as_query_points
 from .errors import OclgiError
 from .photon_trace import PathBatch, PhotonTracer
+from .queries import QueryPoints
 
 
 @dataclass
@@ -44,7 +48,16 @@ class UpdateStats:
     paths: int  # paths re-traced
     segments_removed: int  # old suffix segments taken away (n_Rec)
     segments_added: int  # new suffix segments added
+    points: int = 0  # dynamic points recomputed (camera sessions)
     seconds: dict = field(default_factory=dict)
+
+
+def _copy(q: QueryPoints) -> QueryPoints:
+    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
+
+
+def _subset(q: QueryPoints, index) -> QueryPoints:
+    return QueryPoints(q.positions[index], q.normals[index], q.barys[index], q.kind, None)
 
 
 class Session:
@@ -55,11 +68,15 @@ class Session:
     path stays on the device: memory is photons x max_depth x 48 bytes.
     """
 
-    def __init__(self, engine, points, method=None, photons=None, radius=None, seed=None, max_depth=None,
-                 extension=None, count_emitted=None, count_work=False, **options):
+    def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
+                 extension=None, count_emitted=None, count_work=False, camera=None, **options):
         self.engine = engine
         self.queue = engine.queue
-        self.points = as_query_points(points)
+        self.camera = camera
+        if points is None:
+            points = engine.camera_points(camera)
+        self.points = _copy(as_query_points(points))  # the estimator updates them in place
+        self.options = dict(options, count_work=count_work)
         self.params = engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         p = self.params
         store_bytes = p.photons * p.max_depth * Segment.itemsize
@@ -70,7 +87,7 @@ class Session:
                              f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
         self.store_bytes = store_bytes
         self.scale = engine.compiled.fixed_scale(p.photons)
-        self.estimator = engine.estimator(self.points, p, count_work=count_work, **options)
+        self.estimator = engine.estimator(self.points, p, **self.options)
         self.tracer = PhotonTracer(self.queue, engine.compiled, p.seed, p.max_depth, p.photons, engine.local_size)
         t0 = time.perf_counter()
         self.store = self.tracer.trace(0, p.photons, p.photons)
@@ -99,6 +116,13 @@ class Session:
     def segments(self) -> tuple[np.ndarray, np.ndarray]:
         """The stored segments (path-major) and path lengths, on the host."""
         return self.store.read_segments(self.queue), self.store.read_path_len(self.queue)
+
+    def render(self, exposure: float = 1.0):
+        """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
+        if self.points.kind != "camera":
+            raise OclgiError("render() needs a camera session (points=None)")
+        buf = self.estimator.resolve(self.scale)
+        return self.engine.shade(self.points, buf, exposure)
 
     # -- moving -----------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
@@ -132,8 +156,29 @@ class Session:
             stats.seconds = {"find": t1 - t0, "subtract": t2 - t1, "retrace": t3 - t2, "add": t4 - t3}
         else:
             stats.seconds = {"find": t1 - t0}
+        if self.points.kind == "camera":
+            t5 = time.perf_counter()
+            stats.points = self._refresh_view()
+            stats.seconds["points"] = time.perf_counter() - t5
         stats.seconds["total"] = time.perf_counter() - t0
         return stats
+
+    def _refresh_view(self) -> int:
+        """Dynamic points: pixels whose visible point moved get recomputed sums."""
+        h, w = self.points.shape
+        new = self.engine.camera_points(self.camera, w, h)
+        # compare bits: w holds the triangle id as int bits (-1 reads as NaN)
+        changed = np.nonzero((new.positions.view(np.uint32) != self.points.positions.view(np.uint32)).any(axis=1)
+                             | (new.normals.view(np.uint32) != self.points.normals.view(np.uint32)).any(axis=1))[0]
+        if len(changed) == 0:
+            return 0
+        sub = _subset(new, changed)
+        self.estimator.replace_points(changed, sub)
+        if self.estimator.sums_per_point:
+            fresh = self.engine.estimator(sub, self.params, **self.options)
+            fresh.accumulate(self.store, self.scale)
+            self.estimator.set_accumulators(changed, fresh.accumulators())
+        return len(changed)
 
     def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float):
         p = self.params

@@ -55,6 +55,23 @@ class Estimator:
         cl.enqueue_copy(self.queue, out, self.work_buf)
         return {"t": int(out[0]), "u": int(out[1]), "nodes": int(out[2])}
 
+    # Sums kept per query point (DETP, Photon Maps) must be recomputed when a
+    # point changes; sums kept per triangle (Impact Count) need not.
+    sums_per_point = True
+
+    def replace_points(self, index: np.ndarray, new) -> None:
+        """Points ``index`` are now ``new`` (QueryPoints): e.g. the pixels that
+        see a moved object. Updates the device copies (and any index built
+        over the points); the caller recomputes their sums when
+        ``sums_per_point``."""
+        raise NotImplementedError
+
+    def set_accumulators(self, index: np.ndarray, values: np.ndarray) -> None:
+        """Overwrite the sums of points ``index`` (exact int64 values)."""
+        acc = self.accumulators()
+        acc[index] = values
+        cl.enqueue_copy(self.queue, self.acc, np.ascontiguousarray(acc))
+
     def accumulate(self, batch, scale: float):
         raise NotImplementedError
 
@@ -86,6 +103,17 @@ class DetpEstimator(Estimator):
         self.acc = self.zeros(self.n * 3 * 8)
         self.irr = self.zeros(self.n * 16)
         self.k_resolve = programs(self.ctx).get("detp").detp_resolve
+
+    def replace_points(self, index: np.ndarray, new) -> None:
+        self.points.positions[index] = new.positions
+        self.points.normals[index] = new.normals
+        self.points.barys[index] = new.barys
+        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
+        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
+        self.points_changed()
+
+    def points_changed(self) -> None:
+        """Rebuild whatever the variant built over the points (default: nothing)."""
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""

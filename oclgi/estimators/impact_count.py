@@ -34,6 +34,7 @@ def vertex_triangles(faces: np.ndarray, n_vertices: int):
 
 class ImpactCount(Estimator):
     name = "impact"
+    sums_per_point = False  # sums per triangle: a changed point only reads them
 
     def __init__(self, queue, compiled, points, radius=None, extension=None, **kw):
         # radius and extension are DETP parameters; Impact Count has none
@@ -48,6 +49,7 @@ class ImpactCount(Estimator):
         self.n_vertices = len(scene.vertices)
         if points.kind != "camera" and (points.tri < 0).any():  # camera misses stay background
             points = locate(queue, compiled, points)
+        self.points = points
         self.positions = self.upload(points.positions)
         self.barys = self.upload(points.barys)
         starts, lists = vertex_triangles(scene.faces, self.n_vertices)
@@ -57,6 +59,15 @@ class ImpactCount(Estimator):
         self.tri_irr = self.zeros(self.n_tris * 16)
         self.vert_irr = self.zeros(self.n_vertices * 16)
         self.irr = self.zeros(self.n * 16)
+
+    def replace_points(self, index: np.ndarray, new) -> None:
+        if new.kind != "camera" and (new.tri < 0).any():
+            new = locate(self.queue, self.compiled, new)
+        self.points.positions[index] = new.positions
+        self.points.normals[index] = new.normals
+        self.points.barys[index] = new.barys
+        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
+        cl.enqueue_copy(self.queue, self.barys, self.points.barys)
 
     def accumulate(self, batch, scale: float):
         launch(self.queue, self.k_acc, batch.n_slots, batch.segments, np.int32(batch.n_slots),
