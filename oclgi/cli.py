@@ -16,6 +16,8 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from .errors import OclgiError
 from .estimators import METHODS
 
@@ -106,6 +108,16 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--points", type=Path, required=True, help=".npy (n, 6) or .csv: x,y,z,nx,ny,nz")
     i.add_argument("-o", "--output", type=Path, required=True, help=".npy (n, 3) or .csv output")
 
+    a = sub.add_parser("animate", help="move an object along a path; incremental update and one image per frame")
+    _estimate_args(a)
+    a.add_argument("--object", help="the movable object to move (default: the scene's only one)")
+    a.add_argument("--path", required=True, help="line:DX,DY,DZ | orbit:R[,TURNS] | keyframes .csv/.npy "
+                   "(rows x,y,z[,angle about Y] or 16 numbers of a 4x4 matrix)")
+    a.add_argument("--frames", type=_positive_int, default=30, help="number of frames (default 30)")
+    a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
+    a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
+    a.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
+
     sub.add_parser("info", help="list OpenCL devices")
     return ap
 
@@ -158,6 +170,40 @@ def cmd_irradiance(args):
     print(f"wrote {path}")
 
 
+def cmd_animate(args):
+    from .animate import animate, poses
+    from .session import Session
+
+    out = args.output
+    if out.exists() and not out.is_dir():
+        raise OclgiError(f"{out}: exists and is not a folder")
+    poses(args.path, args.frames)  # a bad path fails before any work
+    engine = _engine(args)
+    movable = [o.name for o in engine.scene.objects if o.movable]
+    name = args.object
+    if name is None:
+        if len(movable) != 1:
+            raise OclgiError(f"--object is needed: the scene has {len(movable)} movable objects {movable}")
+        name = movable[0]
+    engine.scene.object_id(name)
+    out.mkdir(parents=True, exist_ok=True)
+    kw = _est_kwargs(args)
+    session = Session(engine, method=kw["method"], photons=kw["photons"], radius=kw["radius"], seed=kw["seed"],
+                      max_depth=kw["max_depth"])
+    show = None if args.quiet or not sys.stderr.isatty() else (
+        lambda f, r: print(f"\rframe {f + 1}/{args.frames}: {r['paths']:,} paths re-traced, "
+                           f"{r['total_s'] * 1e3:.0f} ms", end="", file=sys.stderr))
+    rows = animate(session, name, args.path, args.frames, out, args.exposure, args.exr, show)
+    if show:
+        print(file=sys.stderr)
+    if not args.quiet:
+        update = [r["total_s"] for r in rows]
+        print(f"{len(rows)} frames of {name!r}: setup {session.setup_seconds:.2f}s, update median "
+              f"{np.median(update) * 1e3:.1f} ms ({1 / max(np.median(update), 1e-9):.1f} updates/s), "
+              f"{np.mean([r['paths'] for r in rows]):,.0f} paths re-traced per frame", file=sys.stderr)
+    print(f"wrote {len(rows)} frames and timing.csv to {out}")
+
+
 def cmd_info(_args):
     from .cl.device import INSTALL_HINT, describe_devices, list_devices
 
@@ -180,7 +226,8 @@ def main(argv=None) -> int:
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
-            {"render": cmd_render, "irradiance": cmd_irradiance, "info": cmd_info}[args.command](args)
+            {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
+             "info": cmd_info}[args.command](args)
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code

@@ -142,3 +142,15 @@ def write_array(path, values: np.ndarray, points=None) -> Path:
                 data = np.hstack([points.positions[:, :3], points.normals[:, :3], values])
             np.savetxt(tmp, data, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
     return path
+
+
+def write_array_text(path, columns: list[str], rows) -> Path:
+    """A CSV table with a header line (e.g. a per-frame timing log)."""
+    path = Path(path)
+    check_output(path)
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as f:
+            f.write(",".join(columns) + "\n")
+            for r in rows:
+                f.write(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r) + "\n")
+    return path

@@ -1,0 +1,105 @@
+"""Animations: an object moved along a path, the illumination updated
+incrementally each frame (a camera :class:`oclgi.Session`).
+
+Path specifications (relative to where the scene file put the object):
+
+    line:DX,DY,DZ        a straight move by that offset over the frames
+    orbit:R[,TURNS]      a circle of radius R about the start, in the XZ plane
+    FILE.csv | FILE.npy  keyframes, one per row: x y z (a translation), or
+                         x y z angle (plus a rotation about Y, degrees),
+                         interpolated linearly over the frames; or 16
+                         columns, one row-major 4x4 matrix per frame
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .errors import OclgiError
+
+
+def _translate_rotate(x, y, z, degrees=0.0) -> np.ndarray:
+    a = math.radians(degrees)
+    m = np.eye(4)
+    m[0, 0], m[0, 2], m[2, 0], m[2, 2] = math.cos(a), math.sin(a), -math.sin(a), math.cos(a)
+    m[:3, 3] = [x, y, z]
+    return m
+
+
+def _numbers(text: str, where: str) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise OclgiError(f"{where}: expected comma-separated numbers, got {text!r}") from None
+    if not all(math.isfinite(v) for v in vals):
+        raise OclgiError(f"{where}: numbers must be finite, got {text!r}")
+    return vals
+
+
+def poses(spec: str, frames: int) -> list[np.ndarray]:
+    """The object's 4x4 pose at each of ``frames`` frames."""
+    if frames < 1:
+        raise OclgiError(f"--frames must be at least 1, got {frames}")
+    s = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)
+    if spec.startswith("line:"):
+        d = _numbers(spec[5:], "--path line")
+        if len(d) != 3:
+            raise OclgiError("--path line:DX,DY,DZ takes 3 numbers")
+        return [_translate_rotate(*(t * np.asarray(d))) for t in s]
+    if spec.startswith("orbit:"):
+        v = _numbers(spec[6:], "--path orbit")
+        if len(v) not in (1, 2) or v[0] <= 0:
+            raise OclgiError("--path orbit:R[,TURNS] takes a radius > 0 and optionally a number of turns")
+        turns = v[1] if len(v) == 2 else 1.0
+        return [_translate_rotate(v[0] * (math.cos(2 * math.pi * turns * t) - 1), 0.0,
+                                  v[0] * math.sin(2 * math.pi * turns * t)) for t in s]
+    path = Path(spec)
+    if not path.is_file():
+        raise OclgiError(f"--path {spec!r}: not line:..., orbit:... or an existing .csv/.npy file")
+    try:
+        if path.suffix.lower() == ".npy":
+            keys = np.load(path, allow_pickle=False)
+        elif path.suffix.lower() == ".csv":
+            keys = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+        else:
+            raise OclgiError(f"--path {path}: keyframes must be a .csv or .npy file")
+    except ValueError as exc:
+        raise OclgiError(f"--path {path}: cannot read keyframes ({exc})") from None
+    keys = np.asarray(keys, dtype=np.float64)
+    if keys.ndim != 2 or keys.shape[1] not in (3, 4, 16) or len(keys) == 0 or not np.isfinite(keys).all():
+        raise OclgiError(f"--path {path}: expected rows of 3, 4 or 16 finite numbers, got shape {keys.shape}")
+    if keys.shape[1] == 16:
+        if len(keys) != frames:
+            raise OclgiError(f"--path {path}: {len(keys)} matrices for {frames} frames")
+        return [k.reshape(4, 4) for k in keys]
+    u = np.linspace(0, len(keys) - 1, frames) if frames > 1 else np.zeros(1)
+    cols = [np.interp(u, np.arange(len(keys)), keys[:, c]) for c in range(keys.shape[1])]
+    return [_translate_rotate(*(c[i] for c in cols)) for i in range(frames)]
+
+
+def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure: float = 1.0,
+            write_exr: bool = False, progress=None) -> list[dict]:
+    """Move ``name`` along the path, write one PNG (and EXR) per frame and a
+    per-frame timing log (``timing.csv``); returns the log rows."""
+    from .io import write_array_text, write_images
+
+    rows = []
+    for f, pose in enumerate(poses(spec, frames)):
+        stats = session.move(name, pose)
+        radiance, pixels = session.render(exposure)
+        stem = out_dir / f"frame_{f:04d}"
+        images = {stem.with_suffix(".png"): pixels}
+        if write_exr:
+            images[stem.with_suffix(".exr")] = radiance
+        write_images(images)
+        rows.append({"frame": f, "paths": stats.paths, "segments_removed": stats.segments_removed,
+                     "segments_added": stats.segments_added, "points": stats.points,
+                     **{f"{k}_s": v for k, v in stats.seconds.items()}})
+        if progress:
+            progress(f, rows[-1])
+    keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
+    write_array_text(out_dir / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows])
+    return rows

@@ -1,0 +1,95 @@
+"""`oclgi animate`: paths, frames, the timing log, and bad input."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from oclgi.animate import poses
+from oclgi.errors import OclgiError
+
+SCENE = """
+[[mesh]]
+vertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]
+faces = [[0, 2, 1], [0, 3, 2]]
+
+[[mesh]]
+name = "block"
+movable = true
+vertices = [[-0.1, 0, -0.1], [0.1, 0, -0.1], [0.1, 0.2, 0.1], [-0.1, 0.2, 0.1]]
+faces = [[0, 1, 2], [0, 2, 3]]
+
+[[point_light]]
+position = [0, 1, 0]
+intensity = [1, 1, 1]
+
+[camera]
+position = [0, 1, 2]
+look_at = [0, 0, 0]
+width = 8
+height = 8
+
+[photons]
+count = 2000
+"""
+
+
+def _run(*args):
+    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_poses():
+    line = poses("line:1,0,-2", 5)
+    assert len(line) == 5
+    np.testing.assert_allclose(line[0], np.eye(4))
+    np.testing.assert_allclose(line[-1][:3, 3], [1, 0, -2])
+    np.testing.assert_allclose(line[2][:3, 3], [0.5, 0, -1])
+    orbit = poses("orbit:0.5", 9)
+    np.testing.assert_allclose(orbit[0], np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(orbit[4][:3, 3], [-1.0, 0, 0], atol=1e-12)  # half way round
+    for spec in ("line:1,2", "orbit:-1", "spiral:2", "line:a,b,c", "line:1,nan,0"):
+        with pytest.raises(OclgiError):
+            poses(spec, 4)
+
+
+def test_keyframe_file(tmp_path):
+    keys = tmp_path / "k.csv"
+    keys.write_text("0,0,0,0\n1,0,0,90\n")
+    p = poses(str(keys), 3)
+    np.testing.assert_allclose(p[1][:3, 3], [0.5, 0, 0])
+    np.testing.assert_allclose(p[2][:3, :3], [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("0,0\n")
+    with pytest.raises(OclgiError, match="rows of 3, 4 or 16"):
+        poses(str(bad), 3)
+
+
+def test_animate_writes_frames_and_log(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "anim"
+    r = _run("animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        "frame_0000.exr", "frame_0000.png", "frame_0001.exr", "frame_0001.png", "frame_0002.exr",
+        "frame_0002.png", "timing.csv"]
+    log = (out / "timing.csv").read_text().splitlines()
+    assert log[0].startswith("frame,paths,segments_removed")
+    assert len(log) == 4
+    assert "updates/s" in r.stderr
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--path", "zigzag:1", "--frames", "3"], "not line:"),
+    (["--path", "line:1,0,0", "--object", "teapot"], "no movable object named 'teapot'"),
+])
+def test_animate_bad_input(tmp_path, args, message):
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "anim"
+    r = _run("animate", scene, *args, "-o", out)
+    assert r.returncode == 2
+    assert message in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists() or not any(out.iterdir())
