@@ -145,6 +145,7 @@ class Session:
             paths_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=paths)
             starts_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=starts)
             self._accumulate_suffixes(paths_buf, starts_buf, len(paths), -1.0)
+            q.finish()  # honest per-stage times
             t2 = time.perf_counter()
             self.tracer.retrace(self.store, p.photons, paths_buf, starts_buf, len(paths))
             q.finish()

@@ -98,15 +98,33 @@ def programs(ctx: cl.Context) -> ProgramCache:
     return cache
 
 
+# A fixed work-group size for launches that do not ask for one. Left to
+# itself, the runtime picks a size from the global size, and PoCL compiles a
+# kernel anew for every work-group size it meets (about 0.4 s each): an
+# interactive loop whose launch sizes vary from call to call would compile
+# every frame. Results never depend on the size (fixed-point sums).
+DEFAULT_LOCAL_SIZE = 64
+_local_limits: dict = {}
+
+
+def _local_size_for(queue: cl.CommandQueue, kernel: cl.Kernel) -> int:
+    key = (kernel.int_ptr, queue.device.int_ptr)
+    size = _local_limits.get(key)
+    if size is None:
+        limit = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, queue.device)
+        size = _local_limits[key] = max(1, min(DEFAULT_LOCAL_SIZE, limit))
+    return size
+
+
 def launch(queue: cl.CommandQueue, kernel: cl.Kernel, n: int, *args, local_size: int | None = None):
     """Run ``kernel`` over ``n`` work-items (kernels guard ``i >= n``).
 
-    ``local_size`` None lets the runtime choose; a number rounds the global
-    size up to a multiple of it. Results never depend on it (fixed-point sums).
+    The global size is rounded up to a multiple of the work-group size:
+    ``local_size``, else DEFAULT_LOCAL_SIZE (or less, if the kernel allows
+    less). Results never depend on it (fixed-point sums).
     """
     if n <= 0:
         return None
-    if local_size:
-        gsize = (n + local_size - 1) // local_size * local_size
-        return kernel(queue, (gsize,), (local_size,), *args)
-    return kernel(queue, (n,), None, *args)
+    local = local_size or _local_size_for(queue, kernel)
+    gsize = (n + local - 1) // local * local
+    return kernel(queue, (gsize,), (local,), *args)
