@@ -1,0 +1,83 @@
+/* detp_ray_map.cl: DETP with a ray map (Havran et al. 2005; DESIGN.md 3).
+ *
+ * detp_ray_map  one work-item per disc that can be crossed (n_discs, any
+ *               local size; the host orders them in Morton order so that
+ *               neighbouring work-items walk the same nodes). The disc's
+ *               padded box walks a BVH over the boxes of the batch's segment
+ *               pieces (box_bvh.h); the pieces of every leaf met are tested
+ *               8 at a time (float8 lanes) with DETP_TEST (detp.h) and
+ *               their claim range, and the fixed-point power of each
+ *               crossing segment is added to the disc's private sums. A
+ *               work-item owns its disc, so the sums go to memory with plain
+ *               adds; batches run in order.
+ *               Counts u = segment-disc tests (real pieces of each leaf met)
+ *               and BVH nodes visited (work.h).
+ *
+ * Piece blocks (host: oclgi/estimators/detp_ray_map.py): the pieces of a
+ * leaf are stored as ceil(count / 8) blocks of 10 float8: ox, oy, oz, wx,
+ * wy, wz, t_end (of the whole segment), slot (int bits), claim_lo,
+ * claim_hi. Padding lanes have w = 0, which never passes DETP_TEST
+ * (w.n = 0). A leaf node's `first` is its first block, `count` its number
+ * of real pieces. The power is read from the batch's segment store by slot,
+ * only for crossing segments.
+ *
+ * Discs: 4 float4 each: centre (w = point id as int bits), normal, padded
+ * box lo, box hi.
+ */
+#include "oclgi_types.h"
+#include "detp.h"
+#include "work.h"
+#include "box_bvh.h"
+
+#define SEG_BLOCK 10 /* float8 per block of 8 segment pieces */
+
+__kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 *blocks,
+                           __global const float4 *discs, int n_discs, __global const float4 *segments,
+                           float radius2, float ext, float scale, __global long *acc,
+                           __global ulong *work)
+{
+    int i = get_global_id(0);
+    if (i >= n_discs) return;
+    WORK_DECL;
+    __global const float4 *disc = discs + 4 * (size_t)i;
+    float4 x = disc[0], n = disc[1];
+    float3 lo = disc[2].xyz, hi = disc[3].xyz;
+    long3 sum = 0;
+    BoxBvhWalk walk;
+    box_bvh_start(&walk);
+    int leaf;
+    while ((leaf = box_bvh_next_box(&walk, nodes, lo, hi)) >= 0) {
+        int count = nodes[leaf].count;
+        int first = nodes[leaf].first;
+        WORK_U(count);
+        for (int blk = first; blk < first + (count + 7) / 8; ++blk) {
+            __global const float8 *b = blocks + (size_t)blk * SEG_BLOCK;
+            float8 tmax = b[6] + ext; /* per lane, exactly as detp_plain's f0.w + ext */
+            int8 hit;
+            DETP_TEST(float8, hit, x.x, x.y, x.z, n.x, n.y, n.z, b[0], b[1], b[2], b[3], b[4], b[5],
+                      tmax, radius2);
+            if (!any(hit)) continue;
+            /* A segment cut into pieces is in the map once per piece; only
+             * the piece whose claim range holds the crossing parameter
+             * counts it. Every piece keeps the whole segment's o and w, so
+             * all compute the same t, and the ranges partition the line:
+             * exactly one piece counts a crossing. */
+            float8 wn = b[3] * n.x + b[4] * n.y + b[5] * n.z;
+            float8 num = (x.x - b[0]) * n.x + (x.y - b[1]) * n.y + (x.z - b[2]) * n.z;
+            float8 t = num / wn;
+            hit &= (t >= b[8]) & (t < b[9]);
+            if (!any(hit)) continue;
+            int slots[8], h[8];
+            vstore8(as_int8(b[7]), 0, slots);
+            vstore8(hit, 0, h);
+            for (int k = 0; k < 8; ++k)
+                if (h[k]) sum += convert_long3_rte(segments[3 * (size_t)slots[k] + 2].xyz * scale);
+        }
+    }
+    int id = as_int(x.w);
+    acc[3 * (size_t)id + 0] += sum.x;
+    acc[3 * (size_t)id + 1] += sum.y;
+    acc[3 * (size_t)id + 2] += sum.z;
+    WORK_NODE(walk.visited);
+    WORK_FLUSH(work);
+}

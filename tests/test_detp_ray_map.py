@@ -1,0 +1,156 @@
+"""DETP with a ray map: identical to plain DETP.
+
+On the Cornell box and the bunny scene, for the three radius fractions, with
+and without the emitted segments, for several leaf sizes, with and without
+cutting segments into pieces, for several work-group sizes and over several
+batches, the fixed-point accumulators equal plain DETP's bit for bit
+(DESIGN.md 3). Adversarial segments check that the culling is conservative
+and that a segment cut into pieces is counted once.
+"""
+
+import functools
+
+import numpy as np
+import pytest
+
+import oclgi
+from exactness import RADIUS_FRACTIONS, bunny_engine, cornell_engine, surface_points
+from oclgi.errors import OclgiError
+from oclgi.estimators import ESTIMATORS
+from test_detp_disc_index import adversarial_batch, run_on_batch
+
+METHOD = "detp_ray_map"
+N_POINTS = 1500
+PHOTONS = 20_000
+
+
+@pytest.fixture(scope="module")
+def engines(scenes_dir):
+    return {"cornell": cornell_engine(scenes_dir), "bunny": bunny_engine(scenes_dir)}
+
+
+@pytest.fixture(scope="module")
+def points(engines):
+    rng = np.random.default_rng(99)
+    return {name: surface_points(e, N_POINTS, rng) for name, e in engines.items()}
+
+
+@pytest.fixture(scope="module")
+def plain(engines, points):
+    """Plain DETP's accumulators, computed once per (scene, fraction, count_emitted)."""
+
+    @functools.cache
+    def get(scene, frac, count_emitted):
+        e = engines[scene]
+        est = e.irradiance(points[scene], method="detp", radius=frac * e.scene.diagonal, photons=PHOTONS,
+                           count_emitted=count_emitted)
+        assert est.accumulators.any(), "the test must select some segments"
+        return est.accumulators
+
+    return get
+
+
+def check_same(ref, est, what):
+    diff = np.nonzero((ref != est.accumulators).any(axis=1))[0]
+    assert len(diff) == 0, f"{what}: {len(diff)} of {len(ref)} points differ from plain DETP (first {diff[:5].tolist()})"
+
+
+@pytest.mark.parametrize("count_emitted", [True, False])
+@pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
+@pytest.mark.parametrize("scene", ["cornell", "bunny"])
+def test_same_as_plain(engines, points, plain, scene, frac, count_emitted):
+    e = engines[scene]
+    est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
+                       count_emitted=count_emitted)
+    check_same(plain(scene, frac, count_emitted), est, f"{scene} radius {frac} x diagonal")
+
+
+@pytest.mark.parametrize("piece", [0.0, 0.05])
+@pytest.mark.parametrize("leaf_size", [1, 8, 32])
+@pytest.mark.parametrize("scene", ["cornell", "bunny"])
+def test_leaf_sizes_and_pieces(engines, points, plain, scene, leaf_size, piece):
+    e = engines[scene]
+    frac = RADIUS_FRACTIONS[1]
+    est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
+                       leaf_size=leaf_size, piece=piece, count_work=True)
+    check_same(plain(scene, frac, True), est, f"{scene} leaf_size {leaf_size} piece {piece}")
+    assert est.work["u"] < est.stats.segments * N_POINTS / 2  # the map does cull
+
+
+@pytest.mark.parametrize("local_size", [1, 7, 64])
+def test_work_group_sizes_and_batches(engines, points, plain, local_size):
+    """Also split into batches of 3,000 paths: one ray map per batch."""
+    e = oclgi.Engine(engines["cornell"].scene, local_size=local_size, batch_bytes=3000 * 16 * 48)
+    frac = RADIUS_FRACTIONS[2]
+    est = e.irradiance(points["cornell"], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS)
+    check_same(plain("cornell", frac, True), est, f"local size {local_size}")
+
+
+def test_camera_points_with_misses(engines):
+    e = engines["cornell"]
+    pts = e.camera_points(width=24, height=24)
+    assert (pts.tri < 0).any()
+    ref = e.irradiance(pts, method="detp", radius=0.05, photons=PHOTONS)
+    est = e.irradiance(pts, method=METHOD, radius=0.05, photons=PHOTONS)
+    check_same(ref.accumulators, est, "camera points")
+
+
+@pytest.mark.parametrize("count_emitted", [True, False])
+def test_adversarial_segments(engines, count_emitted):
+    e = engines["cornell"]
+    pts, d, batch = adversarial_batch(e, np.random.default_rng(8))
+    ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
+    assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
+    # piece 0.004: many segments cut into many pieces (up to the cap), so
+    # crossings land on piece edges and must be counted exactly once.
+    for leaf_size, piece in ((1, 0.0), (32, 0.0), (8, 0.004), (32, 0.05)):
+        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, piece=piece)
+        assert np.array_equal(got, ref), \
+            f"leaf_size {leaf_size} piece {piece}: {(got != ref).any(axis=1).sum()} discs differ"
+
+
+@pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 33}, {"leaf_size": 2.5}, {"piece": -1.0}])
+def test_bad_options(engines, points, bad):
+    with pytest.raises(OclgiError):
+        engines["cornell"].irradiance(points["cornell"], method=METHOD, photons=100, **bad)
+
+
+def test_camera_session_equals_recomputation(scenes_dir):
+    """Incremental updates (negated suffixes with holes, re-traced suffixes)
+    and dynamic points (the index over the points is rebuilt) give what a
+    fresh session gives, bit for bit (DESIGN.md 4)."""
+    from test_session import _moves, _scene
+
+    scene = _scene(scenes_dir)
+    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=20, height=20)
+    engine = oclgi.Engine(scene)
+    session = oclgi.Session(engine, method=METHOD, radius=0.05, photons=8_000)
+    recomputed = touched = 0
+    for m in _moves(np.random.default_rng(5), 8):
+        stats = session.move("bunny", m)
+        recomputed += stats.points
+        touched += stats.paths
+    assert recomputed > 0 and touched > 0
+    fresh = oclgi.Session(engine, method=METHOD, radius=0.05, photons=8_000)
+    plain = oclgi.Session(engine, method="detp", radius=0.05, photons=8_000)
+    assert np.array_equal(session.accumulators(), fresh.accumulators())
+    assert np.array_equal(session.accumulators(), plain.accumulators())
+
+
+def test_replace_points(engines):
+    """Points replaced in place (a session's dynamic points) are indexed
+    again: the sums equal a fresh estimator's over the new points."""
+    from oclgi.queries import QueryPoints
+
+    e = engines["cornell"]
+    pts, d, batch = adversarial_batch(e, np.random.default_rng(9))
+    est = ESTIMATORS[METHOD](e.queue, e.compiled, pts, radius=d)
+    idx = np.arange(0, len(pts), 3)
+    moved, _, _ = adversarial_batch(e, np.random.default_rng(10))  # other discs
+    new = QueryPoints(moved.positions[idx], moved.normals[idx], moved.barys[idx])
+    est.replace_points(idx, new)
+    est.accumulate(batch, 2.0**24)
+    ref = ESTIMATORS["detp"](e.queue, e.compiled, est.points, radius=d)
+    ref.accumulate(batch, 2.0**24)
+    assert ref.accumulators()[idx].any()
+    assert np.array_equal(est.accumulators(), ref.accumulators())
