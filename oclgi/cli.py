@@ -88,7 +88,23 @@ def _estimate_args(p):
     p.add_argument("--max-depth", type=_max_depth, help="maximum path length in segments")
     p.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
     p.add_argument("--local-size", type=_positive_int, help="work-group size (results do not depend on it)")
+    p.add_argument("-O", "--option", action="append", type=_option, default=[], metavar="KEY=VALUE",
+                   help="an option of the method, e.g. -O q=0.6 -O order=morton (sphere cache), "
+                        "-O leaf_size=8 (disc index), -O k=50 (photon map); repeatable")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+
+
+def _option(text):
+    """KEY=VALUE, the value read as an int, else a float, else a string."""
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip().isidentifier():
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    for kind in (int, float):
+        try:
+            return key.strip(), kind(value)
+        except ValueError:
+            pass
+    return key.strip(), value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -133,7 +149,7 @@ def _engine(args):
 
 def _est_kwargs(args):
     return dict(method=args.method, photons=args.photons, radius=args.radius, seed=args.seed,
-                max_depth=args.max_depth)
+                max_depth=args.max_depth, **dict(args.option))
 
 
 def cmd_render(args):
@@ -187,9 +203,7 @@ def cmd_animate(args):
         name = movable[0]
     engine.scene.object_id(name)
     out.mkdir(parents=True, exist_ok=True)
-    kw = _est_kwargs(args)
-    session = Session(engine, method=kw["method"], photons=kw["photons"], radius=kw["radius"], seed=kw["seed"],
-                      max_depth=kw["max_depth"])
+    session = Session(engine, **_est_kwargs(args))
     show = None if args.quiet or not sys.stderr.isatty() else (
         lambda f, r: print(f"\rframe {f + 1}/{args.frames}: {r['paths']:,} paths re-traced, "
                            f"{r['total_s'] * 1e3:.0f} ms", end="", file=sys.stderr))

@@ -21,7 +21,8 @@ def test_detp_equals_float64_reference(cornell, radius, count_emitted):
     segs, _ = cornell.trace(photons=photons, max_depth=depth)
     pts = cornell.camera_points(width=12, height=12)
     on = pts.tri >= 0
-    est = cornell.irradiance(pts, photons=photons, max_depth=depth, radius=radius, count_emitted=count_emitted)
+    est = cornell.irradiance(pts, method="detp", photons=photons, max_depth=depth, radius=radius,
+                             count_emitted=count_emitted)
     ext = 10.0 * cornell.compiled.eps
     ref = detp_reference(pts.xyz[on], pts.normals[on, :3], segs, radius, ext, count_emitted, depth)
     got = est.accumulators[on] / est.scale
