@@ -79,6 +79,11 @@ class Session:
         self.options = dict(options, count_work=count_work)
         self.params = engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         p = self.params
+        from .estimators import ESTIMATORS
+
+        if not ESTIMATORS[p.method].incremental:
+            raise OclgiError(f"method {p.method!r} has no exact incremental update; sessions take "
+                             f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
         store_bytes = p.photons * p.max_depth * Segment.itemsize
         limit = engine.queue.device.max_mem_alloc_size
         if store_bytes > limit:

@@ -124,3 +124,8 @@ def test_camera_session_equals_recomputation(scenes_dir, rng, method):
     assert np.array_equal(session.render()[0], fresh.render()[0])
     session.move("bunny", np.eye(4))
     assert np.array_equal(session.render()[0], first_radiance)
+
+
+def test_photon_maps_have_no_exact_session(engine):
+    with pytest.raises(oclgi.OclgiError, match="no exact incremental update"):
+        oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), method="photon_map", photons=1000)

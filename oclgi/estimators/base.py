@@ -19,6 +19,7 @@ from ..cl.programs import launch, programs
 
 class Estimator:
     name = ""
+    incremental = True  # sums can be updated exactly by adding and subtracting segments
 
     def __init__(self, queue, compiled, points, count_emitted: bool = True,
                  local_size: int | None = None, count_work: bool = False):

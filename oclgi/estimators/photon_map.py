@@ -435,6 +435,9 @@ class PhotonMap(Estimator):
     expose the map for tests and studies."""
 
     name = "photon_map"
+    # Exact add/subtract does not apply to k nearest neighbours (a removed
+    # impact changes other points' neighbour sets); see DESIGN.md section 4.
+    incremental = False
 
     def __init__(self, queue, compiled, points, k: int = 50, estimator: str = "k-1", index: str = "bvh",
                  front_only: bool = True, leaf_size: int = 16, radius=None, extension=None, **kw):
