@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import oclgi
+import oclgi.estimators
 from test_instances import _rigid
 
 N_MOVES = 50
@@ -59,7 +60,10 @@ def _points(engine, rng, n=300):
     return oclgi.query_points(p, nrm)
 
 
-@pytest.mark.parametrize("method", ["detp", "impact"])
+INCREMENTAL = [m for m, c in oclgi.estimators.ESTIMATORS.items() if c.incremental]
+
+
+@pytest.mark.parametrize("method", INCREMENTAL)
 def test_incremental_equals_recomputation(engine, rng, method):
     pts = _points(engine, rng)
     engine.move("bunny", np.eye(4))
@@ -105,7 +109,7 @@ def test_move_statistics(engine, rng):
     session.move("bunny", np.eye(4))
 
 
-@pytest.mark.parametrize("method", ["detp", "impact"])
+@pytest.mark.parametrize("method", INCREMENTAL)
 def test_camera_session_equals_recomputation(scenes_dir, rng, method):
     """A camera session: pixels that see the object (or saw it) are dynamic
     points, recomputed; after 20 moves the view equals a fresh session's."""
