@@ -8,7 +8,6 @@
     est = engine.irradiance(points_and_normals)       # (n, 6) array -> (n, 3) irradiance
 """
 
-from importlib import resources as _resources
 from pathlib import Path as _Path
 
 from .engine import Engine, Estimate, Render, Stats

@@ -115,28 +115,6 @@ def test_bad_options(engines, points, bad):
         engines["cornell"].irradiance(points["cornell"], method=METHOD, photons=100, **bad)
 
 
-def test_camera_session_equals_recomputation(scenes_dir):
-    """Incremental updates (negated suffixes with holes, re-traced suffixes)
-    and dynamic points (the index over the points is rebuilt) give what a
-    fresh session gives, bit for bit (DESIGN.md 4)."""
-    from test_session import _moves, _scene
-
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=20, height=20)
-    engine = oclgi.Engine(scene)
-    session = oclgi.Session(engine, method=METHOD, radius=0.05, photons=8_000)
-    recomputed = touched = 0
-    for m in _moves(np.random.default_rng(5), 8):
-        stats = session.move("bunny", m)
-        recomputed += stats.points
-        touched += stats.paths
-    assert recomputed > 0 and touched > 0
-    fresh = oclgi.Session(engine, method=METHOD, radius=0.05, photons=8_000)
-    plain = oclgi.Session(engine, method="detp", radius=0.05, photons=8_000)
-    assert np.array_equal(session.accumulators(), fresh.accumulators())
-    assert np.array_equal(session.accumulators(), plain.accumulators())
-
-
 def test_replace_points(engines):
     """Points replaced in place (a session's dynamic points) are indexed
     again: the sums equal a fresh estimator's over the new points."""
