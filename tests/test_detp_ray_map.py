@@ -8,46 +8,33 @@ batches, the fixed-point accumulators equal plain DETP's bit for bit
 and that a segment cut into pieces is counted once.
 """
 
-import functools
 
 import numpy as np
 import pytest
 
 import oclgi
-from exactness import RADIUS_FRACTIONS, bunny_engine, cornell_engine, surface_points
+from exactness import RADIUS_FRACTIONS
 from oclgi.errors import OclgiError
 from oclgi.estimators import ESTIMATORS
 from test_detp_disc_index import adversarial_batch, run_on_batch
 
 METHOD = "detp_ray_map"
-N_POINTS = 1500
-PHOTONS = 20_000
+PHOTONS = 20_000  # as the detp_plain fixture (conftest.py)
 
 
-@pytest.fixture(scope="module")
-def engines(scenes_dir):
-    return {"cornell": cornell_engine(scenes_dir), "bunny": bunny_engine(scenes_dir)}
+@pytest.fixture
+def engines(detp_engines):
+    return detp_engines
 
 
-@pytest.fixture(scope="module")
-def points(engines):
-    rng = np.random.default_rng(99)
-    return {name: surface_points(e, N_POINTS, rng) for name, e in engines.items()}
+@pytest.fixture
+def points(detp_points):
+    return detp_points
 
 
-@pytest.fixture(scope="module")
-def plain(engines, points):
-    """Plain DETP's accumulators, computed once per (scene, fraction, count_emitted)."""
-
-    @functools.cache
-    def get(scene, frac, count_emitted):
-        e = engines[scene]
-        est = e.irradiance(points[scene], method="detp", radius=frac * e.scene.diagonal, photons=PHOTONS,
-                           count_emitted=count_emitted)
-        assert est.accumulators.any(), "the test must select some segments"
-        return est.accumulators
-
-    return get
+@pytest.fixture
+def plain(detp_plain):
+    return detp_plain
 
 
 def check_same(ref, est, what):
@@ -74,7 +61,7 @@ def test_leaf_sizes_and_pieces(engines, points, plain, scene, leaf_size, piece):
     est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
                        leaf_size=leaf_size, piece=piece, count_work=True)
     check_same(plain(scene, frac, True), est, f"{scene} leaf_size {leaf_size} piece {piece}")
-    assert est.work["u"] < est.stats.segments * N_POINTS / 2  # the map does cull
+    assert est.work["u"] < est.stats.segments * len(points[scene]) / 2  # the map does cull
 
 
 @pytest.mark.parametrize("local_size", [1, 7, 64])
