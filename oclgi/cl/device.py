@@ -87,6 +87,14 @@ def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue
     return ctx, queue
 
 
+def _kind(dev: cl.Device) -> str:
+    """CPU, GPU or ACCELERATOR (PoCL also sets the DEFAULT bit, which says nothing)."""
+    for name in ("GPU", "CPU", "ACCELERATOR"):
+        if dev.type & getattr(cl.device_type, name):
+            return name
+    return cl.device_type.to_string(dev.type)
+
+
 def describe_devices() -> str:
     devices = list_devices()
     if not devices:
@@ -99,7 +107,7 @@ def describe_devices() -> str:
     for pi, di, d in devices:
         mark = "*" if chosen is not None and d.int_ptr == chosen.int_ptr else " "
         lines.append(
-            f"{mark} {pi}:{di}  {d.platform.name} | {d.name} | {cl.device_type.to_string(d.type)} | "
+            f"{mark} {pi}:{di}  {d.platform.name} | {d.name} | {_kind(d)} | "
             f"{d.max_compute_units} units | {d.global_mem_size / 2**30:.1f} GiB "
             f"(max alloc {d.max_mem_alloc_size / 2**30:.1f} GiB) | {d.version}"
         )
