@@ -19,14 +19,12 @@ than the point spacing) t + u is least for Q in [0.60, 0.72] over the sweep
 0.40 .. 0.90 (García 2006's model puts it at 2/3).
 """
 
-import functools
-
 import numpy as np
 import pyopencl as cl
 import pytest
 
 import oclgi
-from exactness import RADIUS_FRACTIONS, bunny_engine, cornell_engine, surface_points
+from exactness import RADIUS_FRACTIONS, surface_points
 from oclgi import ordering
 from oclgi.cl.layout import Segment
 from oclgi.errors import OclgiError
@@ -35,34 +33,23 @@ from oclgi.estimators import detp_sphere_cache as sc
 from oclgi.photon_trace import PathBatch
 
 METHOD = "detp_sphere_cache"
-N_POINTS = 1200
-PHOTONS = 20_000
+PHOTONS = 20_000  # as the detp_plain fixture (conftest.py)
 
 
-@pytest.fixture(scope="module")
-def engines(scenes_dir):
-    return {"cornell": cornell_engine(scenes_dir), "bunny": bunny_engine(scenes_dir)}
+@pytest.fixture
+def engines(detp_engines):
+    return detp_engines
 
 
-@pytest.fixture(scope="module")
-def points(engines):
-    rng = np.random.default_rng(77)
-    return {name: surface_points(e, N_POINTS, rng) for name, e in engines.items()}
+@pytest.fixture
+def points(detp_points):
+    return detp_points
 
 
-@pytest.fixture(scope="module")
-def plain(engines, points):
-    """Plain DETP's estimate, once per (scene, fraction, count_emitted)."""
-
-    @functools.cache
-    def get(scene, frac, count_emitted=True):
-        e = engines[scene]
-        est = e.irradiance(points[scene], method="detp", radius=frac * e.scene.diagonal, photons=PHOTONS,
-                           count_emitted=count_emitted)
-        assert est.accumulators.any(), "the test must select some segments"
-        return est
-
-    return get
+@pytest.fixture
+def plain(detp_plain):
+    """Plain DETP's accumulators per (scene, fraction, count_emitted), shared (conftest.py)."""
+    return detp_plain
 
 
 def check_same(ref, got, what):
@@ -80,7 +67,7 @@ def run(engine, pts, frac, **kw):
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
 def test_same_as_plain(engines, points, plain, scene, frac):
     """Every order with every q."""
-    ref = plain(scene, frac).accumulators
+    ref = plain(scene, frac)
     for order in ordering.METHODS:
         for q in (0.5, 2 / 3, 0.8):
             est = run(engines[scene], points[scene], frac, order=order, q=q)
@@ -91,20 +78,21 @@ def test_same_as_plain(engines, points, plain, scene, frac):
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
 def test_same_as_plain_without_emitted(engines, points, plain, scene, frac):
     est = run(engines[scene], points[scene], frac, count_emitted=False)
-    check_same(plain(scene, frac, False).accumulators, est.accumulators, f"{scene} {frac}, indirect only")
+    check_same(plain(scene, frac, False), est.accumulators, f"{scene} {frac}, indirect only")
 
 
 def test_run_lengths(engines, points, plain):
     """From one point per run (every point a cold start) to one run for all:
     the same sums; shorter runs re-use less, so they count more tests."""
     e, frac = engines["cornell"], RADIUS_FRACTIONS[1]
-    ref = plain("cornell", frac).accumulators
+    ref = plain("cornell", frac)
     t = {}
-    for run_length in (1, 5, 64, 333, N_POINTS):
+    n = len(points["cornell"])
+    for run_length in (1, 5, 64, 333, n):
         est = run(e, points["cornell"], frac, run_length=run_length, count_work=True)
         check_same(ref, est.accumulators, f"run_length {run_length}")
         t[run_length] = est.work["t"]
-    assert t[1] > t[5] > t[64] > t[N_POINTS], t
+    assert t[1] > t[5] > t[64] > t[n], t
 
 
 @pytest.mark.parametrize("local_size", [1, 7, 64])
@@ -113,7 +101,7 @@ def test_work_group_sizes(engines, points, plain, local_size):
     frac = RADIUS_FRACTIONS[2]
     est = e.irradiance(points["cornell"], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
                        run_length=50)
-    check_same(plain("cornell", frac).accumulators, est.accumulators, f"local size {local_size}")
+    check_same(plain("cornell", frac), est.accumulators, f"local size {local_size}")
 
 
 def test_camera_points_with_misses(engines):
@@ -142,7 +130,7 @@ def test_overflow_reruns_are_exact(engines, points, plain, monkeypatch):
 
     monkeypatch.setattr(sc.DetpSphereCache, "_initial_cap", tiny)
     got = run(e, points["bunny"], frac, count_work=True, run_length=100)
-    check_same(plain("bunny", frac).accumulators, got.accumulators, "forced overflow")
+    check_same(plain("bunny", frac), got.accumulators, "forced overflow")
     monkeypatch.undo()
     again = run(e, points["bunny"], frac, count_work=True, run_length=100)
     assert got.work == again.work
@@ -162,7 +150,7 @@ def test_pieces_when_lists_exceed_the_memory(engines, points, plain, monkeypatch
     monkeypatch.setattr(sc, "SCRATCH_BYTES", sc.ENTRY_BYTES * 3000)  # ~1/10 of one run's peak
     got = run(e, points["cornell"], frac, count_work=True, run_length=300)
     assert e._last_estimator.scratch_bytes == sc.ENTRY_BYTES * 3000
-    check_same(plain("cornell", frac).accumulators, got.accumulators, "pieces")
+    check_same(plain("cornell", frac), got.accumulators, "pieces")
     assert got.work == ref.work
 
 
