@@ -28,33 +28,36 @@ def scenes_dir():
 
 
 # -- shared by the accelerated-DETP tests: scenes, points, plain DETP's sums --
-DETP_PHOTONS = 20_000
 
 
 @pytest.fixture(scope="session")
-def detp_engines(scenes_dir):
+def engines(scenes_dir):
+    """The Cornell box and the bunny in a box (tests/exactness.py)."""
     from exactness import bunny_engine, cornell_engine
 
     return {"cornell": cornell_engine(scenes_dir), "bunny": bunny_engine(scenes_dir)}
 
 
 @pytest.fixture(scope="session")
-def detp_points(detp_engines):
+def points(engines):
+    """1,500 random surface points per scene."""
     from exactness import surface_points
 
     rng = np.random.default_rng(2024)
-    return {name: surface_points(e, 1500, rng) for name, e in detp_engines.items()}
+    return {name: surface_points(e, 1500, rng) for name, e in engines.items()}
 
 
 @pytest.fixture(scope="session")
-def detp_plain(detp_engines, detp_points):
+def plain(engines, points):
     """Plain DETP's accumulators, computed once per (scene, fraction, count_emitted)."""
     import functools
 
     @functools.cache
     def get(scene, frac, count_emitted=True):
-        e = detp_engines[scene]
-        est = e.irradiance(detp_points[scene], method="detp", radius=frac * e.scene.diagonal,
+        from exactness import DETP_PHOTONS
+
+        e = engines[scene]
+        est = e.irradiance(points[scene], method="detp", radius=frac * e.scene.diagonal,
                            photons=DETP_PHOTONS, count_emitted=count_emitted)
         assert est.accumulators.any(), "the test must select some segments"
         return est.accumulators

@@ -6,6 +6,9 @@ import numpy as np
 
 import oclgi
 
+# Photon paths of the shared plain-DETP sums (the `plain` fixture, conftest.py).
+DETP_PHOTONS = 20_000
+
 # Disc radii as fractions of the scene's bounding-box diagonal: small, 1%, 10%.
 RADIUS_FRACTIONS = (0.002, 0.01, 0.1)
 
@@ -55,3 +58,10 @@ def assert_same_as_plain(engine, points, method, radius, photons=20_000, **optio
         f"(first {diff[:5].tolist()})"
     )
     return plain, fast
+
+
+def check_same(ref, got, what):
+    """Accumulators ``got`` (an array or an Estimate) identical to plain DETP's ``ref``."""
+    got = getattr(got, "accumulators", got)
+    diff = np.nonzero((ref != got).any(axis=1))[0]
+    assert len(diff) == 0, f"{what}: {len(diff)} of {len(ref)} points differ from plain DETP (first {diff[:5].tolist()})"

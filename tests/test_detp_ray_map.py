@@ -13,33 +13,15 @@ import numpy as np
 import pytest
 
 import oclgi
-from exactness import RADIUS_FRACTIONS
+from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, check_same
 from oclgi.errors import OclgiError
 from oclgi.estimators import ESTIMATORS
 from test_detp_disc_index import adversarial_batch, run_on_batch
 
 METHOD = "detp_ray_map"
-PHOTONS = 20_000  # as the detp_plain fixture (conftest.py)
+PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
 
 
-@pytest.fixture
-def engines(detp_engines):
-    return detp_engines
-
-
-@pytest.fixture
-def points(detp_points):
-    return detp_points
-
-
-@pytest.fixture
-def plain(detp_plain):
-    return detp_plain
-
-
-def check_same(ref, est, what):
-    diff = np.nonzero((ref != est.accumulators).any(axis=1))[0]
-    assert len(diff) == 0, f"{what}: {len(diff)} of {len(ref)} points differ from plain DETP (first {diff[:5].tolist()})"
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])

@@ -24,7 +24,7 @@ import pyopencl as cl
 import pytest
 
 import oclgi
-from exactness import RADIUS_FRACTIONS, surface_points
+from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, check_same, surface_points
 from oclgi import ordering
 from oclgi.cl.layout import Segment
 from oclgi.errors import OclgiError
@@ -33,28 +33,9 @@ from oclgi.estimators import detp_sphere_cache as sc
 from oclgi.photon_trace import PathBatch
 
 METHOD = "detp_sphere_cache"
-PHOTONS = 20_000  # as the detp_plain fixture (conftest.py)
+PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
 
 
-@pytest.fixture
-def engines(detp_engines):
-    return detp_engines
-
-
-@pytest.fixture
-def points(detp_points):
-    return detp_points
-
-
-@pytest.fixture
-def plain(detp_plain):
-    """Plain DETP's accumulators per (scene, fraction, count_emitted), shared (conftest.py)."""
-    return detp_plain
-
-
-def check_same(ref, got, what):
-    diff = np.nonzero((ref != got).any(axis=1))[0]
-    assert len(diff) == 0, f"{what}: {len(diff)} of {len(ref)} points differ from plain DETP (first {diff[:5].tolist()})"
 
 
 def run(engine, pts, frac, **kw):
