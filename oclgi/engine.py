@@ -77,6 +77,7 @@ class Estimate:
     stats: Stats
     points: queries.QueryPoints
     work: dict | None = None  # exact work counts (t, u, nodes) when count_work=True
+    estimator: object = None  # the estimator itself (its index, impacts, device buffers), for studies
 
 
 @dataclass
@@ -221,9 +222,7 @@ class Engine:
         cl.enqueue_copy(self.queue, irr, irr_buf)
         stats.seconds = {"setup": self.setup_seconds, "trace": t_trace, "estimate": t_est,
                          "total": time.perf_counter() - t0}
-        self._last_irradiance = irr_buf
-        self._last_estimator = est
-        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points, est.work())
+        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points, est.work(), est)
 
     def run_params(self, method=None, photons=None, radius=None, seed=None, max_depth=None, extension=None,
                    count_emitted=None) -> RunParams:
@@ -280,7 +279,7 @@ class Engine:
         pts = self.camera_points(camera, width, height)
         t_cam = time.perf_counter() - t0
         est = self.irradiance(pts, **estimate_args)
-        radiance, pixels = self.shade(pts, self._last_irradiance, exposure)
+        radiance, pixels = self.shade(pts, est.estimator.irr, exposure)  # resolved in irradiance()
         est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
         return Render(radiance, pixels, est)
 

@@ -130,7 +130,7 @@ def test_pieces_when_lists_exceed_the_memory(engines, points, plain, monkeypatch
     ref = run(e, points["cornell"], frac, count_work=True, run_length=300)
     monkeypatch.setattr(sc, "SCRATCH_BYTES", sc.ENTRY_BYTES * 3000)  # ~1/10 of one run's peak
     got = run(e, points["cornell"], frac, count_work=True, run_length=300)
-    assert e._last_estimator.scratch_bytes == sc.ENTRY_BYTES * 3000
+    assert got.estimator.scratch_bytes == sc.ENTRY_BYTES * 3000
     check_same(plain("cornell", frac), got.accumulators, "pieces")
     assert got.work == ref.work
 
@@ -248,7 +248,7 @@ def test_counts_are_the_algorithms(engines, order, q, run_length):
     d = 0.003 * e.scene.diagonal
     est = e.irradiance(pts, method=METHOD, radius=d, photons=5000, count_work=True, order=order, q=q,
                        run_length=run_length)
-    cache = e._last_estimator
+    cache = est.estimator
     segs, _ = e.trace(photons=5000)
     perm = ordering.order_points(e.queue, pts.xyz, order)
     t, u = reference_counts(pts.xyz, perm, segs, cache.ext, cache.c0[:3], cache.radii.astype(np.float32),
@@ -266,7 +266,7 @@ def test_counts_without_inner_spheres(engines):
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     pts = oclgi.query_points(corners, np.ones((8, 3)))
     est = e.irradiance(pts, method=METHOD, radius=0.1 * e.scene.diagonal, photons=5000, q=0.3, count_work=True)
-    assert e._last_estimator.levels == 0
+    assert est.estimator.levels == 0
     assert est.work["t"] == est.stats.segments
     assert est.work["u"] == 8 * est.stats.segments
 

@@ -139,7 +139,7 @@ def test_neighbours_cornell_impacts(cornell):
     pts = surface_points(cornell, 300, rng)
     k = 40
     est = cornell.irradiance(pts, method="photon_map", photons=40_000, k=k)
-    pmap = cornell._last_estimator
+    pmap = est.estimator
     pos, dirs, power = pmap.impacts()
     ids, d2 = pmap.neighbours()
     qp, qn = pts.positions[:, :3], pts.normals[:, :3]
@@ -168,8 +168,8 @@ def test_impacts_are_segment_ends(cornell):
     seg, _ = cornell.trace(photons=photons)
     pt = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
     for emitted in (True, False):
-        cornell.irradiance(pt, method="photon_map", photons=photons, k=2, count_emitted=emitted)
-        pos, dirs, power = cornell._last_estimator.impacts()
+        est = cornell.irradiance(pt, method="photon_map", photons=photons, k=2, count_emitted=emitted)
+        pos, dirs, power = est.estimator.impacts()
         keep = seg["tri"] >= 0
         if not emitted:
             keep &= np.arange(len(seg)) % depth != 0
