@@ -1,7 +1,10 @@
 /* camera.cl: the visible point of each pixel, as DETP/Impact Count queries.
  *
- * camera_visible_points  one work-item per pixel (row-major, top row first):
- *     a pinhole ray through the pixel centre; on a hit, the point (w =
+ * camera_visible_points  one work-item per pixel of the rectangle x0, y0,
+ *     rw x rh of a width x height image (row-major, top row first; outputs
+ *     are the rectangle's pixels, row-major): a pinhole ray through the pixel
+ *     centre against the instances given (all of them, or a subset: a
+ *     session's static layer); on a hit, the point (w =
  *     as_float(tri)), the geometric normal turned towards the camera (w = 1
  *     when the triangle's own normal faces the camera, which is when a
  *     one-sided emitter is seen) and the hit barycentrics; tri = -1 on a miss.
@@ -11,13 +14,13 @@
 __kernel void camera_visible_points(SCENE_ARGS,
                                     __global const float4 *tri_normals,
                                     float4 eye, float4 forward, float4 right, float4 up,
-                                    int width, int height,
+                                    int width, int height, int x0, int y0, int rw, int rh,
                                     __global float4 *positions, __global float4 *normals,
                                     __global float2 *barys)
 {
     int i = get_global_id(0);
-    if (i >= width * height) return;
-    int px = i % width, py = i / width;
+    if (i >= rw * rh) return;
+    int px = x0 + i % rw, py = y0 + i / rw;
     /* right and up are pre-scaled by the half-extents of the image plane */
     float sx = 2.0f * ((float)px + 0.5f) / (float)width - 1.0f;
     float sy = 1.0f - 2.0f * ((float)py + 0.5f) / (float)height;

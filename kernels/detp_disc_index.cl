@@ -1,8 +1,10 @@
 /* detp_disc_index.cl: DETP with disc indexing (García 2006; DESIGN.md 3).
  *
- * detp_disc_index  one work-item per segment slot of a batch
- *                  (n_slots = paths * max_depth; global size n_slots, any
- *                  local size). The segment walks a BVH over the discs' boxes
+ * detp_disc_index  one work-item per path of a batch (global size n_paths,
+ *                  any local size), which walks its segments up to the
+ *                  path's end: reading only the stored segments, not every
+ *                  slot, halves the cost of a pass over a session's whole
+ *                  store. Each segment walks a BVH over the discs' boxes
  *                  (box_bvh.h); in every leaf it meets, it is tested against
  *                  the leaf's discs 8 at a time (float8 lanes, as detp_plain)
  *                  with DETP_TEST (detp.h), and its fixed-point power is
@@ -26,20 +28,11 @@
 
 #define DISC_BLOCK 7 /* float8 per block of 8 discs */
 
-__kernel void detp_disc_index(__global const BvhNode *nodes, __global const float8 *discs,
-                              __global const float4 *segments, int n_slots, int max_depth,
-                              int count_emitted, float radius2, float ext, float scale,
-                              __global long *acc, __global ulong *work)
+/* One segment against the tree: every leaf it meets, 8 discs at a time. */
+inline void disc_index_segment(__global const BvhNode *nodes, __global const float8 *discs,
+                               __global const float4 *seg, float4 f0, float4 f1, float radius2, float ext,
+                               float scale, __global long *acc, uint *visited, ulong *tests)
 {
-    int slot = get_global_id(0);
-    if (slot >= n_slots) return;
-    if (!count_emitted && slot % max_depth == 0) return;
-    __global const float4 *seg = segments + (size_t)slot * 3;
-    float4 f0 = seg[0], f1 = seg[1];
-    /* An empty slot (past the path's end) is all zeros; detp_plain stops at
-     * the first one of a path, and every later slot of that path is empty. */
-    if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) return;
-    WORK_DECL;
     float3 o = f0.xyz, w = f1.xyz;
     float tmax = f0.w + ext; /* exactly as detp_plain */
     float3 inv = 1.0f / w;
@@ -51,7 +44,7 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const floa
     while ((leaf = box_bvh_next_segment(&walk, nodes, o, inv, tmax)) >= 0) {
         int count = nodes[leaf].count;
         int first = nodes[leaf].first;
-        WORK_U(count);
+        *tests += (ulong)count;
         for (int blk = first; blk < first + (count + 7) / 8; ++blk) {
             __global const float8 *b = discs + (size_t)blk * DISC_BLOCK;
             int8 hit;
@@ -74,6 +67,32 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const floa
             }
         }
     }
-    WORK_NODE(walk.visited);
+    *visited += walk.visited;
+}
+
+__kernel void detp_disc_index(__global const BvhNode *nodes, __global const float8 *discs,
+                              __global const float4 *segments, int n_paths, int max_depth,
+                              int count_emitted, float radius2, float ext, float scale,
+                              __global long *acc, __global ulong *work)
+{
+    int p = get_global_id(0);
+    if (p >= n_paths) return;
+    WORK_DECL;
+    uint visited = 0;
+    ulong tests = 0;
+    __global const float4 *path = segments + (size_t)p * max_depth * 3;
+    for (int b = count_emitted ? 0 : 1; b < max_depth; ++b) {
+        __global const float4 *seg = path + 3 * b;
+        float4 f0 = seg[0], f1 = seg[1];
+        /* The first empty slot (all zeros) ends the path; a hole (an update's
+         * scratch store, update.cl) is skipped. */
+        if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) {
+            if (as_int(f1.w) == SEGMENT_HOLE) continue;
+            break;
+        }
+        disc_index_segment(nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
+    }
+    WORK_U(tests);
+    WORK_NODE(visited);
     WORK_FLUSH(work);
 }

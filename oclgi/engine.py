@@ -152,23 +152,39 @@ class Engine:
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
                       height: int | None = None) -> queries.QueryPoints:
+        cam = self.view_camera(camera, width, height)
+        return self.view_points(cam, (0, 0, cam.width, cam.height))
+
+    def view_camera(self, camera: Camera | None = None, width: int | None = None,
+                    height: int | None = None) -> Camera:
+        """The camera given (or the scene's), resized, validated."""
         cam = camera or self.scene.camera
         if cam is None:
             raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
         if width or height:
             cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
         validate_camera(cam)
+        return cam
+
+    def view_points(self, cam: Camera, rect, instances=None) -> queries.QueryPoints:
+        """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
+        against all instances or against ``instances`` = (buffer, count)."""
+        x0, y0, rw, rh = (int(v) for v in rect)
         eye, fwd, right, up = cam.frame()
-        n = cam.width * cam.height
+        n = rw * rh
         mf = cl.mem_flags
-        pos, nrm, bary = (cl.Buffer(self.ctx, mf.WRITE_ONLY, n * s) for s in (16, 16, 8))
+        pos, nrm, bary = (cl.Buffer(self.ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8))
         k = self._programs.get("camera").camera_visible_points
         c = self.compiled
+        scene_args = c.scene_args if instances is None else (c.nodes, c.tris, instances[0], np.int32(instances[1]))
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
-        launch(self.queue, k, n, *c.scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
-               np.int32(cam.width), np.int32(cam.height), pos, nrm, bary, local_size=self.local_size)
         out = queries.QueryPoints(np.empty((n, 4), np.float32), np.empty((n, 4), np.float32),
-                                  np.empty((n, 2), np.float32), kind="camera", shape=(cam.height, cam.width))
+                                  np.empty((n, 2), np.float32), kind="camera", shape=(rh, rw))
+        if n == 0:
+            return out
+        launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
+               np.int32(cam.width), np.int32(cam.height), np.int32(x0), np.int32(y0), np.int32(rw), np.int32(rh),
+               pos, nrm, bary, local_size=self.local_size)
         for host, dev in ((out.positions, pos), (out.normals, nrm), (out.barys, bary)):
             cl.enqueue_copy(self.queue, host, dev)
         return out

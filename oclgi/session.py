@@ -15,10 +15,12 @@ the paths the move touches change (DESIGN.md section 4, García 2004/2007):
 Sums are fixed point, so the result equals a recomputation from scratch at
 the new pose bit for bit, however many moves came before: errors never
 accumulate. Query points are either fixed (sensors: an array of points and
-normals) or the visible points of a camera (``points=None``); then the
-pixels whose visible point a move changed (they see the object, or saw it)
-get their sums recomputed from the whole store, the thesis' "dynamic
-points", and ``render()`` shades the current view.
+normals) or the visible points of a camera (``points=None``, see
+oclgi/dynamic_view.py): pixels on static surfaces are updated like fixed
+points, pixels on a movable object are the thesis' "dynamic points", their
+sums recomputed from the whole store after each move (by ``dynamic``, a
+DETP variant: disc indexing by default, the sphere cache as the thesis
+has it), and ``render()`` shades the current view.
 
     >>> import numpy as np, oclgi
     >>> scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
@@ -56,34 +58,54 @@ def _copy(q: QueryPoints) -> QueryPoints:
     return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
 
 
-def _subset(q: QueryPoints, index) -> QueryPoints:
-    return QueryPoints(q.positions[index], q.normals[index], q.barys[index], q.kind, None)
+def _add_work(total: dict | None, more: dict | None) -> dict | None:
+    if total is None or more is None:
+        return total or more
+    return {k: total[k] + more[k] for k in total}
 
 
 class Session:
     """A scene, an estimator and query points, kept up to date under moves.
 
     ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz); the other
-    arguments as for :meth:`oclgi.Engine.irradiance`. Every segment of every
-    path stays on the device: memory is photons x max_depth x 48 bytes.
+    arguments as for :meth:`oclgi.Engine.irradiance`; ``dynamic``: the DETP
+    variant that recomputes a camera session's dynamic points (default
+    ``detp_disc_index``). Every segment of every path stays on the device:
+    memory is photons x max_depth x 48 bytes.
     """
 
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
-                 extension=None, count_emitted=None, count_work=False, camera=None, **options):
+                 extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, **options):
+        from .estimators import ESTIMATORS
+
         self.engine = engine
         self.queue = engine.queue
         self.camera = camera
-        if points is None:
-            points = engine.camera_points(camera)
-        self.points = _copy(as_query_points(points))  # the estimator updates them in place
         self.options = dict(options, count_work=count_work)
         self.params = engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         p = self.params
-        from .estimators import ESTIMATORS
-
-        if not ESTIMATORS[p.method].incremental:
+        cls = ESTIMATORS[p.method]
+        if not cls.incremental:
             raise OclgiError(f"method {p.method!r} has no exact incremental update; sessions take "
                              f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
+        self.view = None
+        if points is None:
+            from .dynamic_view import DynamicView
+
+            self.view = DynamicView(engine, camera)
+            self.points = self.view.points  # the composite view, kept current by the view
+            # DETP keeps sums per point: the estimator holds the static layer
+            # for good; Impact Count keeps sums per triangle and just shades
+            # whichever point each pixel sees.
+            est_points = self.view.static if cls.sums_per_point else _copy(self.view.points)
+        else:
+            self.points = _copy(as_query_points(points))
+            est_points = self.points
+        detp_variants = [m for m in ESTIMATORS if m.startswith("detp")]
+        self.dynamic = dynamic or ("detp_disc_index" if p.method.startswith("detp") else p.method)
+        if self.dynamic not in detp_variants and (cls.sums_per_point or dynamic is not None):
+            raise OclgiError(f"dynamic points are recomputed by a DETP variant ({', '.join(detp_variants)}), "
+                             f"got {self.dynamic!r}")
         store_bytes = p.photons * p.max_depth * Segment.itemsize
         limit = engine.queue.device.max_mem_alloc_size
         if store_bytes > limit:
@@ -92,11 +114,14 @@ class Session:
                              f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
         self.store_bytes = store_bytes
         self.scale = engine.compiled.fixed_scale(p.photons)
-        self.estimator = engine.estimator(self.points, p, **self.options)
+        self.estimator = engine.estimator(est_points, p, **self.options)
         self.tracer = PhotonTracer(self.queue, engine.compiled, p.seed, p.max_depth, p.photons, engine.local_size)
         t0 = time.perf_counter()
         self.store = self.tracer.trace(0, p.photons, p.photons)
         self.estimator.accumulate(self.store, self.scale)
+        self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
+        if self.view is not None and cls.sums_per_point:
+            self._recompute_dynamic()
         self.queue.finish()
         self.setup_seconds = time.perf_counter() - t0
         prog = programs(engine.ctx).get("update")
@@ -107,16 +132,30 @@ class Session:
         self.scratch = None  # grown on demand: gathered suffixes
 
     # -- reading ------------------------------------------------------------
-    def irradiance(self) -> np.ndarray:
-        """(n, 3) irradiance at the query points, W/m^2."""
+    def _irradiance4(self) -> np.ndarray:
         buf = self.estimator.resolve(self.scale)
         out = np.empty((len(self.points), 4), np.float32)
         cl.enqueue_copy(self.queue, out, buf)
-        return out[:, :3]
+        if self.dyn_est is not None:
+            dyn = np.empty((len(self.dyn_index), 4), np.float32)
+            cl.enqueue_copy(self.queue, dyn, self.dyn_est.resolve(self.scale))
+            out[self.dyn_index] = dyn
+        return out
+
+    def irradiance(self) -> np.ndarray:
+        """(n, 3) irradiance at the query points (the pixels' current visible points), W/m^2."""
+        return self._irradiance4()[:, :3]
 
     def accumulators(self) -> np.ndarray:
         """The exact fixed-point sums behind the irradiance."""
-        return self.estimator.accumulators()
+        acc = self.estimator.accumulators()
+        if self.dyn_est is not None:
+            acc[self.dyn_index] = self.dyn_est.accumulators()
+        return acc
+
+    def work(self) -> dict | None:
+        """Exact work counts so far (count_work=True), dynamic points included."""
+        return _add_work(self.estimator.work(), self.dynamic_work)
 
     def segments(self) -> tuple[np.ndarray, np.ndarray]:
         """The stored segments (path-major) and path lengths, on the host."""
@@ -126,7 +165,8 @@ class Session:
         """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
         if self.points.kind != "camera":
             raise OclgiError("render() needs a camera session (points=None)")
-        buf = self.estimator.resolve(self.scale)
+        irr = self._irradiance4()
+        buf = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=irr)
         return self.engine.shade(self.points, buf, exposure)
 
     # -- moving -----------------------------------------------------------------
@@ -162,29 +202,39 @@ class Session:
             stats.seconds = {"find": t1 - t0, "subtract": t2 - t1, "retrace": t3 - t2, "add": t4 - t3}
         else:
             stats.seconds = {"find": t1 - t0}
-        if self.points.kind == "camera":
+        if self.view is not None:
             t5 = time.perf_counter()
             stats.points = self._refresh_view()
+            q.finish()
             stats.seconds["points"] = time.perf_counter() - t5
         stats.seconds["total"] = time.perf_counter() - t0
         return stats
 
     def _refresh_view(self) -> int:
-        """Dynamic points: pixels whose visible point moved get recomputed sums."""
-        h, w = self.points.shape
-        new = self.engine.camera_points(self.camera, w, h)
-        # compare bits: w holds the triangle id as int bits (-1 reads as NaN)
-        changed = np.nonzero((new.positions.view(np.uint32) != self.points.positions.view(np.uint32)).any(axis=1)
-                             | (new.normals.view(np.uint32) != self.points.normals.view(np.uint32)).any(axis=1))[0]
-        if len(changed) == 0:
-            return 0
-        sub = _subset(new, changed)
-        self.estimator.replace_points(changed, sub)
-        if self.estimator.sums_per_point:
-            fresh = self.engine.estimator(sub, self.params, **self.options)
-            fresh.accumulate(self.store, self.scale)
-            self.estimator.set_accumulators(changed, fresh.accumulators())
-        return len(changed)
+        """Re-trace the pixels that may see a movable object; recompute the
+        dynamic points' sums (DETP) or re-point the changed pixels (Impact Count)."""
+        changed, dynamic = self.view.update()
+        if not self.estimator.sums_per_point:
+            if len(changed):
+                self.estimator.replace_points(changed, self.view.subset(changed))
+            return len(changed)
+        self._recompute_dynamic()
+        return len(dynamic)
+
+    def _recompute_dynamic(self):
+        """Sums of the dynamic points against every stored segment."""
+        self.dyn_index = self.view.dynamic
+        self.dyn_est = None
+        if len(self.dyn_index) == 0:
+            return
+        p = self.params
+        options = self.options if self.dynamic == p.method else {"count_work": self.options["count_work"]}
+        from dataclasses import replace
+
+        est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic), **options)
+        est.accumulate(self.store, self.scale)
+        self.dynamic_work = _add_work(self.dynamic_work, est.work())
+        self.dyn_est = est
 
     def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float):
         p = self.params

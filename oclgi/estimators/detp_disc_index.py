@@ -18,7 +18,7 @@ Algorithm:
    the boxes; each leaf's discs are stored as blocks of 8 float8 lanes
    (kernels/detp_disc_index.cl), so a leaf is tested the way ``detp_plain``
    tests 8 points.
-3. Per batch, one work-item per segment slot walks the tree
+3. Per batch, one work-item per path walks the tree with each segment
    (kernels/box_bvh.h), applies DETP_TEST (kernels/detp.h, the one
    definition shared with plain DETP) to the discs of each leaf met, and
    adds the segment's fixed-point power to every disc it crosses with 64-bit
@@ -175,8 +175,8 @@ class DetpDiscIndex(DetpEstimator):
         if self.nodes is None:
             return
         launch(
-            self.queue, self.k_walk, batch.n_slots,
-            self.nodes, self.blocks, batch.segments, np.int32(batch.n_slots), np.int32(batch.max_depth),
+            self.queue, self.k_walk, batch.n_paths,
+            self.nodes, self.blocks, batch.segments, np.int32(batch.n_paths), np.int32(batch.max_depth),
             np.int32(self.count_emitted), np.float32(self.radius**2), np.float32(self.ext),
             np.float32(scale), self.acc, self.work_buf,
             local_size=self.local_size,

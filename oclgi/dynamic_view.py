@@ -1,0 +1,118 @@
+"""A camera session's view in two layers: static points and dynamic points.
+
+The visible point of a pixel is either on static geometry or on a movable
+object. The thesis keeps the two apart (DESIGN.md section 4): points on
+static surfaces are updated incrementally with the changed segments, like
+any fixed sensor; points on a moving object are recomputed against every
+stored segment after each move ("dynamic points").
+
+So the view keeps, per pixel:
+
+- the **static layer**: the first hit among the static objects only, found
+  once. Its points never change, so the estimator built over them (and any
+  index over their discs) lives as long as the session, and every static
+  point, seen or hidden behind a moving object, has exact up-to-date sums:
+  when an object uncovers a pixel, its sums are already there;
+- the **composite**: the first hit among all objects, as a fresh render
+  sees it. After a move only pixels whose ray can meet a movable object's
+  world box are traced again: the box's eight corners are projected and the
+  bounding rectangle taken, with a margin of ``MARGIN`` pixels for float
+  rounding (a ray through a pixel centre outside it cannot enter the box,
+  the projection of a box being the convex hull of its corners'). Pixels
+  whose composite hit is on a movable object are the dynamic points.
+
+A composite point off the movable objects is bit for bit the static layer's
+point: the same ray meets the same triangle with the same arithmetic,
+whatever else the traversal visited (kernels/bvh.h). Hence the composite
+equals a full camera pass at the current pose, which the session tests
+check.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from .cl.layout import Instance
+from .queries import QueryPoints
+
+MARGIN = 2  # pixels around a projected box (float rounding of the rays)
+
+
+def _copy(q: QueryPoints) -> QueryPoints:
+    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
+
+
+class DynamicView:
+    """Static layer, composite view and dynamic pixels of one camera."""
+
+    def __init__(self, engine, camera=None):
+        self.engine = engine
+        self.cam = engine.view_camera(camera)
+        scene, compiled = engine.scene, engine.compiled
+        self.movable = [k for k, o in enumerate(scene.objects) if o.movable]
+        static = [k for k, o in enumerate(scene.objects) if not o.movable]
+        records = compiled.instances_host[static] if static else np.zeros(1, Instance)
+        self.static_instances = (cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                                           hostbuf=np.ascontiguousarray(records)), len(static))
+        ranges = scene.object_ranges()
+        self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
+        full = (0, 0, self.cam.width, self.cam.height)
+        self.static = engine.view_points(self.cam, full, self.static_instances)
+        self.points = _copy(engine.view_points(self.cam, full))
+        self.dynamic = np.nonzero(self.on_movable(self.points.tri))[0]
+
+    def on_movable(self, tri: np.ndarray) -> np.ndarray:
+        hit = np.zeros(len(tri), bool)
+        for a, b in self.movable_ranges:
+            hit |= (tri >= a) & (tri < b)
+        return hit
+
+    def rectangle(self):
+        """(x0, y0, w, h): pixels that may see a movable object (module doc)."""
+        cam = self.cam
+        eye, fwd, right, up = cam.frame()
+        inst = self.engine.compiled.instances_host[self.movable]
+        xs, ys = [], []
+        for lo, hi in zip(inst["lo"].astype(np.float64), inst["hi"].astype(np.float64)):
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            v = corners - eye
+            depth = v @ fwd
+            if (depth <= 1e-9 * max(np.abs(v).max(), 1.0)).any():
+                return 0, 0, cam.width, cam.height  # the box reaches behind the eye: every pixel
+            sx = (v @ right) / (right @ right) / depth
+            sy = (v @ up) / (up @ up) / depth
+            xs += list((sx + 1.0) * cam.width / 2.0 - 0.5)
+            ys += list((1.0 - sy) * cam.height / 2.0 - 0.5)
+        if not xs:
+            return 0, 0, 0, 0
+        x0 = int(np.clip(np.floor(min(xs)) - MARGIN, 0, cam.width))
+        x1 = int(np.clip(np.ceil(max(xs)) + MARGIN + 1, 0, cam.width))
+        y0 = int(np.clip(np.floor(min(ys)) - MARGIN, 0, cam.height))
+        y1 = int(np.clip(np.ceil(max(ys)) + MARGIN + 1, 0, cam.height))
+        return x0, y0, max(x1 - x0, 0), max(y1 - y0, 0)
+
+    def update(self):
+        """After a move: re-trace the rectangle; returns (changed pixels, new
+        dynamic pixels). Changed pixels hold a new composite point."""
+        x0, y0, rw, rh = rect = self.rectangle()
+        w = self.cam.width
+        ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
+        pix = (y0 + ys) * w + x0 + xs
+        sub = self.engine.view_points(self.cam, rect)
+        dyn_new = pix[self.on_movable(sub.tri)]
+        changed = np.union1d(self.dynamic, dyn_new)
+        # composite: the re-traced point inside the rectangle, the static one outside
+        p = self.points
+        p.positions[changed] = self.static.positions[changed]
+        p.normals[changed] = self.static.normals[changed]
+        p.barys[changed] = self.static.barys[changed]
+        p.positions[pix] = sub.positions
+        p.normals[pix] = sub.normals
+        p.barys[pix] = sub.barys
+        self.dynamic = dyn_new
+        return changed, dyn_new
+
+    def subset(self, index) -> QueryPoints:
+        p = self.points
+        return QueryPoints(p.positions[index], p.normals[index], p.barys[index], p.kind, None)
