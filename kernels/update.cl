@@ -8,6 +8,12 @@
  *     agrees with a re-trace exactly); -1 when the path is untouched. The
  *     segments before b are the same in the moved scene, so re-tracing from
  *     b gives the recomputed path.
+ * update_first_affected_discs  the same, and while it reads the store it
+ *     walks every segment through a BVH over discs (detp_disc_index.h):
+ *     a camera session's dynamic points get their sums over the store
+ *     before the update in the same pass; the update's subtract and add
+ *     passes then bring them to the new store exactly (integer sums), so
+ *     the store is scanned once per move instead of twice.
  * update_gather  one work-item per listed path: copies its slots from its
  *     first affected bounce on, with the power times sign (-1 takes a
  *     contribution away: round-to-nearest-even is symmetric, so the
@@ -16,6 +22,22 @@
  *     before b become holes (zero, tri = SEGMENT_HOLE): skipped, not ends.
  */
 #include "bvh.h"
+#include "detp_disc_index.h"
+#include "work.h"
+
+/* Does segment (o, d, t_end, tri) of a path touch object `in` (triangles
+ * lo..hi) at its old pose (it ended there) or at its new one (it meets it)? */
+inline int update_touches(__global const BvhNode *nodes, __global const Tri *tris, __global const Instance *in,
+                          int lo, int hi, float3 o, float3 d, float t_end, int tri)
+{
+    if (tri >= lo && tri < hi) return 1;
+    if (box_entry(in->lo, in->hi, o, 1.0f / d, t_end) == INFINITY) return 0;
+    Hit h;
+    h.tri = -1;
+    h.t = t_end;
+    return bvh_traverse(nodes, tris, in->root, xform_point(in->object_from_world, o),
+                        xform_vector(in->object_from_world, d), 1, &h) >= 0;
+}
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, int n_paths,
                                     int max_depth, __global int *first)
@@ -25,21 +47,46 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
     __global const Instance *in = &instances[obj];
     int lo = in->first_tri, hi = in->first_tri + in->n_tris;
     int found = -1;
-    for (int b = 0; b < max_depth && found < 0; ++b) {
+    for (int b = 0; b < max_depth; ++b) {
         __global const Segment *sg = &segments[(size_t)p * max_depth + b];
         float3 d = vload3(0, sg->dir);
         if (d.x == 0.0f && d.y == 0.0f && d.z == 0.0f) break; /* the path's end */
-        if (sg->tri >= lo && sg->tri < hi) { found = b; break; }
-        float3 o = vload3(0, sg->org);
-        if (box_entry(in->lo, in->hi, o, 1.0f / d, sg->t_end) == INFINITY) continue;
-        Hit h;
-        h.tri = -1;
-        h.t = sg->t_end;
-        if (bvh_traverse(nodes, tris, in->root, xform_point(in->object_from_world, o),
-                         xform_vector(in->object_from_world, d), 1, &h) >= 0)
+        if (update_touches(nodes, tris, in, lo, hi, vload3(0, sg->org), d, sg->t_end, sg->tri)) {
             found = b;
+            break;
+        }
     }
     first[p] = found;
+}
+
+__kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Segment *segments, int n_paths,
+                                          int max_depth, __global int *first,
+                                          __global const BvhNode *disc_nodes, __global const float8 *discs,
+                                          int count_emitted, float radius2, float ext, float scale,
+                                          __global long *acc, __global ulong *work)
+{
+    int p = get_global_id(0);
+    if (p >= n_paths) return;
+    __global const Instance *in = &instances[obj];
+    int lo = in->first_tri, hi = in->first_tri + in->n_tris;
+    int found = -1;
+    WORK_DECL;
+    uint visited = 0;
+    ulong tests = 0;
+    __global const float4 *path = (__global const float4 *)segments + (size_t)p * max_depth * 3;
+    for (int b = 0; b < max_depth; ++b) {
+        __global const float4 *seg = path + 3 * b;
+        float4 f0 = seg[0], f1 = seg[1];
+        if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* the path's end (a store has no holes) */
+        if (found < 0 && update_touches(nodes, tris, in, lo, hi, f0.xyz, f1.xyz, f0.w, as_int(f1.w)))
+            found = b;
+        if (b > 0 || count_emitted)
+            disc_index_segment(disc_nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
+    }
+    first[p] = found;
+    WORK_U(tests);
+    WORK_NODE(visited);
+    WORK_FLUSH(work);
 }
 
 __kernel void update_gather(__global const Segment *segments, int max_depth,

@@ -74,6 +74,8 @@ class Session:
     memory is photons x max_depth x 48 bytes.
     """
 
+    fuse_find = True  # False: dynamic points summed over the new store in a pass of their own (benchmarks)
+
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
                  extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, **options):
         from .estimators import ESTIMATORS
@@ -121,7 +123,10 @@ class Session:
         self.estimator.accumulate(self.store, self.scale)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:
-            self._recompute_dynamic()
+            self._new_dynamic()
+            if self.dyn_est is not None:
+                self.dyn_est.accumulate(self.store, self.scale)
+                self.dynamic_work = self.dyn_est.work()
         self.queue.finish()
         self.setup_seconds = time.perf_counter() - t0
         prog = programs(engine.ctx).get("update")
@@ -176,53 +181,82 @@ class Session:
         obj = engine.scene.object_id(name)
         t0 = time.perf_counter()
         engine.move(name, matrix)
-        launch(q, self.k_first, p.photons, *engine.compiled.scene_args, np.int32(obj), self.store.segments,
-               np.int32(p.photons), np.int32(p.max_depth), self.first, local_size=engine.local_size)
-        cl.enqueue_copy(q, self.first_host, self.first)
-        paths = np.nonzero(self.first_host >= 0)[0].astype(np.int32)
-        starts = self.first_host[paths]
+        seconds = {}
+        n_view = self._refresh_view() if self.view is not None else 0
         t1 = time.perf_counter()
-        stats = UpdateStats(paths=len(paths), segments_removed=0, segments_added=0)
+        if self.view is not None:
+            seconds["points"] = t1 - t0
+        # A disc-indexed dynamic estimator takes its sums over the old store
+        # in the find pass; the suffix passes below then update them as they
+        # update the static points (update.cl). Any other variant sums over
+        # the new store at the end.
+        fused = self.fuse_find and self.dyn_est is not None and self.dynamic == "detp_disc_index"
+        paths, starts = self._find(obj, self.dyn_est if fused else None)
+        t2 = time.perf_counter()
+        seconds["find"] = t2 - t1
+        stats = UpdateStats(paths=len(paths), segments_removed=0, segments_added=0, points=n_view)
+        estimators = [self.estimator] + ([self.dyn_est] if fused else [])
         if len(paths):
             lens = self.store.read_path_len(q)[paths]
             stats.segments_removed = int((lens - starts).sum())
             mf = cl.mem_flags
             paths_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=paths)
             starts_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=starts)
-            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), -1.0)
+            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), -1.0, estimators)
             q.finish()  # honest per-stage times
-            t2 = time.perf_counter()
+            t3 = time.perf_counter()
             self.tracer.retrace(self.store, p.photons, paths_buf, starts_buf, len(paths))
             q.finish()
-            t3 = time.perf_counter()
-            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), 1.0)
+            t4 = time.perf_counter()
+            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), 1.0, estimators)
             q.finish()
             stats.segments_added = int((self.store.read_path_len(q)[paths] - starts).sum())
-            t4 = time.perf_counter()
-            stats.seconds = {"find": t1 - t0, "subtract": t2 - t1, "retrace": t3 - t2, "add": t4 - t3}
-        else:
-            stats.seconds = {"find": t1 - t0}
-        if self.view is not None:
             t5 = time.perf_counter()
-            stats.points = self._refresh_view()
+            seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
+        if self.dyn_est is not None and not fused:
+            t6 = time.perf_counter()
+            self.dyn_est.accumulate(self.store, self.scale)
             q.finish()
-            stats.seconds["points"] = time.perf_counter() - t5
-        stats.seconds["total"] = time.perf_counter() - t0
+            seconds["points"] += time.perf_counter() - t6
+        if self.dyn_est is not None:
+            self.dynamic_work = _add_work(self.dynamic_work, self.dyn_est.work())
+        seconds["total"] = time.perf_counter() - t0
+        stats.seconds = seconds
         return stats
 
+    def _find(self, obj: int, discs=None):
+        """Paths touched by object ``obj``'s move and their first affected
+        bounce (host arrays); with ``discs`` (a DetpDiscIndex) the same pass
+        also sums the store into its points."""
+        engine, p, q = self.engine, self.params, self.queue
+        args = (*engine.compiled.scene_args, np.int32(obj), self.store.segments, np.int32(p.photons),
+                np.int32(p.max_depth), self.first)
+        if discs is None or discs.nodes is None:
+            launch(q, self.k_first, p.photons, *args, local_size=engine.local_size)
+        else:
+            k = programs(engine.ctx).get("update", **discs.defines).update_first_affected_discs
+            launch(q, k, p.photons, *args, discs.nodes, discs.blocks, np.int32(discs.count_emitted),
+                   np.float32(discs.radius ** 2), np.float32(discs.ext), np.float32(self.scale), discs.acc,
+                   discs.work_buf, local_size=engine.local_size)
+        cl.enqueue_copy(q, self.first_host, self.first)
+        paths = np.nonzero(self.first_host >= 0)[0].astype(np.int32)
+        return paths, self.first_host[paths]
+
     def _refresh_view(self) -> int:
-        """Re-trace the pixels that may see a movable object; recompute the
-        dynamic points' sums (DETP) or re-point the changed pixels (Impact Count)."""
+        """Re-trace the pixels that may see a movable object. Impact Count:
+        the changed pixels are re-pointed (its sums are per triangle). DETP:
+        a fresh estimator over the dynamic points, its sums still empty
+        (``move`` fills them)."""
         changed, dynamic = self.view.update()
         if not self.estimator.sums_per_point:
             if len(changed):
                 self.estimator.replace_points(changed, self.view.subset(changed))
             return len(changed)
-        self._recompute_dynamic()
+        self._new_dynamic()
         return len(dynamic)
 
-    def _recompute_dynamic(self):
-        """Sums of the dynamic points against every stored segment."""
+    def _new_dynamic(self):
+        """An estimator of the ``dynamic`` variant over the view's dynamic points."""
         self.dyn_index = self.view.dynamic
         self.dyn_est = None
         if len(self.dyn_index) == 0:
@@ -231,12 +265,10 @@ class Session:
         options = self.options if self.dynamic == p.method else {"count_work": self.options["count_work"]}
         from dataclasses import replace
 
-        est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic), **options)
-        est.accumulate(self.store, self.scale)
-        self.dynamic_work = _add_work(self.dynamic_work, est.work())
-        self.dyn_est = est
+        self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
+                                             **options)
 
-    def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float):
+    def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float, estimators):
         p = self.params
         nbytes = n_list * p.max_depth * Segment.itemsize
         if self.scratch is None or self.scratch.size < nbytes:
@@ -248,4 +280,5 @@ class Session:
         # Path ids stay in the gathered slots; the scratch store is a batch
         # of n_list paths like any other.
         batch = PathBatch(self.scratch, self.store.path_len, 0, n_list, p.max_depth)
-        self.estimator.accumulate(batch, self.scale)
+        for est in estimators:
+            est.accumulate(batch, self.scale)

@@ -1,0 +1,56 @@
+/* detp_disc_index.h: one segment against a BVH over DETP discs
+ * (detp_disc_index.cl has the layout; update.cl walks the same tree while it
+ * scans a session's store).
+ */
+#ifndef OCLGI_DETP_DISC_INDEX_H
+#define OCLGI_DETP_DISC_INDEX_H
+
+#include "oclgi_types.h"
+#include "detp.h"
+#include "box_bvh.h"
+
+#define DISC_BLOCK 7 /* float8 per block of 8 discs */
+
+/* One segment against the tree: every leaf it meets, 8 discs at a time. */
+inline void disc_index_segment(__global const BvhNode *nodes, __global const float8 *discs,
+                               __global const float4 *seg, float4 f0, float4 f1, float radius2, float ext,
+                               float scale, __global long *acc, uint *visited, ulong *tests)
+{
+    float3 o = f0.xyz, w = f1.xyz;
+    float tmax = f0.w + ext; /* exactly as detp_plain */
+    float3 inv = 1.0f / w;
+    long3 q = 0;
+    int have_q = 0;
+    BoxBvhWalk walk;
+    box_bvh_start(&walk);
+    int leaf;
+    while ((leaf = box_bvh_next_segment(&walk, nodes, o, inv, tmax)) >= 0) {
+        int count = nodes[leaf].count;
+        int first = nodes[leaf].first;
+        *tests += (ulong)count;
+        for (int blk = first; blk < first + (count + 7) / 8; ++blk) {
+            __global const float8 *b = discs + (size_t)blk * DISC_BLOCK;
+            int8 hit;
+            DETP_TEST(float8, hit, b[0], b[1], b[2], b[3], b[4], b[5], o.x, o.y, o.z, w.x, w.y, w.z,
+                      tmax, radius2);
+            if (!any(hit)) continue;
+            if (!have_q) { /* quantised once per segment, as detp_plain does */
+                q = convert_long3_rte(seg[2].xyz * scale);
+                have_q = 1;
+            }
+            int ids[8], h[8];
+            vstore8(as_int8(b[6]), 0, ids);
+            vstore8(hit, 0, h);
+            for (int k = 0; k < 8; ++k) {
+                if (!h[k]) continue;
+                __global long *a = acc + 3 * (size_t)ids[k];
+                atom_add(a + 0, q.x);
+                atom_add(a + 1, q.y);
+                atom_add(a + 2, q.z);
+            }
+        }
+    }
+    *visited += walk.visited;
+}
+
+#endif
