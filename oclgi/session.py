@@ -1,16 +1,11 @@
 """Interactive sessions: illumination kept up to date as objects move.
 
 A session traces every photon path once and keeps all segments on the
-device (path-major, DESIGN.md section 2). After ``move(name, matrix)`` only
-the paths the move touches change (DESIGN.md section 4, García 2004/2007):
-
-1. ``update_first_affected`` finds, per path, the first segment that hit the
-   object at its old pose or meets it at its new pose;
-2. the affected suffixes are gathered with negated power and accumulated
-   (their old contributions leave the sums exactly);
-3. the suffixes are re-traced in place (``photon_retrace``: the same code
-   and random numbers as a full trace);
-4. the new suffixes are gathered and accumulated.
+device (path-major, DESIGN.md section 2; oclgi/segment_store.py). After
+``move(name, matrix)`` only the paths the move touches change (DESIGN.md
+section 4, García 2004/2007): their old suffixes are gathered with negated
+power and accumulated (their contributions leave the sums exactly), the
+suffixes are re-traced in place, and the new suffixes are accumulated.
 
 Sums are fixed point, so the result equals a recomputation from scratch at
 the new pose bit for bit, however many moves came before: errors never
@@ -37,12 +32,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from .cl.layout import Segment
-from .cl.programs import launch, programs
 from .engine import as_query_points
 from .errors import OclgiError
-from .photon_trace import PathBatch, PhotonTracer
 from .queries import QueryPoints
+from .segment_store import SegmentStore
 
 
 @dataclass
@@ -108,33 +101,19 @@ class Session:
         if self.dynamic not in detp_variants and (cls.sums_per_point or dynamic is not None):
             raise OclgiError(f"dynamic points are recomputed by a DETP variant ({', '.join(detp_variants)}), "
                              f"got {self.dynamic!r}")
-        store_bytes = p.photons * p.max_depth * Segment.itemsize
-        limit = engine.queue.device.max_mem_alloc_size
-        if store_bytes > limit:
-            raise OclgiError(f"a session keeps every segment: {p.photons:,} paths x {p.max_depth} slots need "
-                             f"{store_bytes / 2**30:.2f} GiB, more than one device allocation "
-                             f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
-        self.store_bytes = store_bytes
-        self.scale = engine.compiled.fixed_scale(p.photons)
         self.estimator = engine.estimator(est_points, p, **self.options)
-        self.tracer = PhotonTracer(self.queue, engine.compiled, p.seed, p.max_depth, p.photons, engine.local_size)
         t0 = time.perf_counter()
-        self.store = self.tracer.trace(0, p.photons, p.photons)
-        self.estimator.accumulate(self.store, self.scale)
+        self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+        self.scale = self.store.scale
+        self.estimator.accumulate(self.store.batch, self.scale)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:
             self._new_dynamic()
             if self.dyn_est is not None:
-                self.dyn_est.accumulate(self.store, self.scale)
+                self.dyn_est.accumulate(self.store.batch, self.scale)
                 self.dynamic_work = self.dyn_est.work()
         self.queue.finish()
         self.setup_seconds = time.perf_counter() - t0
-        prog = programs(engine.ctx).get("update")
-        self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
-        mf = cl.mem_flags
-        self.first = cl.Buffer(engine.ctx, mf.READ_WRITE, p.photons * 4)
-        self.first_host = np.empty(p.photons, np.int32)
-        self.scratch = None  # grown on demand: gathered suffixes
 
     # -- reading ------------------------------------------------------------
     def _irradiance4(self) -> np.ndarray:
@@ -164,7 +143,7 @@ class Session:
 
     def segments(self) -> tuple[np.ndarray, np.ndarray]:
         """The stored segments (path-major) and path lengths, on the host."""
-        return self.store.read_segments(self.queue), self.store.read_path_len(self.queue)
+        return self.store.segments(), self.store.path_len()
 
     def render(self, exposure: float = 1.0):
         """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
@@ -177,7 +156,7 @@ class Session:
     # -- moving -----------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
         """Place object ``name`` (4x4 world-from-object matrix) and update."""
-        engine, p, q = self.engine, self.params, self.queue
+        engine, q = self.engine, self.queue
         obj = engine.scene.object_id(name)
         t0 = time.perf_counter()
         engine.move(name, matrix)
@@ -191,31 +170,31 @@ class Session:
         # update the static points (update.cl). Any other variant sums over
         # the new store at the end.
         fused = self.fuse_find and self.dyn_est is not None and self.dynamic == "detp_disc_index"
-        paths, starts = self._find(obj, self.dyn_est if fused else None)
+        affected = self.store.find(obj, self.dyn_est if fused else None)
         t2 = time.perf_counter()
         seconds["find"] = t2 - t1
-        stats = UpdateStats(paths=len(paths), segments_removed=0, segments_added=0, points=n_view)
+        stats = UpdateStats(paths=len(affected), segments_removed=0, segments_added=0, points=n_view)
         estimators = [self.estimator] + ([self.dyn_est] if fused else [])
-        if len(paths):
-            lens = self.store.read_path_len(q)[paths]
-            stats.segments_removed = int((lens - starts).sum())
-            mf = cl.mem_flags
-            paths_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=paths)
-            starts_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=starts)
-            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), -1.0, estimators)
+        if len(affected):
+            stats.segments_removed = self.store.suffix_segments(affected)
+            old = self.store.suffixes(affected, -1.0)
+            for est in estimators:
+                est.accumulate(old, self.scale)
             q.finish()  # honest per-stage times
             t3 = time.perf_counter()
-            self.tracer.retrace(self.store, p.photons, paths_buf, starts_buf, len(paths))
+            self.store.retrace(affected)
             q.finish()
             t4 = time.perf_counter()
-            self._accumulate_suffixes(paths_buf, starts_buf, len(paths), 1.0, estimators)
+            new = self.store.suffixes(affected, 1.0)
+            for est in estimators:
+                est.accumulate(new, self.scale)
             q.finish()
-            stats.segments_added = int((self.store.read_path_len(q)[paths] - starts).sum())
+            stats.segments_added = self.store.suffix_segments(affected)
             t5 = time.perf_counter()
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
         if self.dyn_est is not None and not fused:
             t6 = time.perf_counter()
-            self.dyn_est.accumulate(self.store, self.scale)
+            self.dyn_est.accumulate(self.store.batch, self.scale)
             q.finish()
             seconds["points"] += time.perf_counter() - t6
         if self.dyn_est is not None:
@@ -223,24 +202,6 @@ class Session:
         seconds["total"] = time.perf_counter() - t0
         stats.seconds = seconds
         return stats
-
-    def _find(self, obj: int, discs=None):
-        """Paths touched by object ``obj``'s move and their first affected
-        bounce (host arrays); with ``discs`` (a DetpDiscIndex) the same pass
-        also sums the store into its points."""
-        engine, p, q = self.engine, self.params, self.queue
-        args = (*engine.compiled.scene_args, np.int32(obj), self.store.segments, np.int32(p.photons),
-                np.int32(p.max_depth), self.first)
-        if discs is None or discs.nodes is None:
-            launch(q, self.k_first, p.photons, *args, local_size=engine.local_size)
-        else:
-            k = programs(engine.ctx).get("update", **discs.defines).update_first_affected_discs
-            launch(q, k, p.photons, *args, discs.nodes, discs.blocks, np.int32(discs.count_emitted),
-                   np.float32(discs.radius ** 2), np.float32(discs.ext), np.float32(self.scale), discs.acc,
-                   discs.work_buf, local_size=engine.local_size)
-        cl.enqueue_copy(q, self.first_host, self.first)
-        paths = np.nonzero(self.first_host >= 0)[0].astype(np.int32)
-        return paths, self.first_host[paths]
 
     def _refresh_view(self) -> int:
         """Re-trace the pixels that may see a movable object. Impact Count:
@@ -267,18 +228,3 @@ class Session:
 
         self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
                                              **options)
-
-    def _accumulate_suffixes(self, paths_buf, starts_buf, n_list: int, sign: float, estimators):
-        p = self.params
-        nbytes = n_list * p.max_depth * Segment.itemsize
-        if self.scratch is None or self.scratch.size < nbytes:
-            # grow geometrically, never past the store itself
-            size = max(nbytes, min(2 * (self.scratch.size if self.scratch else 0), self.store_bytes))
-            self.scratch = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_WRITE, size)
-        launch(self.queue, self.k_gather, n_list, self.store.segments, np.int32(p.max_depth), paths_buf,
-               starts_buf, np.int32(n_list), np.float32(sign), self.scratch)
-        # Path ids stay in the gathered slots; the scratch store is a batch
-        # of n_list paths like any other.
-        batch = PathBatch(self.scratch, self.store.path_len, 0, n_list, p.max_depth)
-        for est in estimators:
-            est.accumulate(batch, self.scale)
