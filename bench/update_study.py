@@ -14,12 +14,17 @@ hold), per f:
 - counts: the recomputed segments n_Rec / n_R (model f^2) and, with the
   estimator's work counters, the counted work of an update vs a full run;
 - time: a camera session's median update time vs a full recomputation;
-- the interactive rate on the Cornell box with the bunny (``--interactive``):
-  updates per second with the time split per stage, and the process' memory
-  over many frames.
+- the static points' constants: counted work of an update per changed
+  segment, disc indexing vs the sphere cache (the model's 2 vs 8.08);
+- the dynamic points (pixels on the moving object): disc indexing folded
+  into the find pass, disc indexing alone, the sphere cache;
+- the interactive rate on the Cornell box and on Sponza, each with the
+  Stanford bunny (f = 0.1) going round: updates per second with the time
+  split per stage, and the process' memory over the frames.
 
 Writes ``bench/results/update_study.{json,md}`` and ``update_speedup.png``.
-Usage: ``.venv/bin/python bench/update_study.py [--method M] [--quick]``.
+Usage: ``.venv/bin/python bench/update_study.py [--parts speedup,constants,
+dynamic,interactive] [--frames N] [--scenes cornell,sponza] [--quick]``.
 """
 
 from __future__ import annotations
@@ -110,54 +115,216 @@ def speedup_vs_f(method, quick, rng):
     return rows
 
 
-def interactive(method, quick, frames):
-    scene = oclgi.load_file(oclgi.scene_path("cornell_bunny.toml"))
+def _box_radius(vertices):
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    return 0.5 * float(np.linalg.norm(hi - lo)), lo, hi
+
+
+def scaled_pose(scene, name, f, base, offset=(0.0, 0.0, 0.0)):
+    """World-from-loaded matrix that scales object ``name`` to radius
+    f r_0 (r_0: half the diagonal of the static geometry) and stands it with
+    the centre of its base at ``base + offset``."""
+    obj = scene.object_id(name)
+    static = scene.tri_object != obj
+    r0, _, _ = _box_radius(scene.vertices[scene.faces[static]].reshape(-1, 3))
+    rd, lo, hi = _box_radius(scene.vertices[scene.faces[~static]].reshape(-1, 3))
+    s = f * r0 / rd
+    foot = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
+    m = np.eye(4)
+    m[:3, :3] *= s
+    m[:3, 3] = np.asarray(base, float) + np.asarray(offset, float) - s * foot
+    return m
+
+
+BUNNY = {"path": "stanford-bunny/bun_zipper.ply", "name": "bunny", "movable": True, "albedo": [0.8, 0.8, 0.8]}
+SCENES = {
+    # name: (scene dict, where the bunny stands, radius of its circular path)
+    "cornell": ({
+        "mesh": [{"path": "cornell-box/CornellBox-Original.obj"}, BUNNY],
+        "camera": {"position": [0.0, 1.0, 3.94], "look_at": [0.0, 1.0, 0.0], "fov": 39.3},
+        "photons": {"seed": 1, "max_depth": 12},
+    }, [-0.3, 0.0, 0.3], 0.25),
+    "sponza": ({
+        "mesh": [{"path": "sponza-dabrovic/sponza.zip", "albedo": [0.7, 0.7, 0.7]}, BUNNY],
+        "point_light": [{"position": [0.0, 6.0, 0.0], "intensity": [50.0, 50.0, 50.0]}],
+        "camera": {"position": [-11.0, 4.0, 0.0], "look_at": [0.0, 2.0, 0.0], "fov": 60.0},
+        "photons": {"seed": 1, "max_depth": 12},
+    }, [0.0, 0.0, 0.0], 3.0),
+}
+
+
+def scene_engine(name, side):
+    data, base, path_r = SCENES[name]
+    data = json.loads(json.dumps(data))
+    data["camera"].update(width=side, height=side)
+    scene = oclgi.load_dict(data, base_dir=oclgi.scene_path("."))
+    return oclgi.Engine(scene, progress=False), base, path_r
+
+
+def photons_for(engine, segments):
+    """Photon paths giving about ``segments`` stored segments."""
+    _, lens = engine.trace(photons=20_000)
+    return int(segments / lens.mean())
+
+
+def circle(scene, f, base, path_r, frames, i):
+    a = 2 * math.pi * i / max(frames, 1)
+    return scaled_pose(scene, "bunny", f, base, (path_r * (math.cos(a) - 1), 0.0, path_r * math.sin(a)))
+
+
+def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index"):
+    """Updates per second: a camera session (10^5 pixels), 10^6 stored
+    segments, the bunny (f = 0.1) going round a circle; stages and memory."""
     side = 100 if quick else 316  # 10^5 query points
-    scene.camera.width = scene.camera.height = side
-    engine = oclgi.Engine(scene, progress=False)
-    photons = 30_000 if quick else 330_000  # about 10^6 stored segments
-    session = oclgi.Session(engine, method=method, photons=photons, radius=0.03)
+    engine, base, path_r = scene_engine(name, side)
+    engine.move("bunny", circle(engine.scene, f, base, path_r, frames, 0))
+    photons = photons_for(engine, 1e5 if quick else 1e6)
+    session = oclgi.Session(engine, method=method, photons=photons, radius=0.03 if name == "cornell" else 0.3,
+                            dynamic=dynamic)
     n_r = int(session.segments()[1].sum())
-    poses = [np.eye(4)] + [None] * frames
-    rss = []
-    stages = {}
-    totals = []
-    for i in range(frames):
-        m = np.eye(4)
-        a = 2 * math.pi * i / max(frames, 1)
-        m[:3, 3] = [0.25 * (math.cos(a) - 1), 0, 0.25 * math.sin(a)]
-        st = session.move("bunny", m)
+    rss, stages, totals, pts, paths = [], {}, [], [], []
+    for i in range(1, frames + 1):
+        st = session.move("bunny", circle(engine.scene, f, base, path_r, frames, i))
         totals.append(st.seconds["total"])
+        pts.append(st.points)
+        paths.append(st.paths)
         for k, v in st.seconds.items():
             stages.setdefault(k, []).append(v)
         if i % max(frames // 20, 1) == 0:
             rss.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
-    del poses
     med = float(np.median(totals))
-    return {"n_R": n_r, "points": side * side, "frames": frames, "median_update_s": med,
-            "updates_per_s": 1 / med, "stage_median_s": {k: float(np.median(v)) for k, v in stages.items()},
-            "max_rss_mib_samples": rss}
+    return {"scene": name, "f": f, "dynamic": dynamic, "n_R": n_r, "photons": photons, "points": side * side,
+            "frames": frames, "median_update_s": med, "updates_per_s": 1 / med,
+            "dynamic_points_median": float(np.median(pts)), "paths_median": float(np.median(paths)),
+            "stage_median_s": {k: float(np.median(v)) for k, v in stages.items()},
+            "max_rss_mib_samples": rss, "setup_s": session.setup_seconds}
 
 
-def write(rows, inter, method, quick):
-    md = [f"# Incremental update study ({method})", "",
-          "| f | n_Rec/n_R | f^2 | dynamic points | full s | update s | S (time) | S (work) | model S(f) |",
-          "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in rows:
-        md.append(f"| {r['f']:.2f} | {r['n_Rec_over_n_R']:.4f} | {r['f'] ** 2:.4f} | {r['dynamic_points']:.0f} "
-                  f"| {r['full_seconds']:.3f} | {r['update_seconds']:.4f} | {r['speedup_time']:.1f} "
-                  f"| {r['speedup_work']:.1f} | {r['model']:.1f} |")
-    if inter:
-        md += ["", "## Interactive rate (Cornell box + bunny)", "",
-               f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames: "
-               f"median update {inter['median_update_s'] * 1e3:.1f} ms = **{inter['updates_per_s']:.1f} updates/s**.",
+def static_constants(quick, rng):
+    """The static points' constants: counted work of an update per changed
+    segment and per cbrt(n_S), disc indexing vs the sphere cache (model: 2
+    vs 8.08 per recomputed segment, i.e. 1 vs 4.04 per segment streamed)."""
+    rows = []
+    f = 0.1
+    photons = 20_000 if quick else 100_000
+    sizes = (1_000, 8_000) if quick else (1_000, 8_000, 64_000)
+    engine = room_engine(f, photons, 16)
+    for n_s in sizes:
+        # random points on the room's walls (static), normals inwards
+        face = rng.integers(0, 6, n_s)
+        p = rng.uniform(-0.999, 0.999, (n_s, 3))
+        axis, sign = face // 2, np.where(face % 2 == 0, -1.0, 1.0)
+        p[np.arange(n_s), axis] = sign
+        nrm = np.zeros((n_s, 3))
+        nrm[np.arange(n_s), axis] = -sign
+        for method in ("detp_disc_index", "detp_sphere_cache"):
+            engine.move("ball", np.eye(4))
+            session = oclgi.Session(engine, np.hstack([p, nrm]), method=method, radius=0.02, count_work=True)
+            work, streamed, secs = {"t": 0, "u": 0, "nodes": 0}, 0, []
+            for _ in range(3 if quick else 6):
+                before = session.work()
+                st = session.move("ball", random_pose(rng, f))
+                after = session.work()
+                for k in work:
+                    work[k] += after[k] - before[k]
+                streamed += st.segments_removed + st.segments_added
+                secs.append(st.seconds.get("subtract", 0) + st.seconds.get("add", 0))
+            c = np.cbrt(n_s)
+            rows.append({"n_S": n_s, "method": method, "streamed": streamed, **work,
+                         "t_per_seg_cbrt": work["t"] / streamed / c, "u_per_seg_cbrt": work["u"] / streamed / c,
+                         "tu_per_seg_cbrt": (work["t"] + work["u"]) / streamed / c,
+                         "nodes_per_seg": work["nodes"] / streamed,
+                         "estimate_s_per_seg": float(np.sum(secs)) / streamed})
+            r = rows[-1]
+            print(f"n_S={n_s} {method}: (t+u)/(seg cbrt n_S)={r['tu_per_seg_cbrt']:.2f} "
+                  f"t={r['t_per_seg_cbrt']:.2f} u={r['u_per_seg_cbrt']:.2f} nodes/seg={r['nodes_per_seg']:.1f} "
+                  f"{r['estimate_s_per_seg'] * 1e9:.0f} ns/seg", flush=True)
+    return rows
+
+
+def dynamic_points(quick, frames=8):
+    """Dynamic points (pixels on the moving bunny, Cornell box, f = 0.1):
+    disc indexing in the find pass (fused), disc indexing in a pass of its
+    own, and the sphere cache; counted work and time per update."""
+    side = 100 if quick else 316
+    engine, base, path_r = scene_engine("cornell", side)
+    engine.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, 0))
+    photons = photons_for(engine, 1e5 if quick else 1e6)
+    rows = []
+    for label, dynamic, fuse in (("disc index, fused with find", "detp_disc_index", True),
+                                 ("disc index, own pass", "detp_disc_index", False),
+                                 ("sphere cache, own pass", "detp_sphere_cache", False)):
+        for count in (True, False):
+            engine.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, 0))
+            s = oclgi.Session(engine, method="detp_disc_index", photons=photons, radius=0.03, dynamic=dynamic,
+                              count_work=count)
+            s.fuse_find = fuse
+            n_r = int(s.segments()[1].sum())
+            dyn_work, times, n_d, n_rec = {"t": 0, "u": 0, "nodes": 0}, [], [], []
+            for i in range(1, frames + 1):
+                before = s.dynamic_work or {"t": 0, "u": 0, "nodes": 0}
+                st = s.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, i))
+                after = s.dynamic_work or before
+                for k in dyn_work:
+                    dyn_work[k] += after[k] - before[k]
+                times.append(st.seconds)
+                n_d.append(st.points)
+                n_rec.append(st.segments_removed)
+            if count:
+                work = {k: v / frames for k, v in dyn_work.items()}
+                continue
+            row = {"label": label, "n_R": n_r, "n_D": float(np.median(n_d)), "n_Rec": float(np.median(n_rec)),
+                   "work": work, "points_s": float(np.median([t.get("points", 0) for t in times])),
+                   "find_s": float(np.median([t["find"] for t in times])),
+                   "total_s": float(np.median([t["total"] for t in times]))}
+            rows.append(row)
+            print(f"{label}: n_D={row['n_D']:.0f} work={work} points {row['points_s'] * 1e3:.1f} ms "
+                  f"find {row['find_s'] * 1e3:.1f} ms total {row['total_s'] * 1e3:.1f} ms", flush=True)
+    return rows
+
+
+def markdown(res):
+    md = [f"# Incremental update study ({res.get('method', '')})"]
+    rows = res.get("speedup")
+    if rows:
+        md += ["", "## Speedup vs f (room with a ball)", "",
+               "| f | n_Rec/n_R | f^2 | dynamic points | full s | update s | S (time) | S (work) | model S(f) |",
+               "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in rows:
+            md.append(f"| {r['f']:.2f} | {r['n_Rec_over_n_R']:.4f} | {r['f'] ** 2:.4f} | {r['dynamic_points']:.0f} "
+                      f"| {r['full_seconds']:.3f} | {r['update_seconds']:.4f} | {r['speedup_time']:.1f} "
+                      f"| {r['speedup_work']:.1f} | {r['model']:.1f} |")
+    if res.get("constants"):
+        md += ["", "## Static points: counted work per streamed segment and cbrt(n_S)", "",
+               "| n_S | method | segments streamed | t | u | (t+u) | nodes / segment | ns / segment |",
+               "|---:|---|---:|---:|---:|---:|---:|---:|"]
+        for r in res["constants"]:
+            md.append(f"| {r['n_S']:,} | {r['method']} | {r['streamed']:,} | {r['t_per_seg_cbrt']:.2f} "
+                      f"| {r['u_per_seg_cbrt']:.2f} | {r['tu_per_seg_cbrt']:.2f} | {r['nodes_per_seg']:.1f} "
+                      f"| {r['estimate_s_per_seg'] * 1e9:.0f} |")
+    if res.get("dynamic"):
+        md += ["", "## Dynamic points (Cornell box + bunny, f = 0.1)", "",
+               "| dynamic points by | n_R | n_D | n_Rec | t | u | nodes | points ms | find ms | update ms |",
+               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+        for r in res["dynamic"]:
+            w = r["work"]
+            md.append(f"| {r['label']} | {r['n_R']:,} | {r['n_D']:.0f} | {r['n_Rec']:.0f} | {w['t']:,.0f} "
+                      f"| {w['u']:,.0f} | {w['nodes']:,.0f} | {r['points_s'] * 1e3:.1f} | {r['find_s'] * 1e3:.1f} "
+                      f"| {r['total_s'] * 1e3:.1f} |")
+    for inter in res.get("interactive", []):
+        md += ["", f"## Interactive rate ({inter['scene']} + bunny, f = {inter['f']})", "",
+               f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames, "
+               f"{inter['dynamic_points_median']:.0f} dynamic points and {inter['paths_median']:.0f} re-traced paths "
+               f"per frame (median): median update {inter['median_update_s'] * 1e3:.1f} ms = "
+               f"**{inter['updates_per_s']:.1f} updates/s** (session set-up {inter['setup_s']:.2f} s).",
                "", "| stage | median ms |", "|---|---:|"]
         md += [f"| {k} | {v * 1e3:.2f} |" for k, v in inter["stage_median_s"].items()]
-        md.append(f"\nPeak RSS over the run (MiB, sampled): {', '.join(f'{x:.0f}' for x in inter['max_rss_mib_samples'])}")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "update_study.md").write_text("\n".join(md) + "\n")
-    (RESULTS / "update_study.json").write_text(json.dumps({"method": method, "quick": quick, "rows": rows,
-                                                           "interactive": inter}, indent=1))
+        md.append(f"\nPeak RSS over the run (MiB, sampled): "
+                  f"{', '.join(f'{x:.0f}' for x in inter['max_rss_mib_samples'])}")
+    return "\n".join(md) + "\n"
+
+
+def plot(rows, method):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -174,20 +341,41 @@ def write(rows, inter, method, quick):
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(RESULTS / "update_speedup.png", dpi=110)
-    print("\n".join(md))
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--method", default="detp_disc_index" if "detp_disc_index" in METHODS else "detp")
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--interactive", type=int, default=0, metavar="FRAMES",
-                    help="also run the interactive-rate benchmark for this many frames")
+    ap.add_argument("--parts", default="speedup,constants,dynamic,interactive",
+                    help="comma-separated: speedup, constants, dynamic, interactive (the others keep "
+                         "their last results)")
+    ap.add_argument("--frames", type=int, default=100, help="frames of the interactive benchmark")
+    ap.add_argument("--scenes", default="cornell,sponza", help="scenes of the interactive benchmark")
     args = ap.parse_args()
+    parts = set(args.parts.split(","))
     rng = np.random.default_rng(7)
-    rows = speedup_vs_f(args.method, args.quick, rng)
-    inter = interactive(args.method, args.quick, args.interactive) if args.interactive else None
-    write(rows, inter, args.method, args.quick)
+    path = RESULTS / "update_study.json"
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res.setdefault("interactive", [])
+    if isinstance(res["interactive"], dict):
+        res["interactive"] = [res["interactive"]]
+    res.pop("rows", None)
+    res.update(method=args.method, quick=args.quick)
+    if "speedup" in parts:
+        res["speedup"] = speedup_vs_f(args.method, args.quick, rng)
+        plot(res["speedup"], args.method)
+    if "constants" in parts:
+        res["constants"] = static_constants(args.quick, rng)
+    if "dynamic" in parts:
+        res["dynamic"] = dynamic_points(args.quick)
+    if "interactive" in parts:
+        res["interactive"] = [interactive(name, args.method, args.quick, args.frames)
+                              for name in args.scenes.split(",")]
+    RESULTS.mkdir(exist_ok=True)
+    path.write_text(json.dumps(res, indent=1))
+    (RESULTS / "update_study.md").write_text(markdown(res))
+    print(markdown(res))
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ True
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -99,7 +100,10 @@ def _check_run(seed, max_depth):
         raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {max_depth!r}")
 
 
-def _check_options(cls, options):
+@functools.lru_cache(maxsize=None)
+def _accepted_options(cls) -> frozenset:
+    """Keyword parameters of an estimator class' constructors (sessions
+    build estimators every frame: inspect once)."""
     import inspect
 
     accepted = set()
@@ -108,7 +112,11 @@ def _check_options(cls, options):
         if init is not None:
             accepted |= {p.name for p in inspect.signature(init).parameters.values()
                          if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
-    unknown = set(options) - (accepted - {"self", "queue", "compiled", "points"})
+    return frozenset(accepted - {"self", "queue", "compiled", "points"})
+
+
+def _check_options(cls, options):
+    unknown = set(options) - _accepted_options(cls)
     if unknown:
         raise OclgiError(f"method {cls.name!r} takes no option(s) {sorted(unknown)}")
 

@@ -79,7 +79,7 @@ LANES = 8  # discs (or segments) per float8 block
 def coordinate_scale(compiled, positions: np.ndarray) -> float:
     """Largest of the scene's diagonal and its (and the points') coordinates:
     float32 rounding is relative to the coordinates, not to the extent."""
-    lo, hi = compiled.scene.bounds()
+    lo, hi = compiled.bounds
     lo = np.minimum(lo, positions.min(axis=0)) if len(positions) else lo
     hi = np.maximum(hi, positions.max(axis=0)) if len(positions) else hi
     return float(max(np.linalg.norm(hi - lo), np.abs(lo).max(), np.abs(hi).max(), 1e-30))

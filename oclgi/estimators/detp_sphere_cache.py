@@ -207,7 +207,7 @@ class DetpSphereCache(DetpEstimator):
         q = self.queue
         rec0 = self._buffer("_rec0", batch.n_slots * 32)
         slot0 = self._buffer("_slot0", batch.n_slots * 4)
-        cl.enqueue_fill_buffer(q, self._n0, np.int32(0), 0, 4)
+        cl.enqueue_copy(q, self._n0, np.zeros(1, np.int32))  # a fill costs ~0.4 ms on PoCL
         launch(q, self.k_gather, -(-batch.n_paths // PATHS_PER_ITEM), batch.segments, np.int32(batch.n_paths),
                np.int32(batch.max_depth), np.int32(self.count_emitted), np.int32(PATHS_PER_ITEM), self.c0,
                np.float32(self.radii[0]), np.float32(self.ext), rec0, slot0, self._n0, self.work_buf,
@@ -237,7 +237,7 @@ class DetpSphereCache(DetpEstimator):
             pending = np.nonzero(done < lengths)[0].astype(np.int32)
             runs, n_pending = (self.all_runs if len(pending) == self.n_runs else self.upload(pending)), len(pending)
             while n_pending:
-                cl.enqueue_fill_buffer(q, self.status, np.int32(0), 0, 3 * 4)
+                cl.enqueue_copy(q, self.status, np.zeros(3, np.int32))
                 wave = max(1, min(n_pending, self.scratch_bytes // ((cap + 1) * ENTRY_BYTES)))
                 srec = self._buffer("_srec", wave * (cap + 1) * 32)
                 sslot = self._buffer("_sslot", wave * (cap + 1) * 4)

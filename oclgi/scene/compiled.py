@@ -34,6 +34,7 @@ class CompiledScene:
     def __init__(self, ctx: cl.Context, scene: Scene):
         self.ctx = ctx
         self.scene = scene
+        self.bounds = scene.bounds()  # of the geometry as loaded (estimators ask for it often)
         t0 = time.perf_counter()
         v = scene.vertices[scene.faces]  # (F, 3, 3) float64
         self._build_objects(v)
