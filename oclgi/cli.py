@@ -132,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--frames", type=_positive_int, default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
+    a.add_argument("--dynamic", choices=[m for m in METHODS if m.startswith("detp")],
+                   help="DETP variant that recomputes the pixels on the moving object (default detp_disc_index, "
+                        "summed in the pass that finds the affected paths)")
     a.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
 
     sub.add_parser("info", help="list OpenCL devices")
@@ -203,7 +206,7 @@ def cmd_animate(args):
         name = movable[0]
     engine.scene.object_id(name)
     out.mkdir(parents=True, exist_ok=True)
-    session = Session(engine, **_est_kwargs(args))
+    session = Session(engine, dynamic=args.dynamic, **_est_kwargs(args))
     show = None if args.quiet or not sys.stderr.isatty() else (
         lambda f, r: print(f"\rframe {f + 1}/{args.frames}: {r['paths']:,} paths re-traced, "
                            f"{r['total_s'] * 1e3:.0f} ms", end="", file=sys.stderr))

@@ -70,7 +70,8 @@ def test_animate_writes_frames_and_log(tmp_path):
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "anim"
-    r = _run("animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr")
+    r = _run("animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr",
+             "--dynamic", "detp_sphere_cache")
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in out.iterdir()) == [
         "frame_0000.exr", "frame_0000.png", "frame_0001.exr", "frame_0001.png", "frame_0002.exr",
@@ -84,6 +85,7 @@ def test_animate_writes_frames_and_log(tmp_path):
 @pytest.mark.parametrize("args,message", [
     (["--path", "zigzag:1", "--frames", "3"], "not line:"),
     (["--path", "line:1,0,0", "--object", "teapot"], "no movable object named 'teapot'"),
+    (["--path", "line:1,0,0", "--dynamic", "impact"], "invalid choice: 'impact'"),
 ])
 def test_animate_bad_input(tmp_path, args, message):
     scene = tmp_path / "s.toml"
