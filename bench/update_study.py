@@ -283,34 +283,38 @@ def dynamic_points(quick, frames=8):
     return rows
 
 
+def _table(title, columns, rows):
+    """A markdown section: ``columns`` is a list of (header, cell function);
+    the first column is left-aligned, the others right-aligned."""
+    md = ["", f"## {title}", "", "| " + " | ".join(h for h, _ in columns) + " |",
+          "|---|" + "---:|" * (len(columns) - 1)]
+    return md + ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in rows]
+
+
 def markdown(res):
     md = [f"# Incremental update study ({res.get('method', '')})"]
-    rows = res.get("speedup")
-    if rows:
-        md += ["", "## Speedup vs f (room with a ball)", "",
-               "| f | n_Rec/n_R | f^2 | dynamic points | full s | update s | S (time) | S (work) | model S(f) |",
-               "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-        for r in rows:
-            md.append(f"| {r['f']:.2f} | {r['n_Rec_over_n_R']:.4f} | {r['f'] ** 2:.4f} | {r['dynamic_points']:.0f} "
-                      f"| {r['full_seconds']:.3f} | {r['update_seconds']:.4f} | {r['speedup_time']:.1f} "
-                      f"| {r['speedup_work']:.1f} | {r['model']:.1f} |")
+    if res.get("speedup"):
+        md += _table("Speedup vs f (room with a ball)", [
+            ("f", lambda r: f"{r['f']:.2f}"), ("n_Rec/n_R", lambda r: f"{r['n_Rec_over_n_R']:.4f}"),
+            ("f^2", lambda r: f"{r['f'] ** 2:.4f}"), ("dynamic points", lambda r: f"{r['dynamic_points']:.0f}"),
+            ("full s", lambda r: f"{r['full_seconds']:.3f}"), ("update s", lambda r: f"{r['update_seconds']:.4f}"),
+            ("S (time)", lambda r: f"{r['speedup_time']:.1f}"), ("S (work)", lambda r: f"{r['speedup_work']:.1f}"),
+            ("model S(f)", lambda r: f"{r['model']:.1f}")], res["speedup"])
     if res.get("constants"):
-        md += ["", "## Static points: counted work per streamed segment and cbrt(n_S)", "",
-               "| n_S | method | segments streamed | t | u | (t+u) | nodes / segment | ns / segment |",
-               "|---:|---|---:|---:|---:|---:|---:|---:|"]
-        for r in res["constants"]:
-            md.append(f"| {r['n_S']:,} | {r['method']} | {r['streamed']:,} | {r['t_per_seg_cbrt']:.2f} "
-                      f"| {r['u_per_seg_cbrt']:.2f} | {r['tu_per_seg_cbrt']:.2f} | {r['nodes_per_seg']:.1f} "
-                      f"| {r['estimate_s_per_seg'] * 1e9:.0f} |")
+        md += _table("Static points: counted work per streamed segment and cbrt(n_S)", [
+            ("n_S", lambda r: f"{r['n_S']:,}"), ("method", lambda r: r["method"]),
+            ("segments streamed", lambda r: f"{r['streamed']:,}"), ("t", lambda r: f"{r['t_per_seg_cbrt']:.2f}"),
+            ("u", lambda r: f"{r['u_per_seg_cbrt']:.2f}"), ("(t+u)", lambda r: f"{r['tu_per_seg_cbrt']:.2f}"),
+            ("nodes / segment", lambda r: f"{r['nodes_per_seg']:.1f}"),
+            ("ns / segment", lambda r: f"{r['estimate_s_per_seg'] * 1e9:.0f}")], res["constants"])
     if res.get("dynamic"):
-        md += ["", "## Dynamic points (Cornell box + bunny, f = 0.1)", "",
-               "| dynamic points by | n_R | n_D | n_Rec | t | u | nodes | points ms | find ms | update ms |",
-               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-        for r in res["dynamic"]:
-            w = r["work"]
-            md.append(f"| {r['label']} | {r['n_R']:,} | {r['n_D']:.0f} | {r['n_Rec']:.0f} | {w['t']:,.0f} "
-                      f"| {w['u']:,.0f} | {w['nodes']:,.0f} | {r['points_s'] * 1e3:.1f} | {r['find_s'] * 1e3:.1f} "
-                      f"| {r['total_s'] * 1e3:.1f} |")
+        md += _table("Dynamic points (Cornell box + bunny, f = 0.1)", [
+            ("dynamic points by", lambda r: r["label"]), ("n_R", lambda r: f"{r['n_R']:,}"),
+            ("n_D", lambda r: f"{r['n_D']:.0f}"), ("n_Rec", lambda r: f"{r['n_Rec']:.0f}"),
+            ("t", lambda r: f"{r['work']['t']:,.0f}"), ("u", lambda r: f"{r['work']['u']:,.0f}"),
+            ("nodes", lambda r: f"{r['work']['nodes']:,.0f}"), ("points ms", lambda r: f"{r['points_s'] * 1e3:.1f}"),
+            ("find ms", lambda r: f"{r['find_s'] * 1e3:.1f}"), ("update ms", lambda r: f"{r['total_s'] * 1e3:.1f}")],
+            res["dynamic"])
     for inter in res.get("interactive", []):
         md += ["", f"## Interactive rate ({inter['scene']} + bunny, f = {inter['f']})", "",
                f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames, "

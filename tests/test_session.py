@@ -165,3 +165,36 @@ def test_dynamic_must_be_a_detp_variant(engine):
 def test_photon_maps_have_no_exact_session(engine):
     with pytest.raises(oclgi.OclgiError, match="no exact incremental update"):
         oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), method="photon_map", photons=1000)
+
+
+def test_view_rectangle_holds_every_pixel_on_the_object(scenes_dir, rng):
+    """The projected rectangle of the movable object's box must contain every
+    pixel that sees the object (else a dynamic point would be missed), also
+    when the object is close to the eye or partly behind it; the composite
+    view then equals a full camera pass bit for bit."""
+    from oclgi.dynamic_view import DynamicView
+
+    scene = _scene(scenes_dir)
+    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=96, height=80)
+    engine = oclgi.Engine(scene)
+    view = DynamicView(engine)
+    seen = 0
+    for i in range(40):
+        m = _rigid(rng, shift=0.9)
+        if i % 8 == 5:
+            m[:3, 3] = [0.0, 1.0, 3.7]  # around the eye: the box reaches behind it
+        engine.move("bunny", m)
+        x0, y0, w, h = view.rectangle()
+        full = engine.camera_points()
+        on = np.nonzero(view.on_movable(full.tri))[0]
+        ys, xs = np.divmod(on, scene.camera.width)
+        assert ((xs >= x0) & (xs < x0 + w) & (ys >= y0) & (ys < y0 + h)).all()
+        seen += len(on)
+        view.update()
+        assert view.points.positions.tobytes() == full.positions.tobytes()
+        assert view.points.normals.tobytes() == full.normals.tobytes()
+        assert np.array_equal(np.sort(view.dynamic), on)
+        if 0 < w * h < scene.camera.width * scene.camera.height:
+            assert len(on) < w * h  # a real rectangle, not always the whole image
+    assert seen > 1000
+    engine.move("bunny", np.eye(4))
