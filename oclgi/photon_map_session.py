@@ -24,7 +24,10 @@ recomputation are slower than recomputing, so the *practical* update
   (the k-th nearest moved: shadows and light the object moved), by about
   the estimator's own noise, and it tends to recomputation as r_k shrinks
   with more photons. Errors do not pile up over frames: back at the first
-  pose every estimate is the first frame's again, bit for bit.
+  pose every estimate is the first frame's again, bit for bit (when the
+  object was placed there by ``engine.move``: a move computes its world
+  normals on the device, loading the scene on the host, and the last bits
+  differ, so paths that bounce off it differ too).
 - ``mode="exact"``: the points whose closed ball holds a changed impact
   are listed (the others keep their k nearest: nothing of theirs left,
   nothing that arrived ranks before their k-th) and searched again with

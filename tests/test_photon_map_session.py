@@ -150,14 +150,16 @@ def test_exact_equals_recomputation(engine, points):
 
 
 def test_practical_drift_below_noise(engine, points):
-    """After 30 frames of an animation, the practical estimate is closer to
-    recomputation than two recomputations with different seeds are to each
-    other. Measured (bench/photon_map_drift.py, the same kind of frames):
-    the drift's relative RMS grows to a fraction of the noise's and stays
-    there, so "below the noise" is a loose bound that a wrong update (a
-    missed or double-counted impact moves a sum by a whole photon's power,
-    1/(k-1) of the estimate) breaks. The noise is measured here, not assumed:
-    the k-1 estimate's relative spread is about 1/sqrt(k-2)."""
+    """After 30 frames of an animation the practical estimate's RMS error
+    against recomputation is below one estimate's noise (two seeds'
+    difference over sqrt 2), measured here, not assumed. Measured in
+    bench/photon_map_drift.py (10^5 photons, k = 50, 80 frames): drift
+    0.020 to 0.031, noise 0.15, flat over the frames; here (2x10^4
+    photons, k = 30) 0.025 against 0.18. The bound is loose on
+    purpose (a shared machine, another scene and seed must not fail it),
+    yet an update that loses its subtract pass, or adds each impact
+    twice, exceeds it: every changed impact then moves a sum by a whole
+    photon, 1/(k-1) of the estimate, for good."""
     pts, n_room = points
     session = _session(engine, pts)
     for m in _slide(30):
@@ -168,6 +170,7 @@ def test_practical_drift_below_noise(engine, points):
     rms = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
     drift, noise = rms(e - f) / rms(f), rms(g - f) / np.sqrt(2) / rms(f)
     assert 0.05 < noise < 0.5, noise  # k = 30: about 1/sqrt(28) = 0.19
+    print(f"drift {drift:.4f}, noise {noise:.4f}")
     assert 0 < drift < noise, (drift, noise)
 
 
