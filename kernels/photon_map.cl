@@ -57,9 +57,8 @@ __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_d
     int o = offsets[p];
     for (int b = count_emitted ? 0 : 1; b < max_depth && path[b].tri >= 0; ++b) {
         __global const Segment *s = &path[b];
-        float3 w = vload3(0, s->dir);
-        vstore3(vload3(0, s->org) + s->t_end * w, o, pos);
-        vstore3(w, o, dir);
+        vstore3(pm_impact_position(s), o, pos);
+        vstore3(vload3(0, s->dir), o, dir);
         vstore3(vload3(0, s->power), o, power);
         ++o;
     }

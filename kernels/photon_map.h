@@ -53,6 +53,21 @@ inline float pm_dist2(float3 p, float3 q)
     return dx * dx + dy * dy + dz * dz;
 }
 
+/* An impact: the end of a segment that hit a surface. One expression for
+ * every kernel that makes impacts (pm_gather, photon_map_update.cl), so
+ * their positions agree bit for bit. */
+inline float3 pm_impact_position(__global const Segment *s)
+{
+    return vload3(0, s->org) + s->t_end * vload3(0, s->dir);
+}
+
+/* Does direction w arrive on normal n's front side? Products summed in the
+ * order pm_scan's lanes sum them, so the answers agree. */
+inline int pm_arrives_front(float3 w, float3 n)
+{
+    return w.x * n.x + w.y * n.y + w.z * n.z < -PM_COS_EPS;
+}
+
 /* Squared distance from q to a box; never larger than pm_dist2 of a point in
  * it: each clamped difference is a rounded subtraction of a box bound, which
  * rounds no further from q than the point's coordinate (rounding is

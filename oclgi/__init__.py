@@ -15,6 +15,7 @@ from .errors import OclgiError
 from .queries import QueryPoints, from_arrays as query_points, from_file as read_points
 from .scene.description import load_dict, load_file
 from .scene.scene import Camera, Material, OclgiWarning, PointLight, Scene
+from .photon_map_session import PhotonMapSession
 from .session import Session, UpdateStats
 
 __version__ = "0.1.0"
@@ -41,5 +42,5 @@ def save_render(result: Render, path) -> tuple[_Path, _Path]:
 __all__ = [
     "Engine", "Estimate", "Render", "Stats", "OclgiError", "OclgiWarning", "QueryPoints",
     "query_points", "read_points", "load_dict", "load_file", "Camera", "Material", "PointLight",
-    "Scene", "Session", "UpdateStats", "scene_path", "save_render", "__version__",
+    "Scene", "Session", "PhotonMapSession", "UpdateStats", "scene_path", "save_render", "__version__",
 ]

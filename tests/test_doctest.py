@@ -5,10 +5,11 @@ import doctest
 import pytest
 
 import oclgi.engine
+import oclgi.photon_map_session
 import oclgi.session
 
 
-@pytest.mark.parametrize("module", [oclgi.engine, oclgi.session])
+@pytest.mark.parametrize("module", [oclgi.engine, oclgi.session, oclgi.photon_map_session])
 def test_docstring_examples(module):
     result = doctest.testmod(module, verbose=False)
     assert result.attempted >= 2

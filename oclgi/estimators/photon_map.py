@@ -494,6 +494,11 @@ class PhotonMap(Estimator):
         self.chunks.append(tuple(host))
         self.n_impacts += m
 
+    def clear_impacts(self):
+        """Forget the gathered impacts and their index (a session gathers its
+        store again after a move); the sums and radii stay."""
+        self.chunks, self.n_impacts, self.knn = [], 0, None
+
     def impacts(self):
         """All impacts in canonical order: positions, directions, powers, (N, 3) float32."""
         if not self.chunks:
@@ -514,14 +519,38 @@ class PhotonMap(Estimator):
                                 count_work=self.count_work)
         return self.knn
 
-    def resolve(self, scale: float) -> cl.Buffer:
-        """Irradiance (float4 per point, on the device): E = acc / (scale pi r_k^2)."""
+    def search(self, scale: float, ids: np.ndarray | None = None):
+        """The k-nearest search for every point, or for points ``ids`` only
+        (their sums and radii are overwritten, the others keep theirs)."""
         knn = self.build_index()
-        knn.search(self.positions, self.normals, self.order, self.n, self.k, self.front_only,
+        order, n = self.order, self.n
+        if ids is not None:
+            if len(ids) == 0:
+                return
+            ids = np.asarray(ids, np.int32)  # searched in Morton order, for locality only
+            order, n = self.upload(ids[query_order(self.points.positions[ids])]), len(ids)
+        knn.search(self.positions, self.normals, order, n, self.k, self.front_only,
                    self.estimator == "k", scale, self.acc, self.r2, local_size=self.local_size)
+
+    def irradiance_buffer(self, scale: float) -> cl.Buffer:
+        """E = acc / (scale pi r_k^2) from the current sums and radii (float4 per point, on the device)."""
         launch(self.queue, self.k_resolve, self.n, self.acc, self.r2, np.int32(self.n),
                np.float32(1.0 / (scale * math.pi)), self.irr)
         return self.irr
+
+    def resolve(self, scale: float) -> cl.Buffer:
+        """Irradiance (float4 per point, on the device): E = acc / (scale pi r_k^2)."""
+        self.search(scale)
+        return self.irradiance_buffer(scale)
+
+    def replace_points(self, index: np.ndarray, new) -> None:
+        """Points ``index`` moved (points on a moved object); the caller searches them again.
+        The Morton order of the full search is kept: it only serves locality."""
+        self.points.positions[index] = new.positions
+        self.points.normals[index] = new.normals
+        self.points.barys[index] = new.barys
+        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
+        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
 
     def accumulators(self) -> np.ndarray:
         out = np.empty((self.n, 3), np.int64)

@@ -1,0 +1,295 @@
+"""Photon Maps kept up to date as objects move (DESIGN.md section 4).
+
+A k-nearest estimate is not a sum of per-segment terms (an impact that
+arrives or leaves changes which impacts are a point's k nearest, and r_k),
+so the exact add-and-subtract update of ``Session`` does not apply. The
+thesis' answer (García 2004, 2007): Photon Maps made exactly equal to a
+recomputation are slower than recomputing, so the *practical* update
+"estimates with the new impacts and recomputes the moving object fully
+(not equal to recomputation, tends to it)". Here:
+
+- The session keeps every path in a ``SegmentStore``; a move re-traces the
+  affected suffixes, so the store, and the map of impacts gathered from it,
+  equal a fresh trace at the new pose bit for bit.
+- ``mode="practical"``: the impacts that changed (those of the old
+  suffixes, read before the re-trace, and of the new ones) update the sums
+  of the points whose ball (centre x, radius r_k of the point's last
+  k-nearest search) holds them: removed impacts subtract their power,
+  added ones add it, the radius stays (kernels/photon_map_update.cl).
+  Points on the moving object moved with it: their k nearest are searched
+  again in the new map. Fixed-point sums make this path-independent: a
+  static point's estimate is exactly the fixed-radius estimate, with the
+  radius of the first frame, over the current impacts (up to ties at r_k).
+  It differs from recomputation where the impacts near a point changed
+  (the k-th nearest moved: shadows and light the object moved), by about
+  the estimator's own noise, and it tends to recomputation as r_k shrinks
+  with more photons. Errors do not pile up over frames: back at the first
+  pose every estimate is the first frame's again, bit for bit (when the
+  object was placed there by ``engine.move``: a move computes its world
+  normals on the device, loading the scene on the host, and the last bits
+  differ, so paths that bounce off it differ too).
+- ``mode="exact"``: the points whose closed ball holds a changed impact
+  are listed (the others keep their k nearest: nothing of theirs left,
+  nothing that arrived ranks before their k-th) and searched again with
+  the points on the moving object: every estimate equals a recomputation
+  from scratch bit for bit (ranks are (d2, canonical id); an impact's
+  canonical id shifts when earlier paths gain or lose impacts, but the
+  relative order of the impacts that stay does not).
+
+Costs per move: the store's find pass and the re-trace (as ``Session``);
+the changed impacts walk a BVH over the balls (O(changed log n_P)); when
+some point must be searched again (points on the moving object, or exact
+mode), the impacts are gathered from the store and their index rebuilt
+(O(N log N), as a fresh PhotonMap does: it is what most of such a move
+costs), the listed points searched, and the ball BVH rebuilt over the
+points (host numpy, O(n_P log n_P), small beside the impacts' index).
+Host bookkeeping of which points to search is O(listed).
+
+Points on a movable object: a query point whose triangle (``tri``, as
+``engine.vertex_points()`` and camera points carry) belongs to a movable
+object is attached to it and follows its moves (positions by the object's
+matrix, normals by its inverse transpose).
+
+    >>> import numpy as np, oclgi
+    >>> scene = oclgi.load_file(oclgi.scene_path("cornell_box.toml"))
+    >>> pts = np.array([[0, 0.01, 0, 0, 1, 0]])
+    >>> session = oclgi.PhotonMapSession(oclgi.Engine(scene), pts, photons=5000, k=20)
+    >>> session.irradiance().shape
+    (1, 3)
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pyopencl as cl
+
+from .accel.bvh_build import build_bvh
+from .cl.programs import launch, programs
+from .engine import as_query_points
+from .errors import OclgiError
+from .estimators.detp_disc_index import PAD, active_discs, check_depth, coordinate_scale, outward_f32
+from .queries import QueryPoints
+from .segment_store import SegmentStore
+from .session import UpdateStats
+
+MODES = ("practical", "exact")
+BALL_LEAF = 8  # balls per leaf of the ball BVH
+UNBOUNDED = 1e30  # half-extent of the box of a ball with r_k = inf (fewer than k impacts)
+
+
+class BallIndex:
+    """A BVH over the query points' balls (x_i, r_k,i), on the device.
+
+    Boxes are padded like DETP's disc boxes (``PAD`` times the coordinate
+    scale, far above float32 rounding) and rounded outward, so every impact
+    the kernel's exact test accepts reaches its ball's leaf. ``unbounded``:
+    whether balls with r_k = inf are indexed (exact mode: any change may
+    give such a point k impacts; practical mode: their E stays 0).
+    """
+
+    def __init__(self, queue, compiled, points: QueryPoints, r2: np.ndarray, unbounded: bool):
+        ids = active_discs(points)
+        if not unbounded:
+            ids = ids[np.isfinite(r2[ids])]
+        self.n = len(ids)
+        self.nodes = self.balls = None
+        if not self.n:
+            return
+        pos = points.positions[ids, :3].astype(np.float64)
+        r = np.sqrt(r2[ids].astype(np.float64))
+        half = np.where(np.isfinite(r), r + PAD * coordinate_scale(compiled, pos), UNBOUNDED)[:, None]
+        lo, hi = outward_f32(pos - half, pos + half)
+        bvh = build_bvh(lo, hi, BALL_LEAF)
+        check_depth(bvh.depth, "balls")
+        mf = cl.mem_flags
+        ctx = queue.context
+        self.nodes = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=bvh.nodes)
+        self.balls = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=ids[bvh.order].astype(np.int32))
+
+
+def _copy(q: QueryPoints) -> QueryPoints:
+    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
+
+
+def _matrix4(m) -> np.ndarray:
+    m = np.asarray(m, np.float64)
+    return np.vstack([m, [0, 0, 0, 1]]) if m.shape == (3, 4) else m
+
+
+class PhotonMapSession:
+    """Photon Map irradiance at fixed query points, kept up to date under moves.
+
+    ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz); ``photons``,
+    ``seed``, ``max_depth``, ``count_emitted`` as for
+    :meth:`oclgi.Engine.irradiance` (the scene's by default); ``k``,
+    ``estimator``, ``index``, ``front_only``, ``leaf_size`` as for the
+    ``photon_map`` estimator; ``mode``: "practical" (the thesis' update,
+    module docstring) or "exact" (equal to recomputation).
+    """
+
+    def __init__(self, engine, points, photons=None, seed=None, max_depth=None, k=50, estimator="k-1",
+                 count_emitted=None, mode="practical", index="bvh", front_only=True, leaf_size=16):
+        if mode not in MODES:
+            raise OclgiError(f"Photon Map session mode must be one of {', '.join(map(repr, MODES))}, got {mode!r}")
+        self.engine, self.queue, self.mode = engine, engine.queue, mode
+        self.params = engine.run_params("photon_map", photons, None, seed, max_depth, None, count_emitted)
+        self.options = dict(k=k, estimator=estimator, index=index, front_only=front_only, leaf_size=leaf_size)
+        self.points = _copy(as_query_points(points))
+        self.map = engine.estimator(self.points, self.params, **self.options)  # validates the options
+        t0 = time.perf_counter()
+        p = self.params
+        self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+        self.scale = self.store.scale
+        self._gather()
+        self.map.search(self.scale)
+        self.attached = self._attach()
+        self.balls = self._balls()
+        prog = programs(engine.ctx).get("photon_map_update")
+        self.k_update, self.k_unmark = prog.pm_update_balls, prog.pm_unmark
+        n = max(len(self.points), 1)
+        self.marks = self.map.zeros(n * 4)
+        self.listed = cl.Buffer(engine.ctx, cl.mem_flags.READ_WRITE, n * 4)
+        self.n_listed = self.map.zeros(4)
+        self.queue.finish()
+        self.setup_seconds = time.perf_counter() - t0
+
+    # -- setup --------------------------------------------------------------
+    def _gather(self):
+        """The map: every impact of the store, in canonical order (its index is built when searched)."""
+        self.map.clear_impacts()
+        self.map.accumulate(self.store.batch, self.scale)
+        self.map_current = True
+
+    def _attach(self) -> dict:
+        """Per movable object: its points (their triangle is the object's), their
+        positions and normals as given, and the object's pose then."""
+        scene, compiled = self.engine.scene, self.engine.compiled
+        tri = self.points.tri
+        out = {}
+        for obj, (a, b) in enumerate(scene.object_ranges()):
+            ids = np.nonzero((tri >= a) & (tri < b))[0]
+            if scene.objects[obj].movable and len(ids):
+                pose = _matrix4(compiled.instances_host[obj]["world_from_object"].astype(np.float64))
+                out[obj] = (ids, self.points.positions[ids].copy(), self.points.normals[ids].copy(), pose)
+        return out
+
+    def _balls(self) -> BallIndex:
+        r2 = np.empty(len(self.points), np.float32)
+        cl.enqueue_copy(self.queue, r2, self.map.r2)
+        return BallIndex(self.queue, self.engine.compiled, self.points, r2, unbounded=self.mode == "exact")
+
+    def _place_points(self, obj: int, matrix) -> np.ndarray:
+        """Move the points attached to ``obj`` to the object's new pose; their ids."""
+        if obj not in self.attached:
+            return np.zeros(0, np.int64)
+        ids, pos0, nrm0, pose0 = self.attached[obj]
+        m = _matrix4(matrix)
+        moved = QueryPoints(pos0.copy(), nrm0.copy(), self.points.barys[ids].copy())
+        if not np.array_equal(m, pose0):  # back at the first pose: the points as given, bit for bit
+            rel = m @ np.linalg.inv(pose0)
+            moved.positions[:, :3] = pos0[:, :3].astype(np.float64) @ rel[:3, :3].T + rel[:3, 3]
+            n = nrm0[:, :3].astype(np.float64) @ np.linalg.inv(rel[:3, :3])  # inverse transpose
+            moved.normals[:, :3] = n / np.linalg.norm(n, axis=1)[:, None]
+        self.map.replace_points(ids, moved)
+        return ids
+
+    # -- reading ------------------------------------------------------------
+    def irradiance(self) -> np.ndarray:
+        """(n, 3) irradiance at the query points (their current positions), W/m^2."""
+        out = np.empty((len(self.points), 4), np.float32)
+        cl.enqueue_copy(self.queue, out, self.map.irradiance_buffer(self.scale))
+        return out[:, :3]
+
+    def accumulators(self) -> np.ndarray:
+        """The exact fixed-point sums behind the irradiance, (n, 3) int64."""
+        return self.map.accumulators()
+
+    def radii(self) -> np.ndarray:
+        """r_k of each point: of its last k-nearest search (practical mode keeps it for static points)."""
+        return self.map.radii()
+
+    def impacts(self):
+        """The map's impacts at the current pose, canonical order: positions, directions, powers."""
+        if not self.map_current:
+            self._gather()
+        return self.map.impacts()
+
+    def segments(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.store.segments(), self.store.path_len()
+
+    def recompute(self, seed=None):
+        """A Photon Map estimate from scratch at the current pose and points
+        (an ``Estimate``; ``seed`` another seed, to measure the noise)."""
+        p = self.params
+        return self.engine.irradiance(_copy(self.points), method="photon_map", photons=p.photons,
+                                      seed=p.seed if seed is None else seed, max_depth=p.max_depth,
+                                      count_emitted=p.count_emitted, **self.options)
+
+    # -- moving -------------------------------------------------------------
+    def move(self, name: str, matrix) -> UpdateStats:
+        """Place movable object ``name`` (4x4 world-from-object matrix) and update."""
+        engine, q = self.engine, self.queue
+        obj = engine.scene.object_id(name)
+        t0 = time.perf_counter()
+        engine.move(name, matrix)
+        moved = self._place_points(obj, matrix)
+        affected = self.store.find(obj)
+        t1 = time.perf_counter()
+        seconds = {"find": t1 - t0}
+        stats = UpdateStats(paths=len(affected), segments_removed=0, segments_added=0)
+        exact = self.mode == "exact"
+        if len(affected):
+            cl.enqueue_fill_buffer(q, self.n_listed, np.int32(0), 0, 4)
+            stats.segments_removed = self.store.suffix_segments(affected)
+            self._update_balls(affected, -1.0, exact)
+            q.finish()
+            t2 = time.perf_counter()
+            self.store.retrace(affected)
+            q.finish()
+            t3 = time.perf_counter()
+            self._update_balls(affected, 1.0, exact)
+            stats.segments_added = self.store.suffix_segments(affected)
+            q.finish()
+            t4 = time.perf_counter()
+            seconds.update(retrace=t3 - t2, balls=(t2 - t1) + (t4 - t3))
+            self.map_current = False
+        search = moved
+        if exact and len(affected):
+            search = np.union1d(moved, self._listed())
+        stats.points = len(search)
+        if len(search):
+            t5 = time.perf_counter()
+            if not self.map_current:
+                self._gather()
+            self.map.search(self.scale, search)  # builds the index first
+            q.finish()
+            t6 = time.perf_counter()
+            self.balls = self._balls()  # the searched points' balls changed
+            seconds.update(search=t6 - t5, ball_index=time.perf_counter() - t6)
+        seconds["total"] = time.perf_counter() - t0
+        stats.seconds = seconds
+        return stats
+
+    def _update_balls(self, affected, sign: float, mark: bool):
+        """The impacts of the affected suffixes, as the store holds them now,
+        through the balls (kernels/photon_map_update.cl)."""
+        b, m, s = self.balls, self.map, self.store
+        if b.nodes is None:
+            return
+        launch(self.queue, self.k_update, len(affected), b.nodes, b.balls, m.positions, m.normals, m.r2,
+               s.batch.segments, np.int32(s.max_depth), affected.paths_buf, affected.starts_buf,
+               np.int32(len(affected)), np.int32(m.count_emitted), np.int32(m.front_only), np.int32(mark),
+               np.int32(m.estimator == "k"), np.float32(sign), np.float32(self.scale), m.acc, self.marks,
+               self.listed, self.n_listed, local_size=self.engine.local_size)
+
+    def _listed(self) -> np.ndarray:
+        """The points the exact mode listed (O(listed) to read); their marks cleared."""
+        n = np.empty(1, np.int32)
+        cl.enqueue_copy(self.queue, n, self.n_listed)
+        ids = np.empty(int(n[0]), np.int32)
+        if len(ids):
+            cl.enqueue_copy(self.queue, ids, self.listed)
+            launch(self.queue, self.k_unmark, len(ids), self.listed, np.int32(len(ids)), self.marks)
+        return ids
