@@ -146,6 +146,11 @@ class Engine:
         self.progress = progress
         t0 = time.perf_counter()
         self.compiled = CompiledScene(self.ctx, scene)
+        # Movable objects' world normals come from the device, as after any
+        # move, so that moving back to the loaded pose gives the same bits.
+        for k, obj in enumerate(scene.objects):
+            if obj.movable:
+                self.compiled.set_transform(self.queue, k, np.eye(4))
         self.setup_seconds = time.perf_counter() - t0
         self._programs = programs(self.ctx)
 
