@@ -94,31 +94,34 @@ def test_detp_and_impact_count_variance_under_bound(name, method, plane_study, f
     result = {"plane": plane_study, "furnace": furnace_study}[name]
     for row in rows_of(result, method):
         _under_bound(result, row)
-    # the variance falls as 1 / n: 4x the photons, about a quarter of the variance
-    lo, hi = rows_of(result, method)
-    assert 2.5 < lo.summary["rel_var"] / hi.summary["rel_var"] < 6
+    if name == "plane":  # many independent points: the variance falls as 1 / n (4x the photons)
+        lo, hi = rows_of(result, method)
+        assert 2.5 < lo.summary["rel_var"] / hi.summary["rel_var"] < 6
 
 
 def test_photon_map_variance_gamma_law_and_bound(furnace_study):
     """Uniform irradiance: Var(E_hat) / E^2 = 1 / (k-2) for k-1 (times
     (k/(k-1))^2 for k), whatever the photon count; the thesis' bound is
-    smaller than that (the study says so: ratio > 1)."""
+    smaller than that (the study says so: ratio > 1). Medians over the
+    points: single points have shown a rare outlier run far in the tail."""
     from oclgi import bounds
 
     res = furnace_study
     inputs = res.inputs
+    e = math.pi / (1 - 0.5)
     for est, scale in (("k-1", 1.0), ("k", (K / (K - 1)) ** 2)):
         for row in rows_of(res, "photon_map", est):
-            rel_var = row.summary["rel_var"]
-            # 24 points x 8 seeds: the mean relative variance is known to ~10%
-            assert rel_var == pytest.approx(scale / (K - 2), rel=0.3)
+            rel_var = np.median(row.variance[:, 0]) / e**2
+            # the median of a sample variance of 8 runs is ~0.9 of the variance
+            assert rel_var == pytest.approx(0.9 * scale / (K - 2), rel=0.35)
             # the bound the study used is the formula at the documented inputs
             expect = bounds.photon_map_bound(0.5, inputs.l_max[0] / inputs.phi_total[0], inputs.phi_total[0],
                                              6.0, row.photons, K)
             np.testing.assert_allclose(row.bound, expect, rtol=1e-12)
             predicted = (0.5 * 2.0) ** 2 * scale / (K - 2) / expect  # Var(L_hat) / bound, L_hat = rho E / pi = 1
             assert predicted > 1.5
-            assert row.summary["bound_ratio_mean"] == pytest.approx(predicted, rel=0.3)
+            ratio = (0.5 / math.pi) ** 2 * row.variance[:, 0] / row.bound[:, 0]
+            assert np.median(ratio) == pytest.approx(0.9 * predicted, rel=0.35)
             assert row.summary["under_bound"] < 0.5
 
 
@@ -147,7 +150,10 @@ def test_detp_unbiased_against_its_disc_mean(plane):
     assert abs(on_disc["rel_bias"]) < 4 * on_disc["rel_bias_se"], on_disc
     at_point = run_study(plane, cfg, points=pts, seeds=SEEDS,
                          reference=lambda q, n: exact(q[:, 0], q[:, 2])).rows[0].summary
-    assert at_point["rel_bias"] < -4 * at_point["rel_bias_se"], at_point  # the peak is concave: the mean is lower
+    # against the point value, DETP reads the disc's bias (the peak is concave: the mean is lower)
+    predicted = float(np.mean(mean_ref / exact(p[:, 0], p[:, 2]) - 1))
+    assert predicted < -0.005
+    assert abs(at_point["rel_bias"] - predicted) < 4 * at_point["rel_bias_se"], (at_point, predicted)
 
 
 def test_detp_unbiased_in_the_furnace(furnace_study):
