@@ -7,7 +7,7 @@ against a reference and against their theoretical variance bounds.
 ...                          Config("impact", [1e5, 1e6])],
 ...                 points="random:300", seeds=8, reference="detp")
 >>> res.write("out/study")          # study.md, study.csv and the two plots
->>> equal_time(res).rows            # RMSE of each estimator at a common time
+>>> equal_time(res).rows            # error of each estimator at a common time
 
 A configuration is a method, its parameters and one or more photon counts;
 each (configuration, photon count) is run with R seeds (randomness is a pure
@@ -31,8 +31,16 @@ the points (and channels) whose reference is positive and known to 10%
   builds are not timed); estimate_s: the median of total minus trace (the
   estimator's build, accumulation and resolve: Photon Maps' search runs in
   resolve);
-- efficiency = 1 / (time_s x rel_var), per second (DESIGN.md section 3,
-  with the relative variance so that it does not depend on units);
+- the same over the points in absolute terms, divided by the mean
+  reference (or its square) so as not to depend on units: nbias = mean bias
+  / mean ref, nvar = mean var / mean ref^2, nrmse = sqrt(mean MSE, less the
+  reference's variance) / mean ref. These weigh points by their irradiance,
+  so a few dim points (a shadow edge, a corner, where a relative error can
+  reach hundreds of percent) do not decide them, as they can decide the
+  relative means; nrmse is what the equal-time comparison uses by default;
+- efficiency = 1 / (time_s x nvar), per second (DESIGN.md section 3: the
+  variance, here over the squared mean reference, a constant of the scene,
+  so that it does not depend on units);
 - the theoretical bound and the measured Var(L_hat) = (rho / pi)^2 Var(E_hat)
   per point (see oclgi/study_bounds.py for what is bounded and every input):
   var_L and bound (means over the points), bound_ratio_mean and
@@ -382,6 +390,14 @@ def summarise(result: StudyResult, row: Row) -> dict:
     ratio = var_l[has_bound] / row.bound[has_bound]
     time_s = float(np.median(row.seconds))
     mean_rel_var = float(np.mean(rel_var)) if valid.any() else math.nan
+    if valid.any():
+        scale = float(ref[valid].mean())
+        nbias = float((mean - ref)[valid].mean()) / scale
+        nvar = float(var[valid].mean()) / scale**2
+        mse = ((e - ref) ** 2).mean(axis=0)[valid].mean() - (result.reference.std_error**2)[valid].mean()
+        nrmse = math.sqrt(max(0.0, float(mse))) / scale
+    else:
+        nbias = nvar = nrmse = math.nan
     c = row.config
     return {
         "label": row.label,
@@ -398,9 +414,12 @@ def summarise(result: StudyResult, row: Row) -> dict:
         "rms_bias": rms_bias,
         "rel_var": mean_rel_var,
         "rel_rmse": float(math.sqrt(max(0.0, np.mean(rel_mse) - ref_rel_var.mean()))) if valid.any() else math.nan,
+        "nbias": nbias,
+        "nvar": nvar,
+        "nrmse": nrmse,
         "time_s": time_s,
         "estimate_s": float(np.median(row.estimate_seconds)),
-        "efficiency": 1.0 / (time_s * mean_rel_var) if mean_rel_var > 0 else math.inf,
+        "efficiency": 1.0 / (time_s * nvar) if nvar > 0 else math.inf,
         "var_L": float(np.mean(var_l[has_bound])) if has_bound.any() else math.nan,
         "bound": float(np.mean(row.bound[has_bound])) if has_bound.any() else math.nan,
         "bound_ratio_mean": float(np.mean(ratio)) if ratio.size else math.nan,
@@ -417,12 +436,14 @@ class EqualTime:
     time_s: float
     mode: str
     baseline: str
-    rows: list  # dicts: label, rel_rmse, how, ratio (to the baseline), efficiency
+    rows: list  # dicts: label, error, how, ratio (to the baseline), efficiency
+    metric: str = "nrmse"
 
 
 def equal_time(result: StudyResult, time_s: float | None = None, mode: str = "interpolate",
-               baseline: str | None = None) -> EqualTime:
-    """Each configuration's relative RMSE at one common time.
+               baseline: str | None = None, metric: str = "nrmse") -> EqualTime:
+    """Each configuration's error (``metric``: "nrmse", the default, or
+    "rel_rmse") at one common time.
 
     ``mode="interpolate"``: log-log linear between the two measured points
     around ``time_s``; outside a configuration's measured range, extrapolated
@@ -435,11 +456,13 @@ def equal_time(result: StudyResult, time_s: float | None = None, mode: str = "in
     """
     if mode not in ("interpolate", "fit"):
         raise OclgiError(f"equal_time mode must be 'interpolate' or 'fit', got {mode!r}")
+    if metric not in ("nrmse", "rel_rmse"):
+        raise OclgiError(f"equal_time metric must be 'nrmse' or 'rel_rmse', got {metric!r}")
     fam = result.families()
     curves = {}
     for label, rows in fam.items():
         t = np.array([r.summary["time_s"] for r in rows])
-        e = np.array([r.summary["rel_rmse"] for r in rows])
+        e = np.array([r.summary[metric] for r in rows])
         order = np.argsort(t)
         curves[label] = (t[order], e[order], [rows[i] for i in order])
     if time_s is None:
@@ -456,11 +479,11 @@ def equal_time(result: StudyResult, time_s: float | None = None, mode: str = "in
     for label, (t, e, rows) in curves.items():
         value, how = _at_time(t, e, time_s, mode)
         eff = float(np.median([r.summary["efficiency"] for r in rows]))
-        out.append({"label": label, "rel_rmse": value, "how": how, "efficiency": eff})
-    base = next(r["rel_rmse"] for r in out if r["label"] == baseline)
+        out.append({"label": label, "error": value, "how": how, "efficiency": eff})
+    base = next(r["error"] for r in out if r["label"] == baseline)
     for r in out:
-        r["ratio"] = r["rel_rmse"] / base if base > 0 else math.nan
-    return EqualTime(time_s, mode, baseline, out)
+        r["ratio"] = r["error"] / base if base > 0 else math.nan
+    return EqualTime(time_s, mode, baseline, out, metric)
 
 
 def _at_time(t, e, t0, mode):

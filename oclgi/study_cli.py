@@ -111,6 +111,7 @@ def run(args) -> None:
             print(f"image: {summary}", file=sys.stderr)
     if not args.quiet:
         eq = equal_time(result)
-        parts = ", ".join(f"{r['label']} {r['rel_rmse']:.3g} ({r['ratio']:.2g}x)" for r in eq.rows)
+        parts = ", ".join(f"{r['label']} {r['error']:.3g} ({r['ratio']:.2g}x)" for r in eq.rows)
         print(f"study: {len(result.rows)} configurations x {len(seeds)} seeds at {len(result.points):,} points "
-              f"in {result.seconds:.1f}s; relative RMSE at equal time {eq.time_s:.3g}s: {parts}", file=sys.stderr)
+              f"in {result.seconds:.1f}s; RMSE / mean reference at equal time {eq.time_s:.3g}s: {parts}",
+              file=sys.stderr)

@@ -19,7 +19,7 @@ import numpy as np
 from .errors import OclgiError
 
 COLUMNS = ["label", "method", "photons", "radius", "k", "estimator", "seeds", "points", "segments",
-           "rel_bias", "rel_bias_se", "rms_bias", "rel_var", "rel_rmse", "time_s", "estimate_s",
+           "rel_bias", "rel_bias_se", "rms_bias", "rel_var", "rel_rmse", "nbias", "nvar", "nrmse", "time_s", "estimate_s",
            "efficiency", "var_L", "bound", "bound_ratio_mean", "bound_ratio_max", "under_bound"]
 
 PLOTS = ("error_vs_time.png", "variance_vs_photons.png")
@@ -82,33 +82,37 @@ def markdown(result, equal=None) -> str:
         f"- bound inputs: {result.inputs.describe()} (oclgi/study_bounds.py)",
         f"- study time: {result.seconds:.1f} s",
         "",
-        "| configuration | photons | rel. bias (± s.e.) | RMS bias | rel. variance | rel. RMSE | time s "
-        "| estimate s | efficiency 1/s | Var(L̂) | bound | Var/bound mean | max | under bound |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| configuration | photons | rel. bias (± s.e.) | RMS bias | rel. variance | rel. RMSE | nbias | nvar "
+        "| nRMSE | time s | estimate s | efficiency 1/s | Var(L̂) | bound | Var/bound mean | max | under bound |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in result.table():
         lines.append(
             f"| {r['label']} | {r['photons']:,} | {_pct(r['rel_bias'])} ± {100 * r['rel_bias_se']:.2f}% "
             f"| {_pct(r['rms_bias'])} | {_md_num(r['rel_var'])} | {_md_num(r['rel_rmse'])} "
+            f"| {_pct(r['nbias'])} | {_md_num(r['nvar'])} | {_md_num(r['nrmse'])} "
             f"| {_md_num(r['time_s'])} | {_md_num(r['estimate_s'])} | {_md_num(r['efficiency'])} "
             f"| {_md_num(r['var_L'])} | {_md_num(r['bound'])} | {_md_num(r['bound_ratio_mean'])} "
             f"| {_md_num(r['bound_ratio_max'])} | {_md_num(r['under_bound'])} |")
     lines += [
         "",
-        f"## Equal time: {_md_num(equal.time_s)} s per run ({equal.mode}; ratio to {equal.baseline})",
+        f"## Equal time: {_md_num(equal.time_s)} s per run ({equal.metric}, {equal.mode}; ratio to "
+        f"{equal.baseline})",
         "",
-        "| configuration | rel. RMSE | ratio | efficiency 1/s (median) | how |",
+        f"| configuration | {equal.metric} | ratio | efficiency 1/s (median) | how |",
         "|---|---:|---:|---:|---|",
     ]
     for r in equal.rows:
-        lines.append(f"| {r['label']} | {_md_num(r['rel_rmse'])} | {_md_num(r['ratio'])} "
+        lines.append(f"| {r['label']} | {_md_num(r['error'])} | {_md_num(r['ratio'])} "
                      f"| {_md_num(r['efficiency'])} | {r['how']} |")
     lines += [
         "",
-        "Columns: relative statistics over the points and channels with a positive reference; the bias's "
-        "standard error comes from the per-seed means and the reference's error; the RMS bias has the "
-        "noise removed; efficiency = 1 / (time x relative variance); Var(L̂) = (albedo/pi)^2 Var(Ê) against "
-        "the thesis' bound, per point (see the docstrings of oclgi/study.py and oclgi/study_bounds.py).",
+        "Columns: relative statistics (means over the points and channels of bias / ref, var / ref^2, MSE / "
+        "ref^2) where the reference is positive and known to 10%; the bias's standard error comes from the "
+        "per-seed means and the reference's error; the RMS bias has the noise removed; nbias, nvar, nRMSE: "
+        "the absolute means over the same points over the mean reference (or its square), which dim points "
+        "cannot dominate; efficiency = 1 / (time x nvar); Var(L̂) = (albedo/pi)^2 Var(Ê) against the thesis' "
+        "bound, per point (see the docstrings of oclgi/study.py and oclgi/study_bounds.py).",
         "",
     ]
     return "\n".join(lines)
@@ -128,7 +132,8 @@ def json_dict(result) -> dict:
         "seconds": result.seconds,
         "rows": [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in r.items()}
                  for r in result.table()],
-        "equal_time": {"time_s": eq.time_s, "mode": eq.mode, "baseline": eq.baseline, "rows": eq.rows},
+        "equal_time": {"time_s": eq.time_s, "mode": eq.mode, "metric": eq.metric, "baseline": eq.baseline,
+                       "rows": eq.rows},
     }
 
 
@@ -151,12 +156,12 @@ def plot_error_vs_time(result, path) -> None:
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     for label, rows in result.families().items():
         t = [r.summary["time_s"] for r in rows]
-        e = [r.summary["rel_rmse"] for r in rows]
+        e = [r.summary["nrmse"] for r in rows]
         ax.plot(t, e, "o-", label=label)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("time per run (s, median over seeds)")
-    ax.set_ylabel("relative RMSE")
+    ax.set_ylabel("RMSE / mean reference")
     ax.set_title(f"{result.scene_name}: error vs time")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)

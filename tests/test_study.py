@@ -179,20 +179,23 @@ def test_reference_from_detp_states_its_error(plane):
 
 def test_equal_time(plane_study):
     res = plane_study
-    for label, rows in res.families().items():
-        for r in rows:  # at a measured time: the measured error
-            got = next(x for x in equal_time(res, time_s=r.summary["time_s"]).rows if x["label"] == label)
-            assert got["rel_rmse"] == pytest.approx(r.summary["rel_rmse"], rel=1e-9)
-        t = [r.summary["time_s"] for r in rows]
-        e = [r.summary["rel_rmse"] for r in rows]
-        mid = equal_time(res, time_s=math.sqrt(t[0] * t[1]))
-        got = next(x for x in mid.rows if x["label"] == label)
-        assert min(e) <= got["rel_rmse"] <= max(e) and got["how"] == "interpolated"
-        fit = next(x for x in equal_time(res, time_s=2 * max(t), mode="fit").rows if x["label"] == label)
-        c = math.exp(np.mean(np.log(e) + 0.5 * np.log(t)))
-        assert fit["rel_rmse"] == pytest.approx(c * (2 * max(t)) ** -0.5)
+    for metric in ("nrmse", "rel_rmse"):
+        for label, rows in res.families().items():
+            for r in rows:  # at a measured time: the measured error
+                got = next(x for x in equal_time(res, time_s=r.summary["time_s"], metric=metric).rows
+                           if x["label"] == label)
+                assert got["error"] == pytest.approx(r.summary[metric], rel=1e-9)
+            t = [r.summary["time_s"] for r in rows]
+            e = [r.summary[metric] for r in rows]
+            mid = equal_time(res, time_s=math.sqrt(t[0] * t[1]), metric=metric)
+            got = next(x for x in mid.rows if x["label"] == label)
+            assert min(e) <= got["error"] <= max(e) and got["how"] == "interpolated"
+            fit = next(x for x in equal_time(res, time_s=2 * max(t), mode="fit", metric=metric).rows
+                       if x["label"] == label)
+            c = math.exp(np.mean(np.log(e) + 0.5 * np.log(t)))
+            assert fit["error"] == pytest.approx(c * (2 * max(t)) ** -0.5)
     eq = equal_time(res)
-    assert eq.baseline.startswith("detp")
+    assert eq.baseline.startswith("detp") and eq.metric == "nrmse"
     assert next(x for x in eq.rows if x["label"] == eq.baseline)["ratio"] == 1
 
 
@@ -207,7 +210,7 @@ def test_report_files_parse_back(plane_study, tmp_path):
     assert len(table) == len(plane_study.rows) == 4 * len(PHOTONS)
     for got, row in zip(table, plane_study.rows):
         assert got["label"] == row.label and int(got["photons"]) == row.photons
-        for key in ("rel_bias", "rel_var", "rel_rmse", "time_s", "efficiency", "bound_ratio_mean"):
+        for key in ("rel_bias", "rel_var", "rel_rmse", "nvar", "nrmse", "time_s", "efficiency", "bound_ratio_mean"):
             assert float(got[key]) == pytest.approx(row.summary[key], rel=1e-5)
     md = (out / "study.md").read_text()
     table_lines = [line for line in md.splitlines() if line.startswith("| ") and "photons" not in line]
@@ -283,6 +286,7 @@ def test_cli_study(scene, tmp_path):
         (m, n) for m in ("detp", "photon_map", "impact") for n in (2000, 4000)]
     assert all(r["k"] == "20" for r in table if r["method"] == "photon_map")
     assert res.stderr.splitlines()[-1].startswith("study: 6 configurations x 3 seeds at 25 points")
+    assert "RMSE / mean reference at equal time" in res.stderr
     # points from a file, an exact reference from a file
     np.save(tmp_path / "ref.npy", np.array([1.0, 0.5]))
     res = run(tmp_path, "study", "s.toml", "--methods", "detp", "--photons", "2000", "--seeds", "2",
