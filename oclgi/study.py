@@ -117,12 +117,17 @@ def _photon_count(p) -> int:
 
 
 def study_points(engine, points, seed: int = 0) -> queries.QueryPoints:
-    """Query points from a spec: a QueryPoints or (n, 6) array, ``"vertices"``,
+    """Query points from a spec: a QueryPoints or (n, 6) array, a ``.npy`` or
+    ``.csv`` file of them, ``"vertices"``,
     ``"camera"`` or ``"camera:WxH"`` (the visible point of each pixel),
     ``"random:N"`` or an int N (N points uniform over the surface area, drawn
     with ``seed``, each facing the side its triangle's normal gives)."""
+    from pathlib import Path
+
     if isinstance(points, (int, np.integer)) and not isinstance(points, bool):
         points = f"random:{points}"
+    if isinstance(points, (str, Path)) and Path(points).suffix.lower() in (".npy", ".csv"):
+        return queries.from_file(points)
     if isinstance(points, str):
         kind, _, arg = points.partition(":")
         if kind == "vertices" and not arg:
