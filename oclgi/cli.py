@@ -2,6 +2,10 @@
 
     oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE]
     oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv
+    oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
+    oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
+                      [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
+                      [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
     oclgi info
 
 Errors in the input (missing or malformed files, bad numbers, no emitter, no
@@ -79,6 +83,34 @@ def _seed(text):
     return value
 
 
+def _int_text(text):
+    value = _integer(text)
+    if value is None:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
+    return value
+
+
+def _photon_list(text):
+    counts = []
+    for part in text.split(","):
+        value = _integer(part) if part.strip() else None
+        if value is None or value <= 0:
+            raise argparse.ArgumentTypeError(f"expected positive integers separated by commas, got {text!r}")
+        counts.append(value)
+    return counts
+
+
+def _method_list(text):
+    """m1,m2:key=value:key=value,... -> [(method, {options})]."""
+    out = []
+    for part in text.split(","):
+        name, *opts = part.strip().split(":")
+        if name not in METHODS:
+            raise argparse.ArgumentTypeError(f"unknown method {name!r} in {text!r}; choose from {', '.join(METHODS)}")
+        out.append((name, dict(_option(o) for o in opts)))
+    return out
+
+
 def _estimate_args(p):
     p.add_argument("scene", type=Path, help="scene file (TOML)")
     p.add_argument("--method", choices=METHODS, help="estimator (default: the scene's, else detp)")
@@ -136,6 +168,35 @@ def build_parser() -> argparse.ArgumentParser:
                    help="DETP variant that recomputes the pixels on the moving object (default detp_disc_index, "
                         "summed in the pass that finds the affected paths)")
     a.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
+
+    s = sub.add_parser("study", help="compare estimators: bias, variance, time, efficiency, bounds")
+    s.add_argument("scene", type=Path, help="scene file (TOML)")
+    s.add_argument("--methods", type=_method_list, default=None, metavar="M1,M2,...",
+                   help="estimators, each optionally with its own options, e.g. "
+                        "detp_disc_index,photon_map,photon_map:estimator=k,impact "
+                        "(default: detp_disc_index,photon_map,impact)")
+    s.add_argument("--photons", type=_photon_list, default=None, metavar="N1,N2,...",
+                   help="photon counts, each run by every method (default: the scene's count /10, /3 and x1)")
+    s.add_argument("--seeds", type=_int_text, default=8, metavar="R",
+                   help="independent runs per configuration, at least 2 (default 8)")
+    s.add_argument("--points", default="random:256",
+                   help="vertices | camera[:WxH] | random:N | FILE.npy|.csv (default random:256)")
+    s.add_argument("--point-seed", type=_seed, default=0, help="seed of the random points (default 0)")
+    s.add_argument("--reference", default="detp",
+                   help="detp[:PHOTONS] (high-photon DETP, default) | mitsuba[:SPP] | FILE.npy "
+                        "(exact irradiance, (n, 3) or (n,))")
+    s.add_argument("--radius", type=_positive_float, help="DETP disc radius (default: the scene's)")
+    s.add_argument("-O", "--option", action="append", type=_option, default=[], metavar="KEY=VALUE",
+                   help="an option given to every method that takes it, e.g. -O k=50; repeatable")
+    s.add_argument("--image", action="store_true",
+                   help="also render the first method at the largest count and compare the image with "
+                        "Mitsuba's (oclgi.exr, mitsuba.exr, error.exr, error.png in DIR)")
+    s.add_argument("--spp", type=_positive_int, default=256, help="Mitsuba samples per pixel for --image")
+    s.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
+    s.add_argument("--local-size", type=_positive_int, help="work-group size (results do not depend on it)")
+    s.add_argument("-o", "--output", type=Path, required=True,
+                   help="folder for study.md, study.csv, error_vs_time.png, variance_vs_photons.png")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     sub.add_parser("info", help="list OpenCL devices")
     return ap
@@ -221,6 +282,12 @@ def cmd_animate(args):
     print(f"wrote {len(rows)} frames and timing.csv to {out}")
 
 
+def cmd_study(args):
+    from .study_cli import run
+
+    run(args)
+
+
 def cmd_info(_args):
     from .cl.device import INSTALL_HINT, describe_devices, list_devices
 
@@ -244,7 +311,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
-             "info": cmd_info}[args.command](args)
+             "study": cmd_study, "info": cmd_info}[args.command](args)
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code

@@ -5,6 +5,8 @@
 2. A closed box whose walls all emit Le and reflect with albedo rho, all
    bounces (a furnace): the radiance is Le / (1 - rho) everywhere, so the
    irradiance is E = pi Le / (1 - rho).
+
+The scenes are built in analytic_scenes.py (shared with the other tests).
 """
 
 import math
@@ -14,51 +16,14 @@ import pytest
 
 import oclgi
 
-H = 1.0  # light height
-INTENSITY = 1.0  # W/sr
-
-
-def _grid(n_cells, half):
-    """A square grid in the y = 0 plane, 2 triangles per cell, normals +y."""
-    xs = np.linspace(-half, half, n_cells + 1)
-    xx, zz = np.meshgrid(xs, xs, indexing="ij")
-    v = np.stack([xx.ravel(), np.zeros(xx.size), zz.ravel()], axis=1)
-    idx = np.arange(xx.size).reshape(n_cells + 1, n_cells + 1)
-    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
-    faces = np.concatenate([np.stack([a, d, c], 1), np.stack([a, c, b], 1)])
-    return v, faces
-
-
-def _plane_scene(n_cells, half):
-    v, f = _grid(n_cells, half)
-    return oclgi.load_dict({
-        "mesh": [{"vertices": v, "faces": f, "albedo": [0, 0, 0]}],
-        "point_light": [{"position": [0, H, 0], "intensity": [INTENSITY] * 3}],
-        "photons": {"count": 1_000_000, "seed": 3, "max_depth": 2},
-    })
-
-
-def _exact(x, z):
-    r2 = x * x + z * z + H * H
-    return INTENSITY * H / r2**1.5
-
-
-def _disc_mean(x0, z0, d, n=200):
-    """Mean of the exact irradiance over the disc (midpoint rule, polar)."""
-    r = (np.arange(n) + 0.5) / n * d
-    phi = (np.arange(n) + 0.5) / n * 2 * np.pi
-    rr, pp = np.meshgrid(r, phi, indexing="ij")
-    e = _exact(x0 + rr * np.cos(pp), z0 + rr * np.sin(pp))
-    return float((e * rr).sum() / rr.sum())
-
-
-def _triangle_mean(tri, n=60):
-    """Mean of the exact irradiance over a triangle (barycentric grid)."""
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    keep = i + j < n
-    u, v = (i[keep] + 1 / 3) / n, (j[keep] + 1 / 3) / n
-    p = tri[0] + u[:, None] * (tri[1] - tri[0]) + v[:, None] * (tri[2] - tri[0])
-    return float(_exact(p[:, 0], p[:, 2]).mean())
+from analytic_scenes import H, INTENSITY  # noqa: F401  (test_photon_map imports these names from here)
+from analytic_scenes import box as _box
+from analytic_scenes import disc_mean as _disc_mean
+from analytic_scenes import exact as _exact
+from analytic_scenes import face_points as _face_points
+from analytic_scenes import grid as _grid  # noqa: F401
+from analytic_scenes import plane_scene as _plane_scene
+from analytic_scenes import triangle_mean as _triangle_mean
 
 
 @pytest.fixture(scope="module")
@@ -125,42 +90,9 @@ def test_impact_count_vertex_average_and_interpolation(plane):
                                rtol=1e-5)
 
 
-def _box(rho, le):
-    """Unit cube, faces wound so that normals point inwards (emission inwards)."""
-    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    faces = []
-    for a, b, c, d in quads:
-        faces += [(a, b, c), (a, c, d)]
-    faces = np.array(faces)
-    # make every normal point to the centre
-    centre = np.array([0.5, 0.5, 0.5])
-    tri = v[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flip = np.einsum("ij,ij->i", n, centre - tri.mean(axis=1)) < 0
-    faces[flip] = faces[flip][:, ::-1]
-    return oclgi.load_dict({
-        "mesh": [{"vertices": v, "faces": faces, "albedo": [rho] * 3, "emission": [le] * 3}],
-        "photons": {"count": 1_000_000, "seed": 11, "max_depth": 32},
-    })
-
-
 @pytest.fixture(scope="module")
 def furnace():
     return oclgi.Engine(_box(rho=0.5, le=1.0))
-
-
-def _face_points(rng, n_per_face=6, margin=0.15):
-    pts, nrm = [], []
-    for axis in range(3):
-        for side in (0.0, 1.0):
-            p = margin + (1 - 2 * margin) * rng.random((n_per_face, 3))
-            p[:, axis] = side
-            n = np.zeros((n_per_face, 3))
-            n[:, axis] = 1.0 if side == 0.0 else -1.0
-            pts.append(p)
-            nrm.append(n)
-    return np.vstack(pts), np.vstack(nrm)
 
 
 def test_furnace_box_detp(furnace, rng):

@@ -1,0 +1,117 @@
+"""``oclgi study``: the estimator study from the command line (oclgi/study.py).
+
+Every input is checked before any photon is traced, and the report's four
+files are written together at the end (all or nothing), so bad input leaves
+nothing behind.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .errors import OclgiError
+
+DEFAULT_METHODS = ("detp_disc_index", "photon_map", "impact")
+DEFAULT_PHOTON_FRACTIONS = (0.1, 1 / 3, 1.0)  # of the scene's photon count: one decade
+
+
+def _reference(spec: str):
+    from . import study_reference
+
+    path = Path(spec)
+    if path.suffix.lower() == ".npy":
+        if not path.is_file():
+            raise OclgiError(f"reference file not found: {path}")
+        try:
+            values = np.load(path, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise OclgiError(f"{path}: cannot read the reference ({exc})") from None
+        if not isinstance(values, np.ndarray) or values.dtype.kind not in "iuf" or values.ndim not in (1, 2):
+            raise OclgiError(f"{path}: expected an (n, 3) or (n,) array of irradiance values")
+        return values.astype(np.float64)
+    ref = study_reference.parse(spec)
+    study_reference.check_available(ref)
+    return ref
+
+
+def _points(spec: str):
+    from .queries import from_file
+
+    if Path(spec).suffix.lower() in (".npy", ".csv"):
+        return from_file(spec)
+    return spec  # vertices, camera, random:N: checked by oclgi.study.study_points
+
+
+def _configs(engine, args):
+    from .engine import _check_options
+    from .estimators import ESTIMATORS
+    from .study import Config
+
+    methods = args.methods or [(m, {}) for m in DEFAULT_METHODS]
+    photons = args.photons or sorted({max(1, round(f * engine.scene.settings.photons))
+                                      for f in DEFAULT_PHOTON_FRACTIONS})
+    shared = dict(args.option)
+    used = set()
+    configs = []
+    for method, own in methods:
+        options = {}
+        for key, value in shared.items():  # an -O option goes to every method that takes it
+            try:
+                _check_options(ESTIMATORS[method], {key: value})
+            except OclgiError:
+                continue
+            options[key] = value
+            used.add(key)
+        options.update(own)
+        radius = args.radius if method.startswith("detp") else None
+        configs.append(Config(method, photons, radius=radius, **options))
+    unused = sorted(set(shared) - used)
+    if unused:
+        raise OclgiError(f"option(s) {unused} are taken by none of the methods {[m for m, _ in methods]}")
+    return configs
+
+
+def _image_module():
+    try:
+        from . import study_image
+    except ImportError as exc:
+        raise OclgiError(f"--image needs oclgi.study_image, which this installation lacks ({exc})") from None
+    return study_image
+
+
+def run(args) -> None:
+    from .engine import Engine
+    from .scene.description import load_file
+    from .study import check_seeds, equal_time, run_study
+
+    out = args.output
+    if out.exists() and not out.is_dir():
+        raise OclgiError(f"{out}: exists and is not a folder")
+    seeds = check_seeds(args.seeds)
+    points = _points(args.points)
+    reference = _reference(args.reference)
+    image = _image_module() if args.image else None
+
+    engine = Engine(load_file(args.scene), device=args.device, local_size=args.local_size,
+                    progress=False if args.quiet else None)
+    configs = _configs(engine, args)
+    result = run_study(engine, configs, points=points, seeds=seeds, reference=reference,
+                       point_seed=args.point_seed, progress=False if args.quiet else None)
+    for path in result.write(out):
+        print(f"wrote {path}")
+    if image is not None:
+        first = configs[0]
+        summary = image.compare_with_mitsuba(engine, out, spp=args.spp, method=first.method,
+                                             photons=max(first.photons), radius=first.radius, **first.options)
+        print(f"wrote the image comparison to {out}")
+        if not args.quiet:
+            print(f"image: {summary}", file=sys.stderr)
+    if not args.quiet:
+        eq = equal_time(result)
+        parts = ", ".join(f"{r['label']} {r['error']:.3g} ({r['ratio']:.2g}x)" for r in eq.rows)
+        print(f"study: {len(result.rows)} configurations x {len(seeds)} seeds at {len(result.points):,} points "
+              f"in {result.seconds:.1f}s; RMSE / mean reference at equal time {eq.time_s:.3g}s: {parts}",
+              file=sys.stderr)
