@@ -62,8 +62,9 @@ from .errors import OclgiError
 DEFAULT_VARIANT = "scalar_rgb"
 INSTALL_HINT = "pip install 'oclgi[mitsuba]'"
 # Correlated multi-jittered samples: about 1.5x less pixel noise than
-# independent ones at equal spp on the Cornell box, any spp allowed, and each
-# seed a fresh randomisation (two seeds measure the noise).
+# independent ones at equal spp on the Cornell box, and each seed a fresh
+# randomisation (two seeds measure the noise). It stratifies on a grid, so
+# spp is rounded up to a square (see sample_count).
 SAMPLER = "multijitter"
 
 
@@ -160,10 +161,12 @@ def scene_dict(mi, scene_or_engine) -> dict:
     return out
 
 
-def _check_spp(spp):
+def sample_count(spp) -> int:
+    """The samples per pixel (or per point) actually taken for ``spp``: the
+    next perfect square, the grid the sampler stratifies (256 and 1024 stay)."""
     if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
         raise OclgiError(f"samples per pixel must be a positive integer, got {spp!r}")
-    return int(spp)
+    return (math.isqrt(int(spp) - 1) + 1) ** 2
 
 
 def _check_seed(seed):
@@ -188,6 +191,7 @@ def render(scene, camera=None, width=None, height=None, spp=256, seed=0, max_dep
     :func:`world_triangles`). ``camera`` defaults to the scene's;
     ``width``/``height`` override its resolution. ``max_depth`` is oclgi's
     (segments of a photon path, default the scene's ``photons.max_depth``).
+    ``spp`` is rounded up to a square (:func:`sample_count`).
     """
     from .scene.description import validate_camera
     from .scene.scene import Camera
@@ -199,7 +203,7 @@ def render(scene, camera=None, width=None, height=None, spp=256, seed=0, max_dep
     if width or height:
         cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
     validate_camera(cam)
-    spp, seed = _check_spp(spp), _check_seed(seed)
+    spp, seed = sample_count(spp), _check_seed(seed)
     mi = load_mitsuba(variant)
     d = scene_dict(mi, scene)
     d["integrator"] = {"type": "path", "max_depth": _mitsuba_depth(sc, max_depth)}
@@ -231,7 +235,7 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
     also catches point lights and keeps direct light from small emitters
     cheap. The squares (side 2e-4 of the scene diagonal, raised 1e-4 of it)
     shade nothing measurable. All points share one Mitsuba scene; each is
-    rendered with ``spp`` paths of its own sensor. ``max_depth`` is oclgi's: the
+    rendered with ``spp`` paths (rounded up to a square) of its own sensor. ``max_depth`` is oclgi's: the
     segment to the square plays the camera's, so Mitsuba gets ``max_depth + 1``.
     """
     from .queries import from_arrays
@@ -241,7 +245,7 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
     p = q.xyz.astype(np.float64)
     n = q.normals[:, :3].astype(np.float64)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    spp, seed = _check_spp(spp), _check_seed(seed)
+    spp, seed = sample_count(spp), _check_seed(seed)
     mi = load_mitsuba(variant)
     diag = sc.diagonal
     half, lift, above = 1e-4 * diag, 1e-4 * diag, 1e-3 * diag
@@ -283,6 +287,7 @@ def _check_sees_square(mi, mscene, sensor, distance, i):
     si = mscene.ray_intersect(ray)
     t = float(np.asarray(si.t).reshape(-1)[0])
     prim = int(np.asarray(si.prim_index).reshape(-1)[0])
-    if not (abs(t - distance) <= 1e-2 * distance and prim // 2 == i):
+    # Mitsuba's ray offset shortens t by ~1e-4 absolute: only a gross mismatch counts.
+    if not (abs(t - distance) <= 0.5 * distance and prim // 2 == i):
         raise OclgiError(f"point {i}: other geometry lies within {distance:.3g} of it along its normal; "
                          "its irradiance cannot be measured there")

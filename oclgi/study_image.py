@@ -70,7 +70,8 @@ def compare_with_mitsuba(engine, out_dir, spp: int = 256, edge_px: int = 3, widt
         "oclgi": {**{k: getattr(run, k) for k in RUN_KEYS}, "segments": result.stats.segments,
                   "seconds": t_oclgi, "device": engine.queue.device.name.strip()},
         "mitsuba": {"version": mi.__version__, "variant": mi.variant(), "integrator": "path",
-                    "max_depth": mitsuba_reference.max_depth_for(run.max_depth), "spp": int(spp),
+                    "max_depth": mitsuba_reference.max_depth_for(run.max_depth),
+                    "spp": mitsuba_reference.sample_count(spp),
                     "sampler": mitsuba_reference.SAMPLER, "seed": int(mitsuba_seed), "seconds": t_mitsuba},
         "files": list(FILES),
     }
