@@ -234,9 +234,11 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
     tracer samples the lights at the square (next-event estimation), which
     also catches point lights and keeps direct light from small emitters
     cheap. The squares (side 2e-4 of the scene diagonal, raised 1e-4 of it)
-    shade nothing measurable. All points share one Mitsuba scene; each is
-    rendered with ``spp`` paths (rounded up to a square) of its own sensor. ``max_depth`` is oclgi's: the
-    segment to the square plays the camera's, so Mitsuba gets ``max_depth + 1``.
+    shade nothing measurable; a point with other geometry within 1e-3 of
+    the diagonal along its normal is an error. All points share one Mitsuba
+    scene; each is rendered with ``spp`` paths (rounded up to a square) of
+    its own sensor. ``max_depth`` is oclgi's: the segment to the square plays
+    the camera's, so Mitsuba gets ``max_depth + 1``.
     """
     from .queries import from_arrays
 

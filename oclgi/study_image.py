@@ -30,7 +30,7 @@ RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "co
 
 
 def compare_with_mitsuba(engine, out_dir, spp: int = 256, edge_px: int = 3, width: int | None = None,
-                         height: int | None = None, mitsuba_seed: int = 0, error_scale: float = 0.2,
+                         height: int | None = None, *, mitsuba_seed: int = 0, error_scale: float = 0.2,
                          **estimate_args) -> dict:
     """Render the camera view with oclgi and Mitsuba, compare, write ``out_dir``; return the summary.
 
