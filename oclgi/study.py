@@ -229,8 +229,7 @@ class StudyResult:
         """(n, 3): the relative statistics' domain, the point-channels whose
         reference is positive and known to REFERENCE_TRUST (a dim point whose
         reference is a few photons would divide by noise)."""
-        ref, se = self.reference.values, self.reference.std_error
-        return np.isfinite(ref) & (ref > 0) & (se <= REFERENCE_TRUST * ref)
+        return trusted(self.reference)
 
     def table(self) -> list[dict]:
         return [r.summary for r in self.rows]
@@ -283,6 +282,11 @@ def check_seeds(seeds) -> list:
     return [int(s) for s in seeds]
 
 
+def trusted(ref) -> np.ndarray:
+    """(n, 3): reference values that are positive and known to REFERENCE_TRUST."""
+    return np.isfinite(ref.values) & (ref.values > 0) & (ref.std_error <= REFERENCE_TRUST * ref.values)
+
+
 def run_study(engine, configs, points="random:256", seeds=8, reference=None, point_seed: int = 0,
               bound_params: dict | None = None, progress: bool | None = None) -> StudyResult:
     """Run every configuration at every photon count with every seed.
@@ -320,6 +324,10 @@ def run_study(engine, configs, points="random:256", seeds=8, reference=None, poi
             engine.irradiance(pts, method=c.method, photons=min(WARMUP_PHOTONS, max(c.photons)), radius=c.radius,
                               seed=0, **c.options)
         ref = study_reference.compute(engine, pts, reference, max_photons, min(radii) if radii else None)
+        if not trusted(ref).any():
+            raise OclgiError(f"the reference ({ref.description}) is known to {REFERENCE_TRUST:.0%} at none of the "
+                             f"{len(pts):,} points: use a stronger reference (more photons or samples) or "
+                             f"more points")
         albedo = _albedo(scene, pts)
         inputs = study_bounds.scene_inputs(scene, ref.values, _emission(scene, pts), **bound_params)
         total = sum(p for c in configs for p in c.photons) * len(seeds)

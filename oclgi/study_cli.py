@@ -98,17 +98,24 @@ def run(args) -> None:
     engine = Engine(load_file(args.scene), device=args.device, local_size=args.local_size,
                     progress=False if args.quiet else None)
     configs = _configs(engine, args)
+    if image is not None:
+        engine.view_camera()  # no camera: fail before the long work
     result = run_study(engine, configs, points=points, seeds=seeds, reference=reference,
                        point_seed=args.point_seed, progress=False if args.quiet else None)
-    for path in result.write(out):
-        print(f"wrote {path}")
-    if image is not None:
+    if image is not None:  # first: its five files are written all or none, then the study's
         first = configs[0]
         summary = image.compare_with_mitsuba(engine, out, spp=args.spp, method=first.method,
                                              photons=max(first.photons), radius=first.radius, **first.options)
         print(f"wrote the image comparison to {out}")
         if not args.quiet:
-            print(f"image: {summary}", file=sys.stderr)
+            o = summary["oclgi"]
+            print(f"image vs Mitsuba ({o['method']}, {o['photons']:,} photons; {summary['compared_pixels']:,} "
+                  f"pixels away from edges): relative error mean {summary['rel_error_mean']:.3g}, median "
+                  f"{summary['rel_error_median']:.3g}, p95 {summary['rel_error_p95']:.3g}; channel ratios "
+                  f"{'/'.join(f'{r:.4f}' for r in summary['channel_mean_ratio'])} (comparison.json)",
+                  file=sys.stderr)
+    for path in result.write(out):
+        print(f"wrote {path}")
     if not args.quiet:
         eq = equal_time(result)
         parts = ", ".join(f"{r['label']} {r['error']:.3g} ({r['ratio']:.2g}x)" for r in eq.rows)

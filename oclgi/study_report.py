@@ -151,15 +151,28 @@ def _pyplot():
     return plt
 
 
+def _loglog(x, y):
+    """The points of a curve a log-log plot can show (finite, positive)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    keep = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+    return x[keep], y[keep]
+
+
+def _log_axes(ax):
+    """Log scales when there is data to scale (an empty log axis raises)."""
+    if ax.has_data():
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+
+
 def plot_error_vs_time(result, path) -> None:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     for label, rows in result.families().items():
-        t = [r.summary["time_s"] for r in rows]
-        e = [r.summary["nrmse"] for r in rows]
-        ax.plot(t, e, "o-", label=label)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+        t, e = _loglog([r.summary["time_s"] for r in rows], [r.summary["nrmse"] for r in rows])
+        if len(t):
+            ax.plot(t, e, "o-", label=label)
+    _log_axes(ax)
     ax.set_xlabel("time per run (s, median over seeds)")
     ax.set_ylabel("RMSE / mean reference")
     ax.set_title(f"{result.scene_name}: error vs time")
@@ -174,10 +187,11 @@ def plot_variance_vs_photons(result, path) -> None:
     for i, (label, rows) in enumerate(result.families().items()):
         color = f"C{i % 10}"
         n = [r.photons for r in rows]
-        ax.plot(n, [r.summary["var_L"] for r in rows], "o-", color=color, label=label)
-        ax.plot(n, [r.summary["bound"] for r in rows], "--", color=color, alpha=0.7)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+        for key, style, kw in (("var_L", "o-", {"label": label}), ("bound", "--", {"alpha": 0.7})):
+            x, y = _loglog(n, [r.summary[key] for r in rows])
+            if len(x):
+                ax.plot(x, y, style, color=color, **kw)
+    _log_axes(ax)
     ax.set_xlabel("photon paths")
     ax.set_ylabel("Var(L̂) (mean over points); dashed: bound")
     ax.set_title(f"{result.scene_name}: variance vs photons")

@@ -343,6 +343,6 @@ def test_cli_bad_input_subprocess(scene, tmp_path):
     assert res.stderr.splitlines() == [res.stderr.strip()] and "not a folder" in res.stderr
     assert files_under(tmp_path) == before | {tmp_path.joinpath("out").relative_to(tmp_path)}
     res = run(tmp_path, "study", "s.toml", "--image", "--seeds", "2", "-o", "out3")
-    if res.returncode == 2:  # without oclgi.study_image (it lives in another branch): a clear error
-        assert "study_image" in res.stderr and res.stdout == ""
-        assert not (tmp_path / "out3").exists()
+    # --image needs the scene's camera: refused before any work, nothing written
+    assert res.returncode == 2 and "no [camera]" in res.stderr and res.stdout == ""
+    assert not (tmp_path / "out3").exists()
