@@ -20,11 +20,12 @@ hold), per f:
   into the find pass, disc indexing alone, the sphere cache;
 - the interactive rate on the Cornell box and on Sponza, each with the
   Stanford bunny (f = 0.1) going round: updates per second with the time
-  split per stage, and the process' memory over the frames.
+  split per stage, and the process' memory over the frames; and the rate
+  against the number of stored segments (``segments``).
 
 Writes ``bench/results/update_study.{json,md}`` and ``update_speedup.png``.
 Usage: ``.venv/bin/python bench/update_study.py [--parts speedup,constants,
-dynamic,interactive] [--frames N] [--scenes cornell,sponza] [--quick]``.
+dynamic,interactive,segments] [--frames N] [--scenes cornell,sponza] [--quick]``.
 """
 
 from __future__ import annotations
@@ -172,13 +173,13 @@ def circle(scene, f, base, path_r, frames, i):
     return scaled_pose(scene, "bunny", f, base, (path_r * (math.cos(a) - 1), 0.0, path_r * math.sin(a)))
 
 
-def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index"):
+def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", segments=1e6):
     """Updates per second: a camera session (10^5 pixels), 10^6 stored
     segments, the bunny (f = 0.1) going round a circle; stages and memory."""
     side = 100 if quick else 316  # 10^5 query points
     engine, base, path_r = scene_engine(name, side)
     engine.move("bunny", circle(engine.scene, f, base, path_r, frames, 0))
-    photons = photons_for(engine, 1e5 if quick else 1e6)
+    photons = photons_for(engine, segments / 10 if quick else segments)
     session = oclgi.Session(engine, method=method, photons=photons, radius=0.03 if name == "cornell" else 0.3,
                             dynamic=dynamic)
     n_r = int(session.segments()[1].sum())
@@ -315,6 +316,14 @@ def markdown(res):
             ("nodes", lambda r: f"{r['work']['nodes']:,.0f}"), ("points ms", lambda r: f"{r['points_s'] * 1e3:.1f}"),
             ("find ms", lambda r: f"{r['find_s'] * 1e3:.1f}"), ("update ms", lambda r: f"{r['total_s'] * 1e3:.1f}")],
             res["dynamic"])
+    if res.get("rate_vs_segments"):
+        md += _table("Update rate against the number of stored segments (Cornell box + bunny, f = 0.1, "
+                     "316 x 316 pixels, 30 frames)", [
+                         ("stored segments", lambda r: f"{r['n_R']:,}"),
+                         ("updates/s", lambda r: f"{r['updates_per_s']:.1f}"),
+                         *[(f"{k} ms", (lambda k: lambda r: f"{r['stage_median_s'].get(k, 0) * 1e3:.1f}")(k))
+                           for k in ("points", "find", "subtract", "retrace", "add", "total")]],
+                     res["rate_vs_segments"])
     for inter in res.get("interactive", []):
         md += ["", f"## Interactive rate ({inter['scene']} + bunny, f = {inter['f']})", "",
                f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames, "
@@ -351,9 +360,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--method", default="detp_disc_index" if "detp_disc_index" in METHODS else "detp")
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--parts", default="speedup,constants,dynamic,interactive",
-                    help="comma-separated: speedup, constants, dynamic, interactive (the others keep "
-                         "their last results)")
+    ap.add_argument("--parts", default="speedup,constants,dynamic,interactive,segments",
+                    help="comma-separated: speedup, constants, dynamic, interactive, segments (the others "
+                         "keep their last results)")
     ap.add_argument("--frames", type=int, default=100, help="frames of the interactive benchmark")
     ap.add_argument("--scenes", default="cornell,sponza", help="scenes of the interactive benchmark")
     args = ap.parse_args()
@@ -373,6 +382,9 @@ def main():
         res["constants"] = static_constants(args.quick, rng)
     if "dynamic" in parts:
         res["dynamic"] = dynamic_points(args.quick)
+    if "segments" in parts:  # the rate against the store's size, Cornell box
+        res["rate_vs_segments"] = [interactive("cornell", args.method, args.quick, 30, segments=n)
+                                   for n in (1.25e5, 2.5e5, 5e5, 1e6, 2e6)]
     if "interactive" in parts:
         res["interactive"] = [interactive(name, args.method, args.quick, args.frames)
                               for name in args.scenes.split(",")]
