@@ -33,15 +33,20 @@ typedef struct {
 
 /* Entry distance of the ray into a box, INFINITY when it misses the box
  * before tmax. fmin/fmax drop the NaN of 0 * inf (ray on a slab plane). */
-inline float box_entry(__global const float *lo, __global const float *hi, float3 o, float3 inv, float tmax)
+inline float box_entry3(float3 lo, float3 hi, float3 o, float3 inv, float tmax)
 {
-    float3 t0 = (vload3(0, lo) - o) * inv;
-    float3 t1 = (vload3(0, hi) - o) * inv;
+    float3 t0 = (lo - o) * inv;
+    float3 t1 = (hi - o) * inv;
     float3 tn = fmin(t0, t1), tf = fmax(t0, t1);
     float enter = fmax(fmax(tn.x, tn.y), fmax(tn.z, 0.0f));
     /* 1 + 2 ulp-ish slack keeps rays grazing a face of the box. */
     float leave = fmin(fmin(tf.x, tf.y), fmin(tf.z, tmax)) * 1.0000004f;
     return enter <= leave ? enter : INFINITY;
+}
+
+inline float box_entry(__global const float *lo, __global const float *hi, float3 o, float3 inv, float tmax)
+{
+    return box_entry3(vload3(0, lo), vload3(0, hi), o, inv, tmax);
 }
 
 /* Affine 3x4 transforms stored as 12 floats, row-major (a b c t per row). */

@@ -1,7 +1,17 @@
 /* update.cl: finding and gathering the paths a move changes (DESIGN.md 4).
  *
- * update_first_affected  one work-item per stored path: the first bounce b
- *     whose segment hit the moved object before the move (its triangle is
+ * update_path_cells  one work-item per listed path: a 128-bit mask of the
+ *     cells of a 5 x 5 x 5 grid over the scene that the path's segments
+ *     meet (each segment against each padded cell its box can reach, the
+ *     same slab test as below), and bit 127 when a segment leaves the grid.
+ *     A move need only look at the paths whose mask meets the cells of the
+ *     object's old and new boxes (and of the dynamic points' discs), plus
+ *     bit 127 when a box reaches out of the grid: a segment meeting a box
+ *     meets it inside some cell, which is in both masks, or outside the
+ *     grid, which it then leaves. The host keeps the masks current: all
+ *     paths after the trace, re-traced paths after each update.
+ * update_first_affected  one work-item per listed path (first[i] for list[i]):
+ *     the first bounce b whose segment hit the moved object before the move (its triangle is
  *     in the object's range) or meets the object at its new pose before its
  *     own end (the object's box first, then its BVH, any hit, with the same
  *     traversal code and transform as a full trace uses, so the answer
@@ -39,11 +49,53 @@ inline int update_touches(__global const BvhNode *nodes, __global const Tri *tri
                         xform_vector(in->object_from_world, d), 1, &h) >= 0;
 }
 
-__kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, int n_paths,
-                                    int max_depth, __global int *first)
+#define GRID 5        /* cells per axis: 125 cells, one bit each */
+#define OUTSIDE_BIT 127 /* the path leaves the grid */
+
+__kernel void update_path_cells(__global const Segment *segments, __global const int *path_len, int max_depth,
+                                __global const int *list, int n_list, float4 grid_lo, float4 cell, float pad,
+                                __global ulong2 *cells)
 {
-    int p = get_global_id(0);
-    if (p >= n_paths) return;
+    int i = get_global_id(0);
+    if (i >= n_list) return;
+    int p = list[i];
+    ulong m[2] = {0, 0};
+    float3 g0 = grid_lo.xyz + pad, g1 = grid_lo.xyz + (float)GRID * cell.xyz - pad; /* the grid, shrunk */
+    for (int b = 0; b < path_len[p]; ++b) {
+        __global const Segment *sg = &segments[(size_t)p * max_depth + b];
+        float3 o = vload3(0, sg->org), d = vload3(0, sg->dir);
+        float t_end = sg->t_end;
+        /* the cells the segment's box reaches (all, for an escaping one) */
+        int3 c0 = (int3)(0), c1 = (int3)(GRID - 1);
+        int out = 1;
+        if (t_end != INFINITY) {
+            float3 e = o + t_end * d;
+            float3 lo = fmin(o, e), hi = fmax(o, e);
+            c0 = clamp(convert_int3_rtn((lo - pad - grid_lo.xyz) / cell.xyz), 0, GRID - 1);
+            c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), 0, GRID - 1);
+            out = any(lo < g0) || any(hi > g1); /* a segment leaves the (convex) grid at an end */
+        }
+        if (out) m[1] |= (ulong)1 << (OUTSIDE_BIT - 64);
+        float3 inv = 1.0f / d;
+        for (int z = c0.z; z <= c1.z; ++z)
+            for (int y = c0.y; y <= c1.y; ++y)
+                for (int x = c0.x; x <= c1.x; ++x) {
+                    float3 lo = grid_lo.xyz + (float3)(x, y, z) * cell.xyz - pad;
+                    if (box_entry3(lo, lo + cell.xyz + 2.0f * pad, o, inv, t_end) != INFINITY) {
+                        int c = x + GRID * (y + GRID * z);
+                        m[c >> 6] |= (ulong)1 << (c & 63);
+                    }
+                }
+    }
+    cells[p] = (ulong2)(m[0], m[1]);
+}
+
+__kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,
+                                    int n_list, int max_depth, __global int *first)
+{
+    int i = get_global_id(0);
+    if (i >= n_list) return;
+    int p = list[i];
     __global const Instance *in = &instances[obj];
     int lo = in->first_tri, hi = in->first_tri + in->n_tris;
     int found = -1;
@@ -56,17 +108,18 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
             break;
         }
     }
-    first[p] = found;
+    first[i] = found;
 }
 
-__kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Segment *segments, int n_paths,
-                                          int max_depth, __global int *first,
+__kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Segment *segments,
+                                          __global const int *list, int n_list, int max_depth, __global int *first,
                                           __global const BvhNode *disc_nodes, __global const float8 *discs,
                                           int count_emitted, float radius2, float ext, float scale,
                                           __global long *acc, __global ulong *work)
 {
-    int p = get_global_id(0);
-    if (p >= n_paths) return;
+    int i = get_global_id(0);
+    if (i >= n_list) return;
+    int p = list[i];
     __global const Instance *in = &instances[obj];
     int lo = in->first_tri, hi = in->first_tri + in->n_tris;
     int found = -1;
@@ -83,7 +136,7 @@ __kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Se
         if (b > 0 || count_emitted)
             disc_index_segment(disc_nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
     }
-    first[p] = found;
+    first[i] = found;
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

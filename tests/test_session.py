@@ -198,3 +198,27 @@ def test_view_rectangle_holds_every_pixel_on_the_object(scenes_dir, rng):
             assert len(on) < w * h  # a real rectangle, not always the whole image
     assert seen > 1000
     engine.move("bunny", np.eye(4))
+
+
+def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
+    """The find examines only paths whose cell mask meets the object's old
+    and new boxes: over random moves (kept up to date by re-tracing) it must
+    list exactly the paths and first bounces a scan of every path lists."""
+    from oclgi.segment_store import SegmentStore
+
+    engine.move("bunny", np.eye(4))
+    masked, full = (SegmentStore(engine, 20_000, 5, 10) for _ in range(2))
+    full._region = lambda boxes: None  # every path, every move
+    obj = engine.scene.object_id("bunny")
+    filtered = 0
+    for m in _moves(rng, 30):
+        engine.move("bunny", m)
+        a, b = masked.find(obj), full.find(obj)
+        assert np.array_equal(a.paths, b.paths) and np.array_equal(a.starts, b.starts)
+        filtered += masked.examined < full.examined
+        if len(a):
+            masked.retrace(a)
+            full.retrace(b)
+    assert filtered >= 20  # the masks did the work on most moves (not the moves out of the box)
+    assert masked.segments().tobytes() == full.segments().tobytes()
+    engine.move("bunny", np.eye(4))

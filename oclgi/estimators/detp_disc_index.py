@@ -162,6 +162,7 @@ class DetpDiscIndex(DetpEstimator):
                 blocks[blk, 3 + c, lane] = nrm[o, c]
             blocks[blk, 6, lane] = ids[o].astype(np.int32).view(np.float32)
             self.nodes = self.upload(nodes)
+            self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
             self.blocks = self.upload(blocks)
             self.depth = bvh.depth
             self.n_nodes = len(nodes)
