@@ -10,6 +10,8 @@
  *     meets it inside some cell, which is in both masks, or outside the
  *     grid, which it then leaves. The host keeps the masks current: all
  *     paths after the trace, re-traced paths after each update.
+ * update_candidates  one work-item per path: lists those whose mask meets
+ *     the region's.
  * update_first_affected  one work-item per listed path (first[i] for list[i]):
  *     the first bounce b whose segment hit the moved object before the move (its triangle is
  *     in the object's range) or meets the object at its new pose before its
@@ -88,6 +90,17 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
                 }
     }
     cells[p] = (ulong2)(m[0], m[1]);
+}
+
+/* The paths whose mask meets `region`, appended to `list` in any order (the
+ * host sorts them): only a few percent of the store is read again. */
+__kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong2 region,
+                                volatile __global int *count, __global int *list)
+{
+    int p = get_global_id(0);
+    if (p >= n_paths) return;
+    ulong2 m = cells[p] & region;
+    if (m.x | m.y) list[atomic_inc(count)] = p;
 }
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
+from pyopencl import cltypes
 
 from .cl.layout import Segment
 from .cl.programs import launch, programs
@@ -68,8 +69,8 @@ class SegmentStore:
         self.tracer = PhotonTracer(self.queue, engine.compiled, seed, max_depth, self.photons, engine.local_size)
         self.batch = self.tracer.trace(0, self.photons, self.photons)
         prog = programs(engine.ctx).get("update")
-        self.k_first, self.k_gather, self.k_cells = prog.update_first_affected, prog.update_gather, \
-            prog.update_path_cells
+        self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
+        self.k_cells, self.k_candidates = prog.update_path_cells, prog.update_candidates
         mf = cl.mem_flags
         self.first = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 4)
         self.first_host = np.empty(self.photons, np.int32)
@@ -85,7 +86,8 @@ class SegmentStore:
         self.all_paths = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
                                    hostbuf=np.arange(self.photons, dtype=np.int32))
         self.cells = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 16)
-        self.cells_host = np.empty((self.photons, 2), np.uint64)
+        self.candidates = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 4)
+        self.count = cl.Buffer(engine.ctx, mf.READ_WRITE, 4)
         self._mark_cells(self.all_paths, self.photons)
         # each movable object's world box when the stored paths were traced
         inst = engine.compiled.instances_host
@@ -144,9 +146,16 @@ class SegmentStore:
         if region is None:
             candidates, n, listed = None, self.photons, self.all_paths
         else:
-            cl.enqueue_copy(q, self.cells_host, self.cells)
-            candidates = np.nonzero((self.cells_host & region).any(axis=1))[0].astype(np.int32)
-            n = len(candidates)
+            count = np.zeros(1, np.int32)
+            cl.enqueue_copy(q, self.count, count)
+            launch(q, self.k_candidates, self.photons, self.cells, np.int32(self.photons),
+                   cltypes.make_ulong2(*(int(w) for w in region)), self.count, self.candidates)
+            cl.enqueue_copy(q, count, self.count)
+            n = int(count[0])
+            candidates = np.empty(n, np.int32)
+            if n:
+                cl.enqueue_copy(q, candidates, self.candidates)
+            candidates.sort()  # appended in any order
             listed = cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                hostbuf=candidates if n else np.zeros(1, np.int32))
         self.examined = n
