@@ -75,10 +75,10 @@ def _configs(engine, args):
 
 
 def _image_module():
-    try:
-        from . import study_image
-    except ImportError as exc:
-        raise OclgiError(f"--image needs oclgi.study_image, which this installation lacks ({exc})") from None
+    """oclgi.study_image, with the mitsuba package checked before any work."""
+    from . import mitsuba_reference, study_image
+
+    mitsuba_reference.load_mitsuba()
     return study_image
 
 

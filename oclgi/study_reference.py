@@ -85,15 +85,12 @@ def parse(spec) -> Reference | np.ndarray | object:
 def check_available(ref) -> None:
     """Fail before any work when the Mitsuba reference cannot run."""
     if isinstance(ref, Reference) and ref.kind == "mitsuba":
-        _mitsuba_module()
+        _mitsuba_module().load_mitsuba()  # the mitsuba package itself (an optional extra)
 
 
 def _mitsuba_module():
-    try:
-        from . import mitsuba_reference
-    except ImportError as exc:
-        raise OclgiError(f"the Mitsuba reference is not available in this installation "
-                         f"(oclgi.mitsuba_reference: {exc}); use --reference detp or an exact one") from None
+    from . import mitsuba_reference
+
     return mitsuba_reference
 
 

@@ -245,8 +245,8 @@ def test_api_rejects_bad_input(plane):
 def test_mitsuba_reference_missing_is_a_clear_error(plane, monkeypatch):
     from oclgi.errors import OclgiError
 
-    monkeypatch.setitem(sys.modules, "oclgi.mitsuba_reference", None)  # as if absent: import fails
-    with pytest.raises(OclgiError, match="Mitsuba reference is not available"):
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # as if the optional extra were not installed
+    with pytest.raises(OclgiError, match=r"needs the mitsuba package: pip install 'oclgi\[mitsuba\]'"):
         run_study(plane, [Config("detp", [1000])], points="random:4", seeds=2, reference="mitsuba")
 
 
