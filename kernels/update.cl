@@ -20,12 +20,12 @@
  *     agrees with a re-trace exactly); -1 when the path is untouched. The
  *     segments before b are the same in the moved scene, so re-tracing from
  *     b gives the recomputed path.
- * update_first_affected_discs  the same, and while it reads the store it
- *     walks every segment through a BVH over discs (detp_disc_index.h):
- *     a camera session's dynamic points get their sums over the store
- *     before the update in the same pass; the update's subtract and add
- *     passes then bring them to the new store exactly (integer sums), so
- *     the store is scanned once per move instead of twice.
+ *     Given a BVH over discs (disc_nodes not NULL; detp_disc_index.h), it
+ *     also walks every segment of the path through it: a camera session's
+ *     dynamic points get their sums over the store before the update in
+ *     the same pass; the update's subtract and add passes then bring them
+ *     to the new store exactly (integer sums), so the store is read once
+ *     per move instead of twice.
  * update_gather  one work-item per listed path: copies its slots from its
  *     first affected bounce on, with the power times sign (-1 takes a
  *     contribution away: round-to-nearest-even is symmetric, so the
@@ -104,31 +104,10 @@ __kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong
 }
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,
-                                    int n_list, int max_depth, __global int *first)
-{
-    int i = get_global_id(0);
-    if (i >= n_list) return;
-    int p = list[i];
-    __global const Instance *in = &instances[obj];
-    int lo = in->first_tri, hi = in->first_tri + in->n_tris;
-    int found = -1;
-    for (int b = 0; b < max_depth; ++b) {
-        __global const Segment *sg = &segments[(size_t)p * max_depth + b];
-        float3 d = vload3(0, sg->dir);
-        if (d.x == 0.0f && d.y == 0.0f && d.z == 0.0f) break; /* the path's end */
-        if (update_touches(nodes, tris, in, lo, hi, vload3(0, sg->org), d, sg->t_end, sg->tri)) {
-            found = b;
-            break;
-        }
-    }
-    first[i] = found;
-}
-
-__kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Segment *segments,
-                                          __global const int *list, int n_list, int max_depth, __global int *first,
-                                          __global const BvhNode *disc_nodes, __global const float8 *discs,
-                                          int count_emitted, float radius2, float ext, float scale,
-                                          __global long *acc, __global ulong *work)
+                                    int n_list, int max_depth, __global int *first,
+                                    __global const BvhNode *disc_nodes, __global const float8 *discs,
+                                    int count_emitted, float radius2, float ext, float scale,
+                                    __global long *acc, __global ulong *work)
 {
     int i = get_global_id(0);
     if (i >= n_list) return;
@@ -146,6 +125,10 @@ __kernel void update_first_affected_discs(SCENE_ARGS, int obj, __global const Se
         if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* the path's end (a store has no holes) */
         if (found < 0 && update_touches(nodes, tris, in, lo, hi, f0.xyz, f1.xyz, f0.w, as_int(f1.w)))
             found = b;
+        if (!disc_nodes) { /* no dynamic points: the first affected bounce is all we need */
+            if (found >= 0) break;
+            continue;
+        }
         if (b > 0 || count_emitted)
             disc_index_segment(disc_nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
     }

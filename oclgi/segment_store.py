@@ -163,9 +163,10 @@ class SegmentStore:
             args = (*engine.compiled.scene_args, np.int32(obj), self.batch.segments, listed, np.int32(n),
                     np.int32(self.max_depth), self.first)
             if not fused:
-                launch(q, self.k_first, n, *args, local_size=engine.local_size)
+                launch(q, self.k_first, n, *args, None, None, np.int32(0), np.float32(0), np.float32(0),
+                       np.float32(0), None, None, local_size=engine.local_size)
             else:
-                k = programs(engine.ctx).get("update", **discs.defines).update_first_affected_discs
+                k = programs(engine.ctx).get("update", **discs.defines).update_first_affected
                 launch(q, k, n, *args, discs.nodes, discs.blocks, np.int32(discs.count_emitted),
                        np.float32(discs.radius ** 2), np.float32(discs.ext), np.float32(self.scale), discs.acc,
                        discs.work_buf, local_size=engine.local_size)

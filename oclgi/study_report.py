@@ -172,13 +172,8 @@ def plot_error_vs_time(result, path) -> None:
         t, e = _loglog([r.summary["time_s"] for r in rows], [r.summary["nrmse"] for r in rows])
         if len(t):
             ax.plot(t, e, "o-", label=label)
-    _log_axes(ax)
-    ax.set_xlabel("time per run (s, median over seeds)")
-    ax.set_ylabel("RMSE / mean reference")
-    ax.set_title(f"{result.scene_name}: error vs time")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
-    _save(fig, path)
+    _finish(fig, ax, "time per run (s, median over seeds)", "RMSE / mean reference",
+            f"{result.scene_name}: error vs time", path)
 
 
 def plot_variance_vs_photons(result, path) -> None:
@@ -191,10 +186,15 @@ def plot_variance_vs_photons(result, path) -> None:
             x, y = _loglog(n, [r.summary[key] for r in rows])
             if len(x):
                 ax.plot(x, y, style, color=color, **kw)
+    _finish(fig, ax, "photon paths", "Var(L̂) (mean over points); dashed: bound",
+            f"{result.scene_name}: variance vs photons", path)
+
+
+def _finish(fig, ax, xlabel, ylabel, title, path) -> None:
     _log_axes(ax)
-    ax.set_xlabel("photon paths")
-    ax.set_ylabel("Var(L̂) (mean over points); dashed: bound")
-    ax.set_title(f"{result.scene_name}: variance vs photons")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     _save(fig, path)
