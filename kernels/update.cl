@@ -1,7 +1,8 @@
 /* update.cl: finding and gathering the paths a move changes (DESIGN.md 4).
  *
  * update_path_cells  one work-item per listed path: a 128-bit mask of the
- *     cells of a 5 x 5 x 5 grid over the scene that the path's segments
+ *     cells of a grid over the scene (at most 127 cells, about cubic: 5 x 5
+ *     x 5 for the Cornell box, 7 x 4 x 4 for Sponza) that the path's segments
  *     meet (each segment against each padded cell its box can reach, the
  *     same slab test as below), and bit 127 when a segment leaves the grid.
  *     A move need only look at the paths whose mask meets the cells of the
@@ -51,30 +52,30 @@ inline int update_touches(__global const BvhNode *nodes, __global const Tri *tri
                         xform_vector(in->object_from_world, d), 1, &h) >= 0;
 }
 
-#define GRID 5        /* cells per axis: 125 cells, one bit each */
-#define OUTSIDE_BIT 127 /* the path leaves the grid */
+#define OUTSIDE_BIT 127 /* the path leaves the grid; cells take bits 0..126 */
 
 __kernel void update_path_cells(__global const Segment *segments, __global const int *path_len, int max_depth,
-                                __global const int *list, int n_list, float4 grid_lo, float4 cell, float pad,
-                                __global ulong2 *cells)
+                                __global const int *list, int n_list, float4 grid_lo, float4 cell, int4 dims,
+                                float pad, __global ulong2 *cells)
 {
     int i = get_global_id(0);
     if (i >= n_list) return;
     int p = list[i];
     ulong m[2] = {0, 0};
-    float3 g0 = grid_lo.xyz + pad, g1 = grid_lo.xyz + (float)GRID * cell.xyz - pad; /* the grid, shrunk */
+    int3 top = dims.xyz - 1;
+    float3 g0 = grid_lo.xyz + pad, g1 = grid_lo.xyz + convert_float3(dims.xyz) * cell.xyz - pad; /* shrunk */
     for (int b = 0; b < path_len[p]; ++b) {
         __global const Segment *sg = &segments[(size_t)p * max_depth + b];
         float3 o = vload3(0, sg->org), d = vload3(0, sg->dir);
         float t_end = sg->t_end;
         /* the cells the segment's box reaches (all, for an escaping one) */
-        int3 c0 = (int3)(0), c1 = (int3)(GRID - 1);
+        int3 c0 = (int3)(0), c1 = top;
         int out = 1;
         if (t_end != INFINITY) {
             float3 e = o + t_end * d;
             float3 lo = fmin(o, e), hi = fmax(o, e);
-            c0 = clamp(convert_int3_rtn((lo - pad - grid_lo.xyz) / cell.xyz), 0, GRID - 1);
-            c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), 0, GRID - 1);
+            c0 = clamp(convert_int3_rtn((lo - pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
+            c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
             out = any(lo < g0) || any(hi > g1); /* a segment leaves the (convex) grid at an end */
         }
         if (out) m[1] |= (ulong)1 << (OUTSIDE_BIT - 64);
@@ -84,7 +85,7 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
                 for (int x = c0.x; x <= c1.x; ++x) {
                     float3 lo = grid_lo.xyz + (float3)(x, y, z) * cell.xyz - pad;
                     if (box_entry3(lo, lo + cell.xyz + 2.0f * pad, o, inv, t_end) != INFINITY) {
-                        int c = x + GRID * (y + GRID * z);
+                        int c = x + dims.x * (y + dims.y * z);
                         m[c >> 6] |= (ulong)1 << (c & 63);
                     }
                 }

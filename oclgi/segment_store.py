@@ -7,7 +7,7 @@ path-major, as one batch. After a movable object moves:
 1. ``find`` lists, per path, the first segment that hit the object at its
    old pose or meets it at its new pose (the earlier segments are the same
    in the moved scene). Only paths whose cell mask (kernels/update.cl: the
-   cells of a 5 x 5 x 5 grid over the scene that the path crosses, and
+   cells of a grid of at most 127 cells over the scene that the path crosses, and
    whether it leaves the grid) meets the cells of the object's old and new
    boxes are examined: a few percent of the store for a small object,
    instead of every stored segment;
@@ -34,8 +34,23 @@ from .cl.programs import launch, programs
 from .errors import OclgiError
 from .photon_trace import PathBatch, PhotonTracer
 
-GRID = 5  # cells per axis of the paths' cell masks (kernels/update.cl: 125 cells)
+MAX_CELLS = 127  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
 OUTSIDE_BIT = 127  # a path's segment leaves the grid
+
+
+def grid_dims(extent) -> np.ndarray:
+    """Cells per axis, at most MAX_CELLS in all, as near cubic as they go
+    (5 x 5 x 5 for a cube, 7 x 4 x 4 for Sponza's atrium): the axis with the
+    longest cells is split once more while the cells still fit."""
+    e = np.asarray(extent, np.float64)
+    dims = np.ones(3, np.int64)
+    while True:
+        a = int(np.argmax(e / dims))
+        grown = dims.copy()
+        grown[a] += 1
+        if np.prod(grown) > MAX_CELLS:
+            return dims
+        dims = grown
 
 
 @dataclass
@@ -82,7 +97,8 @@ class SegmentStore:
         diag = float(np.linalg.norm(hi - lo)) or 1.0
         self.pad = 1e-4 * diag
         self.grid_lo = lo - 0.01 * diag
-        self.cell = (hi - lo + 0.02 * diag) / GRID
+        self.dims = grid_dims(hi - lo + 0.02 * diag)
+        self.cell = (hi - lo + 0.02 * diag) / self.dims
         self.all_paths = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
                                    hostbuf=np.arange(self.photons, dtype=np.int32))
         self.cells = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 16)
@@ -106,13 +122,15 @@ class SegmentStore:
     def _mark_cells(self, paths: cl.Buffer, n: int):
         f4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
         launch(self.queue, self.k_cells, n, self.batch.segments, self.batch.path_len, np.int32(self.max_depth),
-               paths, np.int32(n), f4(self.grid_lo), f4(self.cell), np.float32(self.pad), self.cells)
+               paths, np.int32(n), f4(self.grid_lo), f4(self.cell), cltypes.make_int4(*(int(d) for d in self.dims), 0),
+               np.float32(self.pad), self.cells)
 
     def _region(self, boxes) -> np.ndarray | None:
         """The 128-bit mask (two uint64) of the cells the boxes meet, padded,
         with the outside bit when a box reaches out of the grid; None to
         examine every path (a box that is not finite)."""
-        grid_hi = self.grid_lo + GRID * self.cell
+        dims = self.dims
+        grid_hi = self.grid_lo + dims * self.cell
         bits = 0
         for lo, hi in boxes:
             lo, hi = lo - self.pad, hi + self.pad
@@ -122,13 +140,13 @@ class SegmentStore:
                 bits |= 1 << OUTSIDE_BIT
             c0 = np.floor((lo - self.grid_lo) / self.cell).astype(np.int64)
             c1 = np.floor((hi - self.grid_lo) / self.cell).astype(np.int64)
-            if (c1 < 0).any() or (c0 >= GRID).any():
+            if (c1 < 0).any() or (c0 >= dims).any():
                 continue  # wholly outside the grid
-            c0, c1 = np.clip(c0, 0, GRID - 1), np.clip(c1, 0, GRID - 1)
+            c0, c1 = np.clip(c0, 0, dims - 1), np.clip(c1, 0, dims - 1)
             for z in range(c0[2], c1[2] + 1):
                 for y in range(c0[1], c1[1] + 1):
                     for x in range(c0[0], c1[0] + 1):
-                        bits |= 1 << (x + GRID * (y + GRID * z))
+                        bits |= 1 << int(x + dims[0] * (y + dims[1] * z))
         return np.array([bits & (2**64 - 1), bits >> 64], np.uint64)
 
     def find(self, obj: int, discs=None) -> Affected:

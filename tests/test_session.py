@@ -222,3 +222,12 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
     assert filtered >= 20  # the masks did the work on most moves (not the moves out of the box)
     assert masked.segments().tobytes() == full.segments().tobytes()
     engine.move("bunny", np.eye(4))
+
+
+def test_grid_dims_fit_the_mask_and_follow_the_scene():
+    from oclgi.segment_store import MAX_CELLS, grid_dims
+
+    for extent, expect in (([2, 2, 2], [5, 5, 5]), ([35.5, 17.4, 16.3], [7, 4, 4]), ([1, 1, 0], [11, 11, 1]),
+                           ([1e6, 1, 1], [127, 1, 1])):
+        dims = grid_dims(extent)
+        assert dims.tolist() == expect and np.prod(dims) <= MAX_CELLS
