@@ -90,6 +90,7 @@ class SegmentStore:
         self.first = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 4)
         self.first_host = np.empty(self.photons, np.int32)
         self.scratch = None  # grown on demand: gathered suffixes
+        self.examined = 0  # paths the last find looked at
         # the cell grid: the scene as loaded, padded; the cells' pad is far
         # above float rounding, so a segment meeting a box inside a cell
         # always meets the padded cell
