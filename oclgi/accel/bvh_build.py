@@ -45,14 +45,29 @@ def morton_codes(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarr
     return (_spread_bits(q[:, 0]) << 2) | (_spread_bits(q[:, 1]) << 1) | _spread_bits(q[:, 2])
 
 
+def bit_length(x: np.ndarray) -> np.ndarray:
+    """Exact bit length of uint64 values (float64 alone rounds above 2^53)."""
+    hi = (x >> np.uint64(32)).astype(np.float64)
+    lo = (x & np.uint64(0xFFFFFFFF)).astype(np.float64)
+    return np.where(hi > 0, 32 + np.frexp(hi)[1], np.frexp(lo)[1]).astype(np.int64)
+
+
 def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> BvhData:
+    """LBVH over primitive boxes, on the 30-bit Morton codes of their centres."""
     box_lo = np.asarray(box_lo, dtype=np.float32)
     box_hi = np.asarray(box_hi, dtype=np.float32)
-    n = len(box_lo)
-    if n == 0:
+    if len(box_lo) == 0:
         raise ValueError("cannot build a BVH over no primitives")
     centres = 0.5 * (box_lo.astype(np.float64) + box_hi)
-    codes = morton_codes(centres, centres.min(axis=0), centres.max(axis=0))
+    return build_from_codes(morton_codes(centres, centres.min(axis=0), centres.max(axis=0)), box_lo, box_hi,
+                            leaf_size)
+
+
+def build_from_codes(codes: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int) -> BvhData:
+    """LBVH over primitive boxes (float32) ordered by the given uint64 codes
+    (any width: the 30-bit codes above, or the photon map's 63-bit ones).
+    Ties keep id order and split in the middle."""
+    n = len(codes)
     order = np.argsort(codes, kind="stable")
     codes = codes[order]
 
@@ -60,7 +75,6 @@ def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> Bvh
     first = [np.zeros(1, np.int64)]  # per level: child index or first primitive
     count = [np.zeros(1, np.int64)]
     starts, ends = np.zeros(1, np.int64), np.full(1, n, np.int64)
-    levels_se = [(starts, ends)]
     next_id = 1
     while True:
         size = ends - starts
@@ -73,11 +87,10 @@ def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> Bvh
             break
         s, e = starts[inner], ends[inner]
         diff = codes[s] ^ codes[e - 1]
-        split = (s + e) // 2
+        split = (s + e) // 2  # equal codes: the middle
         nz = diff != 0
-        if nz.any():
-            _, exp = np.frexp(diff[nz].astype(np.float64))
-            bit = (exp - 1).astype(np.uint64)
+        if nz.any():  # first index whose code has the highest differing bit set
+            bit = (bit_length(diff[nz]) - 1).astype(np.uint64)
             target = ((codes[s[nz]] >> bit) | np.uint64(1)) << bit
             split[nz] = np.searchsorted(codes, target, side="left")
         child = next_id + 2 * np.arange(n_inner)
@@ -91,7 +104,6 @@ def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> Bvh
         starts[1::2], ends[1::2] = split, e
         first.append(None)
         count.append(None)
-        levels_se.append((starts, ends))
 
     first_all = np.concatenate(first)
     count_all = np.concatenate(count)
