@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
 import oclgi
+from oclgi.cl.layout import Segment
+from oclgi.estimators import ESTIMATORS
+from oclgi.photon_trace import PathBatch
+from oclgi.queries import QueryPoints
 
 # Photon paths of the shared plain-DETP sums (the `plain` fixture, conftest.py).
 DETP_PHOTONS = 20_000
@@ -65,3 +70,73 @@ def check_same(ref, got, what):
     got = getattr(got, "accumulators", got)
     diff = np.nonzero((ref != got).any(axis=1))[0]
     assert len(diff) == 0, f"{what}: {len(diff)} of {len(ref)} points differ from plain DETP (first {diff[:5].tolist()})"
+
+
+def adversarial_batch(engine, rng, n_discs=400, n_paths=12_000, max_depth=3, offset=0.0):
+    """Discs in the scene's volume and segments made to graze them: crossing
+    near the rim, nearly parallel to the plane, ending just before, on or
+    past it, escaping (t_end = inf), axis-aligned, and empty slots; the whole
+    set moved by `offset` (float rounding far from the origin).
+    Returns (points, radius, batch)."""
+    lo, hi = (np.asarray(b, float) for b in engine.scene.bounds())
+    d = 0.02 * engine.scene.diagonal
+    x = lo + rng.random((n_discs, 3)) * (hi - lo)
+    n = rng.normal(size=(n_discs, 3))
+    axis = rng.random(n_discs) < 0.3
+    n[axis] = np.eye(3)[rng.integers(0, 3, axis.sum())] * rng.choice([-1, 1], (axis.sum(), 1))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    m = n_paths * max_depth
+    k = rng.integers(0, n_discs, m)
+    nk = n[k]
+
+    def tangent():
+        v = rng.normal(size=(m, 3))
+        v -= (v * nk).sum(1)[:, None] * nk
+        return v / np.linalg.norm(v, axis=1)[:, None]
+
+    target = x[k] + tangent() * (d * rng.choice([0.0, 0.5, 1 - 1e-6, 1.0, 1 + 1e-6, 1.001], m))[:, None]
+    cos = -np.where(rng.random(m) < 0.4, 10 ** rng.uniform(-6.5, -4, m), rng.random(m))
+    w = tangent() * np.sqrt(1 - cos**2)[:, None] + nk * cos[:, None]
+    flat = rng.random(m) < 0.15
+    w[flat, rng.integers(0, 3, flat.sum())] = 0.0
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    back = rng.uniform(0.0, 0.5, m) * engine.scene.diagonal
+    segs = np.zeros(m, Segment)
+    segs["org"] = target - w * back[:, None] + offset
+    segs["dir"] = w
+    t_end = back * rng.choice([1 - 1e-6, 1.0, 1 + 1e-6, 0.5, 2.0], m)
+    t_end[rng.random(m) < 0.1] = np.inf
+    segs["t_end"] = t_end
+    segs["power"] = rng.uniform(0.1, 1.0, (m, 3))
+    segs["path"] = np.repeat(np.arange(n_paths), max_depth)
+    ends = rng.integers(1, max_depth + 1, n_paths)
+    segs[(np.arange(m) % max_depth) >= np.repeat(ends, max_depth)] = np.zeros(1, Segment)
+    mf = cl.mem_flags
+    buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=segs)
+    lens = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=ends.astype(np.int32))
+    return oclgi.query_points(x + offset, n), d, PathBatch(buf, lens, 0, n_paths, max_depth)
+
+
+def run_on_batch(engine, method, points, radius, batch, count_emitted, **options):
+    est = ESTIMATORS[method](engine.queue, engine.compiled, points, radius=radius, count_emitted=count_emitted,
+                             **options)
+    scale = 2.0**24
+    est.accumulate(batch, scale)
+    est.accumulate(batch, scale)  # batches add up
+    return est.accumulators()
+
+
+def check_replace_points(engine, method):
+    """Points replaced in place (a session's dynamic points) are indexed
+    again: the sums equal a fresh estimator's over the new points."""
+    pts, d, batch = adversarial_batch(engine, np.random.default_rng(9))
+    est = ESTIMATORS[method](engine.queue, engine.compiled, pts, radius=d)
+    idx = np.arange(0, len(pts), 3)
+    moved, _, _ = adversarial_batch(engine, np.random.default_rng(10))  # other discs
+    new = QueryPoints(moved.positions[idx], moved.normals[idx], moved.barys[idx])
+    est.replace_points(idx, new)
+    est.accumulate(batch, 2.0**24)
+    ref = ESTIMATORS["detp"](engine.queue, engine.compiled, est.points, radius=d)
+    ref.accumulate(batch, 2.0**24)
+    assert ref.accumulators()[idx].any()
+    assert np.array_equal(est.accumulators(), ref.accumulators())

@@ -16,19 +16,12 @@ import pytest
 
 import oclgi
 
-from analytic_scenes import H, INTENSITY  # noqa: F401  (test_photon_map imports these names from here)
-from analytic_scenes import box as _box
-from analytic_scenes import disc_mean as _disc_mean
-from analytic_scenes import exact as _exact
-from analytic_scenes import face_points as _face_points
-from analytic_scenes import grid as _grid  # noqa: F401
-from analytic_scenes import plane_scene as _plane_scene
-from analytic_scenes import triangle_mean as _triangle_mean
+from analytic_scenes import box, disc_mean, exact, face_points, plane_scene, triangle_mean
 
 
 @pytest.fixture(scope="module")
 def plane():
-    return oclgi.Engine(_plane_scene(n_cells=16, half=4.0))
+    return oclgi.Engine(plane_scene(n_cells=16, half=4.0))
 
 
 def test_point_light_plane_detp(plane):
@@ -46,13 +39,13 @@ def test_point_light_plane_detp(plane):
     normals = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
     est = plane.irradiance(np.hstack([pts, normals]), method="detp", radius=0.25)
     e = est.irradiance[:, 0]
-    ref = np.array([_disc_mean(x, z, 0.25) for x, _, z in pts])
+    ref = np.array([disc_mean(x, z, 0.25) for x, _, z in pts])
     assert np.abs(e / ref - 1).max() < 0.03
     # the channels see the same photons
     assert np.array_equal(est.accumulators[:, 0], est.accumulators[:, 1])
 
     small = plane.irradiance(np.hstack([pts, normals]), method="detp", radius=0.1).irradiance[:, 0]
-    point = _exact(pts[:, 0], pts[:, 2])
+    point = exact(pts[:, 0], pts[:, 2])
     assert abs(np.mean(small / point) - 1) < 0.03
     assert np.abs(small / point - 1).max() < 0.10
 
@@ -67,7 +60,7 @@ def test_point_light_plane_impact_count(plane):
     centre = v.mean(axis=1)
     interior = np.hypot(centre[:, 0], centre[:, 2]) < 1.0
     assert interior.sum() >= 24
-    ref = np.array([_triangle_mean(t) for t in v[interior]])
+    ref = np.array([triangle_mean(t) for t in v[interior]])
     assert np.abs(e_tri[interior] / ref - 1).max() < 0.03
 
 
@@ -92,12 +85,12 @@ def test_impact_count_vertex_average_and_interpolation(plane):
 
 @pytest.fixture(scope="module")
 def furnace():
-    return oclgi.Engine(_box(rho=0.5, le=1.0))
+    return oclgi.Engine(box(rho=0.5, le=1.0))
 
 
 def test_furnace_box_detp(furnace, rng):
     """All bounces: DETP irradiance within 3% of pi Le / (1 - rho)."""
-    p, n = _face_points(rng)
+    p, n = face_points(rng)
     est = furnace.irradiance(np.hstack([p, n]), method="detp", radius=0.1)
     expected = math.pi * 1.0 / (1 - 0.5)
     assert est.stats.segments > 1.8 * est.stats.photons  # mean path length 1/(1-rho)

@@ -1,10 +1,8 @@
 """`oclgi animate`: paths, frames, the timing log, and bad input."""
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
+from cli_run import run
 
 from oclgi.animate import poses
 from oclgi.errors import OclgiError
@@ -34,10 +32,6 @@ height = 8
 count = 2000
 """
 
-
-def _run(*args):
-    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
 
 
 def test_poses():
@@ -70,7 +64,7 @@ def test_animate_writes_frames_and_log(tmp_path):
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "anim"
-    r = _run("animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr",
+    r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr",
              "--dynamic", "detp_sphere_cache")
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in out.iterdir()) == [
@@ -91,7 +85,7 @@ def test_animate_bad_input(tmp_path, args, message):
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "anim"
-    r = _run("animate", scene, *args, "-o", out)
+    r = run(None, "animate", scene, *args, "-o", out)
     assert r.returncode == 2
     assert message in r.stderr and "Traceback" not in r.stderr
     assert not out.exists() or not any(out.iterdir())

@@ -16,11 +16,11 @@ uncaught exception fails the test just as a traceback would.
 
 import os
 import subprocess
-import sys
 import zipfile
 
 import numpy as np
 import pytest
+from cli_run import run
 from small_scene import BOX_OBJ
 
 from oclgi.errors import OclgiError
@@ -64,11 +64,6 @@ def write_scene(d, obj=BOX_OBJ, mtl=BOX_MTL, mesh="box.obj", count="2000", radiu
 SUB = True  # run this case in a subprocess
 INP = False  # run it in-process
 
-
-def run(cwd, *args):
-    """``python -m oclgi *args`` in ``cwd``."""
-    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
 
 
 @pytest.fixture

@@ -6,11 +6,10 @@ into tmp_path (2,000 photons, an 8 x 8 camera), about a second each.
 
 import os
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from cli_run import run
 from small_scene import BOX_OBJ
 
 from oclgi.io import read_image
@@ -42,10 +41,6 @@ radius = 0.1
 """
 POINTS = [[0, 0.01, 0, 0, 1, 0], [0.5, 0.01, 0.5, 0, 1, 0], [-0.7, 0.01, 0.3, 0, 2, 0], [0, 0.5, 0, 1, 0, 0]]
 
-
-def run(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
 
 
 def ok(res):

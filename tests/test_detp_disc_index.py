@@ -17,10 +17,8 @@ import numpy as np
 import pytest
 
 import oclgi
-from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, check_same
-from oclgi.cl.layout import Segment
-from oclgi.estimators import ESTIMATORS
-from oclgi.photon_trace import PathBatch
+from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_replace_points, check_same,
+                       run_on_batch)
 
 METHOD = "detp_disc_index"
 PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
@@ -66,63 +64,6 @@ def test_camera_points_with_misses(engines):
     ref = e.irradiance(pts, method="detp", radius=0.05, photons=PHOTONS)
     est = e.irradiance(pts, method=METHOD, radius=0.05, photons=PHOTONS)
     check_same(ref.accumulators, est, "camera points")
-
-
-def adversarial_batch(engine, rng, n_discs=400, n_paths=12_000, max_depth=3):
-    """Discs in the scene's volume and segments made to graze them: crossing
-    near the rim, at angles down to the DETP cutoff, ending just before,
-    on or past the plane, escaping (t_end = inf), axis-aligned (zero
-    direction components), and empty slots. Returns (points, radius, batch)."""
-    lo, hi = (np.asarray(b, float) for b in engine.scene.bounds())
-    d = 0.02 * engine.scene.diagonal
-    x = lo + rng.random((n_discs, 3)) * (hi - lo)
-    n = rng.normal(size=(n_discs, 3))
-    axis = rng.random(n_discs) < 0.3  # some axis-aligned normals: flat boxes
-    n[axis] = np.eye(3)[rng.integers(0, 3, axis.sum())] * rng.choice([-1, 1], (axis.sum(), 1))
-    n /= np.linalg.norm(n, axis=1)[:, None]
-    points = oclgi.query_points(x, n)
-    m = n_paths * max_depth
-    k = rng.integers(0, n_discs, m)
-    nk = n[k]
-    u = rng.normal(size=(m, 3))
-    u -= (u * nk).sum(1)[:, None] * nk
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    target = x[k] + u * (d * rng.choice([0.0, 0.5, 1 - 1e-6, 1.0, 1 + 1e-6, 1.001], m))[:, None]
-    cos = -np.where(rng.random(m) < 0.4, 10 ** rng.uniform(-6.5, -4, m), rng.random(m))
-    t = rng.normal(size=(m, 3))
-    t -= (t * nk).sum(1)[:, None] * nk
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    w = t * np.sqrt(1 - cos**2)[:, None] + nk * cos[:, None]
-    flat = rng.random(m) < 0.15  # a zero component: 0 * inf in the slab tests
-    w[flat, rng.integers(0, 3, flat.sum())] = 0.0
-    w /= np.linalg.norm(w, axis=1)[:, None]
-    back = rng.uniform(0.0, 0.5, m) * engine.scene.diagonal
-    segs = np.zeros(m, Segment)
-    segs["org"] = target - w * back[:, None]
-    segs["dir"] = w
-    t_end = back * rng.choice([1 - 1e-6, 1.0, 1 + 1e-6, 0.5, 2.0], m)
-    t_end[rng.random(m) < 0.1] = np.inf
-    segs["t_end"] = t_end
-    segs["power"] = rng.uniform(0.1, 1.0, (m, 3))
-    segs["path"] = np.repeat(np.arange(n_paths), max_depth)
-    ends = rng.integers(1, max_depth + 1, n_paths)  # empty slots past each path's end
-    empty = (np.arange(m) % max_depth) >= np.repeat(ends, max_depth)
-    segs[empty] = np.zeros(1, Segment)
-    import pyopencl as cl
-
-    buf = cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=segs)
-    lens = cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                     hostbuf=ends.astype(np.int32))
-    return points, d, PathBatch(buf, lens, 0, n_paths, max_depth)
-
-
-def run_on_batch(engine, method, points, radius, batch, count_emitted, **options):
-    est = ESTIMATORS[method](engine.queue, engine.compiled, points, radius=radius, count_emitted=count_emitted,
-                             **options)
-    scale = 2.0**24
-    est.accumulate(batch, scale)
-    est.accumulate(batch, scale)  # batches add up
-    return est.accumulators()
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
@@ -171,19 +112,4 @@ def test_bad_options(engines, points, bad):
 
 
 def test_replace_points(engines):
-    """Points replaced in place (a session's dynamic points) are indexed
-    again: the sums equal a fresh estimator's over the new points."""
-    from oclgi.queries import QueryPoints
-
-    e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(9))
-    est = ESTIMATORS[METHOD](e.queue, e.compiled, pts, radius=d)
-    idx = np.arange(0, len(pts), 3)
-    moved, _, _ = adversarial_batch(e, np.random.default_rng(10))  # other discs
-    new = QueryPoints(moved.positions[idx], moved.normals[idx], moved.barys[idx])
-    est.replace_points(idx, new)
-    est.accumulate(batch, 2.0**24)
-    ref = ESTIMATORS["detp"](e.queue, e.compiled, est.points, radius=d)
-    ref.accumulate(batch, 2.0**24)
-    assert ref.accumulators()[idx].any()
-    assert np.array_equal(est.accumulators(), ref.accumulators())
+    check_replace_points(engines["cornell"], METHOD)

@@ -13,10 +13,8 @@ import numpy as np
 import pytest
 
 import oclgi
-from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, check_same
+from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_replace_points, check_same, run_on_batch
 from oclgi.errors import OclgiError
-from oclgi.estimators import ESTIMATORS
-from test_detp_disc_index import adversarial_batch, run_on_batch
 
 METHOD = "detp_ray_map"
 PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
@@ -85,19 +83,4 @@ def test_bad_options(engines, points, bad):
 
 
 def test_replace_points(engines):
-    """Points replaced in place (a session's dynamic points) are indexed
-    again: the sums equal a fresh estimator's over the new points."""
-    from oclgi.queries import QueryPoints
-
-    e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(9))
-    est = ESTIMATORS[METHOD](e.queue, e.compiled, pts, radius=d)
-    idx = np.arange(0, len(pts), 3)
-    moved, _, _ = adversarial_batch(e, np.random.default_rng(10))  # other discs
-    new = QueryPoints(moved.positions[idx], moved.normals[idx], moved.barys[idx])
-    est.replace_points(idx, new)
-    est.accumulate(batch, 2.0**24)
-    ref = ESTIMATORS["detp"](e.queue, e.compiled, est.points, radius=d)
-    ref.accumulate(batch, 2.0**24)
-    assert ref.accumulators()[idx].any()
-    assert np.array_equal(est.accumulators(), ref.accumulators())
+    check_replace_points(engines["cornell"], METHOD)

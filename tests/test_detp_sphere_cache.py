@@ -20,17 +20,13 @@ than the point spacing) t + u is least for Q in [0.60, 0.72] over the sweep
 """
 
 import numpy as np
-import pyopencl as cl
 import pytest
 
 import oclgi
-from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, check_same, surface_points
+from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_same, run_on_batch, surface_points
 from oclgi import ordering
-from oclgi.cl.layout import Segment
 from oclgi.errors import OclgiError
-from oclgi.estimators import ESTIMATORS
 from oclgi.estimators import detp_sphere_cache as sc
-from oclgi.photon_trace import PathBatch
 
 METHOD = "detp_sphere_cache"
 PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
@@ -135,68 +131,15 @@ def test_pieces_when_lists_exceed_the_memory(engines, points, plain, monkeypatch
     assert got.work == ref.work
 
 
-def adversarial_batch(engine, rng, n_discs=300, n_paths=10_000, max_depth=3, offset=0.0):
-    """Discs in the scene's volume and segments made to graze them: crossing
-    near the rim, nearly parallel to the plane, ending just before, on or
-    past it, escaping (t_end = inf), axis-aligned, and empty slots; the whole
-    set moved by `offset` (float rounding far from the origin).
-    Returns (points, radius, batch)."""
-    lo, hi = (np.asarray(b, float) for b in engine.scene.bounds())
-    d = 0.02 * engine.scene.diagonal
-    x = lo + rng.random((n_discs, 3)) * (hi - lo)
-    n = rng.normal(size=(n_discs, 3))
-    axis = rng.random(n_discs) < 0.3
-    n[axis] = np.eye(3)[rng.integers(0, 3, axis.sum())] * rng.choice([-1, 1], (axis.sum(), 1))
-    n /= np.linalg.norm(n, axis=1)[:, None]
-    m = n_paths * max_depth
-    k = rng.integers(0, n_discs, m)
-    nk = n[k]
-
-    def tangent():
-        v = rng.normal(size=(m, 3))
-        v -= (v * nk).sum(1)[:, None] * nk
-        return v / np.linalg.norm(v, axis=1)[:, None]
-
-    target = x[k] + tangent() * (d * rng.choice([0.0, 0.5, 1 - 1e-6, 1.0, 1 + 1e-6, 1.001], m))[:, None]
-    cos = -np.where(rng.random(m) < 0.4, 10 ** rng.uniform(-6.5, -4, m), rng.random(m))
-    w = tangent() * np.sqrt(1 - cos**2)[:, None] + nk * cos[:, None]
-    flat = rng.random(m) < 0.15
-    w[flat, rng.integers(0, 3, flat.sum())] = 0.0
-    w /= np.linalg.norm(w, axis=1)[:, None]
-    back = rng.uniform(0.0, 0.5, m) * engine.scene.diagonal
-    segs = np.zeros(m, Segment)
-    segs["org"] = target - w * back[:, None] + offset
-    segs["dir"] = w
-    t_end = back * rng.choice([1 - 1e-6, 1.0, 1 + 1e-6, 0.5, 2.0], m)
-    t_end[rng.random(m) < 0.1] = np.inf
-    segs["t_end"] = t_end
-    segs["power"] = rng.uniform(0.1, 1.0, (m, 3))
-    segs["path"] = np.repeat(np.arange(n_paths), max_depth)
-    ends = rng.integers(1, max_depth + 1, n_paths)
-    segs[(np.arange(m) % max_depth) >= np.repeat(ends, max_depth)] = np.zeros(1, Segment)
-    mf = cl.mem_flags
-    buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=segs)
-    lens = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=ends.astype(np.int32))
-    return oclgi.query_points(x + offset, n), d, PathBatch(buf, lens, 0, n_paths, max_depth)
-
-
-def accumulate(engine, method, points, radius, batch, count_emitted, **options):
-    est = ESTIMATORS[method](engine.queue, engine.compiled, points, radius=radius, count_emitted=count_emitted,
-                             **options)
-    est.accumulate(batch, 2.0**24)
-    est.accumulate(batch, 2.0**24)  # batches add up
-    return est.accumulators()
-
-
 @pytest.mark.parametrize("offset", [0.0, 1000.0])
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_adversarial_segments(engines, count_emitted, offset):
     e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(8), offset=offset)
-    ref = accumulate(e, "detp", pts, d, batch, count_emitted)
+    pts, d, batch = adversarial_batch(e, np.random.default_rng(8), 300, 10_000, offset=offset)
+    ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
     assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
     for opts in ({}, {"q": 0.5, "order": "none", "run_length": 7}, {"q": 0.9, "order": "morton"}):
-        got = accumulate(e, METHOD, pts, d, batch, count_emitted, **opts)
+        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, **opts)
         check_same(ref, got, f"adversarial {opts}, offset {offset}")
 
 

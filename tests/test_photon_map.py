@@ -33,7 +33,7 @@ from oclgi.estimators.photon_map import KnnIndex
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from exactness import surface_points  # noqa: E402
-from test_analytic import _box, _exact, _plane_scene  # noqa: E402
+from analytic_scenes import box, exact, plane_scene  # noqa: E402
 
 EPS = np.float32(1e-6)  # PM_COS_EPS in kernels/photon_map.h
 
@@ -199,7 +199,7 @@ def test_bits_do_not_depend_on_batches_groups_or_index(scenes_dir):
 
 @pytest.fixture(scope="module")
 def plane():
-    return oclgi.Engine(_plane_scene(n_cells=16, half=4.0))
+    return oclgi.Engine(plane_scene(n_cells=16, half=4.0))
 
 
 def test_k_over_k_minus_1_on_the_plane(plane):
@@ -215,11 +215,11 @@ def test_k_over_k_minus_1_on_the_plane(plane):
     hi = plane.irradiance(pts, method="photon_map", photons=1_000_000, k=k, estimator="k")
     assert np.array_equal(hi.accumulators * (k - 1), lo.accumulators * k)
     np.testing.assert_allclose(hi.irradiance / lo.irradiance, k / (k - 1), rtol=1e-6)
-    rel = lo.irradiance[:, 0] / _exact(p[:, 0], p[:, 2])
+    rel = lo.irradiance[:, 0] / exact(p[:, 0], p[:, 2])
     sigma = 1 / math.sqrt(k - 2)
     assert abs(rel.mean() - 1) < 4 * sigma / math.sqrt(n)  # 2.2%
     assert rel.std() == pytest.approx(sigma, rel=0.1)
-    rel_hi = hi.irradiance[:, 0] / _exact(p[:, 0], p[:, 2])
+    rel_hi = hi.irradiance[:, 0] / exact(p[:, 0], p[:, 2])
     assert abs(rel_hi.mean() - k / (k - 1)) < 4 * sigma / math.sqrt(n)
 
 
@@ -231,7 +231,7 @@ def test_point_light_plane_accuracy(plane):
     p = np.array([(r * math.cos(a), 0.0, r * math.sin(a)) for r in rho for a in ang])
     pts = np.hstack([p, np.tile([0.0, 1.0, 0.0], (len(p), 1))])
     est = plane.irradiance(pts, method="photon_map", photons=1_000_000, k=2048)
-    rel = est.irradiance[:, 0] / _exact(p[:, 0], p[:, 2]) - 1
+    rel = est.irradiance[:, 0] / exact(p[:, 0], p[:, 2]) - 1
     assert np.abs(rel).max() < 0.08
     assert abs(rel.mean()) < 0.01
     assert np.array_equal(est.accumulators[:, 0], est.accumulators[:, 2])
@@ -240,10 +240,10 @@ def test_point_light_plane_accuracy(plane):
 def test_furnace_box(rng):
     """All bounces: within 5% of pi Le / (1 - rho) at points 0.15 from the
     edges (k = 4096: r_k ~ 0.06, noise 1.6%)."""
-    from test_analytic import _face_points
+    from analytic_scenes import face_points
 
-    engine = oclgi.Engine(_box(rho=0.5, le=1.0))
-    p, n = _face_points(rng)
+    engine = oclgi.Engine(box(rho=0.5, le=1.0))
+    p, n = face_points(rng)
     est = engine.irradiance(np.hstack([p, n]), method="photon_map", k=4096)
     expected = math.pi / (1 - 0.5)
     assert np.abs(est.irradiance / expected - 1).max() < 0.05

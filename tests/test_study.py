@@ -22,12 +22,12 @@ box (E = pi Le / (1 - rho)).
 
 import csv
 import math
-import subprocess
 import sys
 
 import numpy as np
 import pytest
 from analytic_scenes import box, disc_mean, exact, face_points, plane_scene
+from cli_run import run
 from scipy.stats import chi2
 from small_scene import BOX_OBJ
 
@@ -264,10 +264,6 @@ def scene(tmp_path):
     np.save(tmp_path / "p.npy", np.array([[0, 0.0, 0, 0, 1, 0], [0.5, 0.0, 0.5, 0, 1, 0]], float))
     return tmp_path / "s.toml"
 
-
-def run(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
 
 
 def test_cli_study(scene, tmp_path):
