@@ -39,9 +39,6 @@ from .queries import QueryPoints
 MARGIN = 2  # pixels around a projected box (float rounding of the rays)
 
 
-def _copy(q: QueryPoints) -> QueryPoints:
-    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
-
 
 class DynamicView:
     """Static layer, composite view and dynamic pixels of one camera."""
@@ -59,7 +56,7 @@ class DynamicView:
         self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
         full = (0, 0, self.cam.width, self.cam.height)
         self.static = engine.view_points(self.cam, full, self.static_instances)
-        self.points = _copy(engine.view_points(self.cam, full))
+        self.points = engine.view_points(self.cam, full)
         self.dynamic = np.nonzero(self.on_movable(self.points.tri))[0]
 
     def on_movable(self, tri: np.ndarray) -> np.ndarray:
@@ -114,5 +111,4 @@ class DynamicView:
         return changed, dyn_new
 
     def subset(self, index) -> QueryPoints:
-        p = self.points
-        return QueryPoints(p.positions[index], p.normals[index], p.barys[index], p.kind, None)
+        return self.points.subset(index)

@@ -24,10 +24,7 @@ recomputation are slower than recomputing, so the *practical* update
   (the k-th nearest moved: shadows and light the object moved), by about
   the estimator's own noise, and it tends to recomputation as r_k shrinks
   with more photons. Errors do not pile up over frames: back at the first
-  pose every estimate is the first frame's again, bit for bit (when the
-  object was placed there by ``engine.move``: a move computes its world
-  normals on the device, loading the scene on the host, and the last bits
-  differ, so paths that bounce off it differ too).
+  pose every estimate is the first frame's again, bit for bit.
 - ``mode="exact"``: the points whose closed ball holds a changed impact
   are listed (the others keep their k nearest: nothing of theirs left,
   nothing that arrived ranks before their k-th) and searched again with
@@ -71,6 +68,7 @@ from .engine import as_query_points
 from .errors import OclgiError
 from .estimators.detp_disc_index import PAD, active_discs, check_depth, coordinate_scale, outward_f32
 from .queries import QueryPoints
+from .scene.compiled import as_transform
 from .segment_store import SegmentStore
 from .session import UpdateStats
 
@@ -109,14 +107,6 @@ class BallIndex:
         self.balls = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=ids[bvh.order].astype(np.int32))
 
 
-def _copy(q: QueryPoints) -> QueryPoints:
-    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
-
-
-def _matrix4(m) -> np.ndarray:
-    m = np.asarray(m, np.float64)
-    return np.vstack([m, [0, 0, 0, 1]]) if m.shape == (3, 4) else m
-
 
 class PhotonMapSession:
     """Photon Map irradiance at fixed query points, kept up to date under moves.
@@ -136,7 +126,7 @@ class PhotonMapSession:
         self.engine, self.queue, self.mode = engine, engine.queue, mode
         self.params = engine.run_params("photon_map", photons, None, seed, max_depth, None, count_emitted)
         self.options = dict(k=k, estimator=estimator, index=index, front_only=front_only, leaf_size=leaf_size)
-        self.points = _copy(as_query_points(points))
+        self.points = as_query_points(points).copy()
         self.map = engine.estimator(self.points, self.params, **self.options)  # validates the options
         t0 = time.perf_counter()
         p = self.params
@@ -171,7 +161,7 @@ class PhotonMapSession:
         for obj, (a, b) in enumerate(scene.object_ranges()):
             ids = np.nonzero((tri >= a) & (tri < b))[0]
             if scene.objects[obj].movable and len(ids):
-                pose = _matrix4(compiled.instances_host[obj]["world_from_object"].astype(np.float64))
+                pose = as_transform(compiled.instances_host[obj]["world_from_object"].astype(np.float64))
                 out[obj] = (ids, self.points.positions[ids].copy(), self.points.normals[ids].copy(), pose)
         return out
 
@@ -185,7 +175,7 @@ class PhotonMapSession:
         if obj not in self.attached:
             return np.zeros(0, np.int64)
         ids, pos0, nrm0, pose0 = self.attached[obj]
-        m = _matrix4(matrix)
+        m = as_transform(matrix)
         moved = QueryPoints(pos0.copy(), nrm0.copy(), self.points.barys[ids].copy())
         if not np.array_equal(m, pose0):  # back at the first pose: the points as given, bit for bit
             rel = m @ np.linalg.inv(pose0)
@@ -223,7 +213,7 @@ class PhotonMapSession:
         """A Photon Map estimate from scratch at the current pose and points
         (an ``Estimate``; ``seed`` another seed, to measure the noise)."""
         p = self.params
-        return self.engine.irradiance(_copy(self.points), method="photon_map", photons=p.photons,
+        return self.engine.irradiance(self.points.copy(), method="photon_map", photons=p.photons,
                                       seed=p.seed if seed is None else seed, max_depth=p.max_depth,
                                       count_emitted=p.count_emitted, **self.options)
 

@@ -31,6 +31,13 @@ class QueryPoints:
     def __len__(self):
         return len(self.positions)
 
+    def copy(self) -> "QueryPoints":
+        return QueryPoints(self.positions.copy(), self.normals.copy(), self.barys.copy(), self.kind, self.shape)
+
+    def subset(self, index) -> "QueryPoints":
+        """The points ``index`` (copies), as a flat set of the same kind."""
+        return QueryPoints(self.positions[index], self.normals[index], self.barys[index], self.kind, None)
+
     @property
     def tri(self) -> np.ndarray:
         return self.positions[:, 3].view(np.int32)

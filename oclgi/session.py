@@ -34,7 +34,6 @@ import pyopencl as cl
 
 from .engine import as_query_points
 from .errors import OclgiError
-from .queries import QueryPoints
 from .segment_store import SegmentStore
 
 
@@ -46,9 +45,6 @@ class UpdateStats:
     points: int = 0  # dynamic points recomputed (camera sessions)
     seconds: dict = field(default_factory=dict)
 
-
-def _copy(q: QueryPoints) -> QueryPoints:
-    return QueryPoints(q.positions.copy(), q.normals.copy(), q.barys.copy(), q.kind, q.shape)
 
 
 def _add_work(total: dict | None, more: dict | None) -> dict | None:
@@ -92,9 +88,9 @@ class Session:
             # DETP keeps sums per point: the estimator holds the static layer
             # for good; Impact Count keeps sums per triangle and just shades
             # whichever point each pixel sees.
-            est_points = self.view.static if cls.sums_per_point else _copy(self.view.points)
+            est_points = self.view.static if cls.sums_per_point else self.view.points.copy()
         else:
-            self.points = _copy(as_query_points(points))
+            self.points = as_query_points(points).copy()
             est_points = self.points
         detp_variants = [m for m in ESTIMATORS if m.startswith("detp")]
         self.dynamic = dynamic or ("detp_disc_index" if p.method.startswith("detp") else p.method)

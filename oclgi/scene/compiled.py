@@ -30,6 +30,18 @@ def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
     return cl.Buffer(ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
 
+def as_transform(matrix) -> np.ndarray:
+    """A validated affine 4x4 float64 matrix from a 4x4 or 3x4 one."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape == (3, 4):
+        m = np.vstack([m, [0, 0, 0, 1]])
+    if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
+        raise OclgiError(f"a transform must be a finite affine 4x4 or 3x4 matrix, got shape {m.shape}")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise OclgiError("the transform is singular (it flattens the object)")
+    return m
+
+
 class CompiledScene:
     def __init__(self, ctx: cl.Context, scene: Scene):
         self.ctx = ctx
@@ -134,13 +146,7 @@ class CompiledScene:
         """Move object ``obj``: ``matrix`` (4x4 or 3x4, world from the object as
         loaded) replaces its transform. Only its Instance record and the world
         normals of its triangles change; no BVH is rebuilt."""
-        m = np.asarray(matrix, dtype=np.float64)
-        if m.shape == (3, 4):
-            m = np.vstack([m, [0, 0, 0, 1]])
-        if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
-            raise OclgiError(f"a transform must be a finite affine 4x4 or 3x4 matrix, got shape {m.shape}")
-        if abs(np.linalg.det(m[:3, :3])) < 1e-12:
-            raise OclgiError("the transform is singular (it flattens the object)")
+        m = as_transform(matrix)
         if not self.scene.objects[obj].movable:
             raise OclgiError(f"object {self.scene.objects[obj].name!r} is static")
         self._place(obj, m)
