@@ -67,6 +67,7 @@ from .cl.programs import launch, programs
 from .engine import as_query_points
 from .errors import OclgiError
 from .estimators.detp_disc_index import PAD, active_discs, check_depth, coordinate_scale, outward_f32
+from .estimators.photon_map import DEFAULT_K
 from .queries import QueryPoints
 from .scene.compiled import as_transform
 from .segment_store import SegmentStore
@@ -119,7 +120,7 @@ class PhotonMapSession:
     module docstring) or "exact" (equal to recomputation).
     """
 
-    def __init__(self, engine, points, photons=None, seed=None, max_depth=None, k=50, estimator="k-1",
+    def __init__(self, engine, points, photons=None, seed=None, max_depth=None, k=DEFAULT_K, estimator="k-1",
                  count_emitted=None, mode="practical", index="bvh", front_only=True, leaf_size=16):
         if mode not in MODES:
             raise OclgiError(f"Photon Map session mode must be one of {', '.join(map(repr, MODES))}, got {mode!r}")

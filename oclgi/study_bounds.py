@@ -58,8 +58,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bounds
+from .estimators.photon_map import DEFAULT_K
 
-DEFAULT_K = 50  # oclgi.estimators.photon_map.PhotonMap's default
 
 
 @dataclass

@@ -121,6 +121,9 @@ def max_impacts(device) -> int:
     return min(by_total, by_buffer, 2**31 - 1)
 
 
+DEFAULT_K = 50  # neighbours per estimate
+
+
 def _check_k(k, estimator):
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_K:
         raise OclgiError(f"photon_map: k must be an integer in 1..{MAX_K}, got {k!r}")
@@ -379,7 +382,7 @@ class PhotonMap(Estimator):
     # impact changes other points' neighbour sets); see DESIGN.md section 4.
     incremental = False
 
-    def __init__(self, queue, compiled, points, k: int = 50, estimator: str = "k-1", index: str = "bvh",
+    def __init__(self, queue, compiled, points, k: int = DEFAULT_K, estimator: str = "k-1", index: str = "bvh",
                  front_only: bool = True, leaf_size: int = 16, radius=None, extension=None, **kw):
         # radius and extension are DETP parameters; the k-th neighbour sets the radius here
         super().__init__(queue, compiled, points, **kw)
