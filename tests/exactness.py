@@ -140,3 +140,21 @@ def check_replace_points(engine, method):
     ref.accumulate(batch, 2.0**24)
     assert ref.accumulators()[idx].any()
     assert np.array_equal(est.accumulators(), ref.accumulators())
+
+
+def check_variant_same_as_plain(engines, points, plain, method, scene, frac, count_emitted):
+    """``method`` on the shared points equals the shared plain-DETP sums (conftest.py)."""
+    e = engines[scene]
+    est = e.irradiance(points[scene], method=method, radius=frac * e.scene.diagonal, photons=DETP_PHOTONS,
+                       count_emitted=count_emitted)
+    check_same(plain(scene, frac, count_emitted), est, f"{scene} radius {frac} x diagonal")
+
+
+def check_camera_misses(engine, method):
+    """Camera points include background pixels (zero normals): an index
+    leaves them out, and they stay zero, as in plain DETP."""
+    pts = engine.camera_points(width=24, height=24)
+    assert (pts.tri < 0).any()
+    ref = engine.irradiance(pts, method="detp", radius=0.05, photons=DETP_PHOTONS)
+    est = engine.irradiance(pts, method=method, radius=0.05, photons=DETP_PHOTONS)
+    check_same(ref.accumulators, est, "camera points")

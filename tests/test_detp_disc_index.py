@@ -17,23 +17,18 @@ import numpy as np
 import pytest
 
 import oclgi
-from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_replace_points, check_same,
-                       run_on_batch)
+from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_camera_misses, check_replace_points,
+                       check_same, check_variant_same_as_plain, run_on_batch)
 
 METHOD = "detp_disc_index"
 PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
-
-
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
 @pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
 def test_same_as_plain(engines, points, plain, scene, frac, count_emitted):
-    e = engines[scene]
-    est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                       count_emitted=count_emitted)
-    check_same(plain(scene, frac, count_emitted), est, f"{scene} radius {frac} x diagonal")
+    check_variant_same_as_plain(engines, points, plain, METHOD, scene, frac, count_emitted)
 
 
 @pytest.mark.parametrize("leaf_size", [1, 3, 8, 32])
@@ -56,14 +51,7 @@ def test_work_group_sizes(engines, points, plain, local_size):
 
 
 def test_camera_points_with_misses(engines):
-    """Camera points include background pixels (zero normals): left out of
-    the index, they stay zero, as in plain DETP."""
-    e = engines["cornell"]
-    pts = e.camera_points(width=24, height=24)
-    assert (pts.tri < 0).any()
-    ref = e.irradiance(pts, method="detp", radius=0.05, photons=PHOTONS)
-    est = e.irradiance(pts, method=METHOD, radius=0.05, photons=PHOTONS)
-    check_same(ref.accumulators, est, "camera points")
+    check_camera_misses(engines["cornell"], METHOD)
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
