@@ -47,8 +47,8 @@ import numpy as np
 import oclgi
 from oclgi.io import atomic_path
 from oclgi.study import Config, equal_time, random_surface_points, run_study
-from oclgi.study_reference import Reference
-from oclgi.study_report import write_all
+from oclgi.study.reference import Reference
+from oclgi.study.report import write_all
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = Path(__file__).resolve().parent / "results"

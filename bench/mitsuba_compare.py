@@ -1,7 +1,7 @@
 """oclgi's Cornell box against Mitsuba 3's path tracer, at high quality.
 
 Renders the Cornell box with oclgi (DETP with disc indexing) and with
-Mitsuba (``oclgi.study_image.compare_with_mitsuba``, the study's own image
+Mitsuba (``oclgi.study.image.compare_with_mitsuba``, the study's own image
 comparison), then renders Mitsuba once more with another seed to measure the
 reference's own noise, and compares oclgi with the mean of both Mitsuba
 images as well.
@@ -26,9 +26,9 @@ import time
 from pathlib import Path
 
 import oclgi
-from oclgi import image_compare, mitsuba_reference
+from oclgi.study import image_compare, mitsuba as mitsuba_reference
 from oclgi.io import atomic_path, read_image
-from oclgi.study_image import compare_with_mitsuba
+from oclgi.study.image import compare_with_mitsuba
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results"

@@ -53,8 +53,8 @@ import scipy
 from scipy.spatial import cKDTree
 
 from oclgi import queries
-from oclgi.estimators.photon_map import KnnIndex, query_order
-from oclgi.photon_trace import PhotonTracer
+from oclgi.accel.point_index import KnnIndex, query_order
+from oclgi.tracing.photon_trace import PhotonTracer
 from oclgi.scene.scene import Camera
 
 K = 50

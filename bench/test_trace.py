@@ -18,7 +18,7 @@ import pyopencl as cl
 import pytest
 
 from oclgi.cl.layout import Segment
-from oclgi.photon_trace import PhotonTracer
+from oclgi.tracing.photon_trace import PhotonTracer
 
 PATHS = 1_000_000
 MAX_DEPTH = 16  # the engine's default

@@ -30,7 +30,7 @@
  *         of them left, and whatever arrived ranks after the k-th.
  * pm_unmark  clears the marks of the listed points (O(listed), not O(n)).
  */
-#include "photon_map.h"
+#include "point_index.h"
 #include "box_bvh.h"
 
 __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int *balls,

@@ -15,8 +15,8 @@ from .errors import OclgiError
 from .queries import QueryPoints, from_arrays as query_points, from_file as read_points
 from .scene.description import load_dict, load_file
 from .scene.scene import Camera, Material, OclgiWarning, PointLight, Scene
-from .photon_map_session import PhotonMapSession
-from .session import Session, UpdateStats
+from .incremental.photon_map_session import PhotonMapSession
+from .incremental.session import Session, UpdateStats
 
 __version__ = "0.1.0"
 

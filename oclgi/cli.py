@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import OclgiError
-from .estimators import METHODS
+from .params import METHODS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -251,8 +251,8 @@ def cmd_irradiance(args):
 
 
 def cmd_animate(args):
-    from .animate import animate, poses
-    from .session import Session
+    from .incremental.animate import animate, poses
+    from .incremental.session import Session
 
     out = args.output
     if out.exists() and not out.is_dir():
@@ -283,7 +283,7 @@ def cmd_animate(args):
 
 
 def cmd_study(args):
-    from .study_cli import run
+    from .study.cli import run
 
     run(args)
 

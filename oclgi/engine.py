@@ -26,9 +26,10 @@ from .cl.device import create_context
 from .cl.programs import launch, programs
 from .errors import OclgiError
 from .estimators import ESTIMATORS
-from .photon_trace import PhotonTracer
+from .tracing.photon_trace import PhotonTracer
 from .scene.compiled import CompiledScene
-from .scene.description import check_method, validate_camera
+from .params import check_method
+from .scene.description import validate_camera
 from .scene.scene import MAX_DEPTH_LIMIT, MAX_PHOTONS, Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20

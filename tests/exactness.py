@@ -8,7 +8,7 @@ import pyopencl as cl
 import oclgi
 from oclgi.cl.layout import Segment
 from oclgi.estimators import ESTIMATORS
-from oclgi.photon_trace import PathBatch
+from oclgi.tracing.photon_trace import PathBatch
 from oclgi.queries import QueryPoints
 
 # Photon paths of the shared plain-DETP sums (the `plain` fixture, conftest.py).

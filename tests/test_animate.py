@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from cli_run import run
 
-from oclgi.animate import poses
+from oclgi.incremental.animate import poses
 from oclgi.errors import OclgiError
 
 SCENE = """

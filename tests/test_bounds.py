@@ -1,4 +1,4 @@
-"""oclgi.bounds: the variance bounds of DESIGN.md section 3 ("Efficiency").
+"""oclgi.study.bounds: the variance bounds of DESIGN.md section 3 ("Efficiency").
 
 The order-statistics factor sigma^2_n(k) = sup_x g_k(x), g_k(x) =
 P_k (1 - P_k) / (x (1 - x)) with P_k(x) = I_x(k, n+1-k) = P(Bin(n, x) >= k),
@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from scipy.special import betainc
 
-from oclgi import bounds
+from oclgi.study import bounds
 from oclgi.errors import OclgiError
 
 

@@ -24,7 +24,7 @@ import pytest
 
 import oclgi
 from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_same, run_on_batch, surface_points
-from oclgi import ordering
+from oclgi.accel import ordering
 from oclgi.errors import OclgiError
 from oclgi.estimators import detp_sphere_cache as sc
 

@@ -5,11 +5,11 @@ import doctest
 import pytest
 
 import oclgi.engine
-import oclgi.photon_map_session
-import oclgi.session
+import oclgi.incremental.photon_map_session
+import oclgi.incremental.session
 
 
-@pytest.mark.parametrize("module", [oclgi.engine, oclgi.session, oclgi.photon_map_session])
+@pytest.mark.parametrize("module", [oclgi.engine, oclgi.incremental.session, oclgi.incremental.photon_map_session])
 def test_docstring_examples(module):
     result = doctest.testmod(module, verbose=False)
     assert result.attempted >= 2

@@ -1,4 +1,4 @@
-"""oclgi against Mitsuba 3, an independent path tracer (oclgi.mitsuba_reference).
+"""oclgi against Mitsuba 3, an independent path tracer (oclgi.study.mitsuba).
 
 First Mitsuba's reference itself is checked against closed-form answers
 (a point light over a plane, a furnace box), which validates the conversion
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import oclgi
-from oclgi import image_compare, mitsuba_reference
+from oclgi.study import image_compare, mitsuba as mitsuba_reference
 from oclgi.errors import OclgiError
 from oclgi.queries import QueryPoints
 
@@ -370,7 +370,7 @@ def test_compare_dark_reference_and_bad_input():
 
 
 def _small_run(engine, out, **kw):
-    from oclgi.study_image import compare_with_mitsuba
+    from oclgi.study.image import compare_with_mitsuba
 
     return compare_with_mitsuba(engine, out, spp=16, edge_px=1, width=24, height=16, photons=50_000,
                                 radius=0.1, **kw)
@@ -378,7 +378,7 @@ def _small_run(engine, out, **kw):
 
 def test_compare_with_mitsuba_writes_its_files(cornell, tmp_path):
     from oclgi.io import read_image
-    from oclgi.study_image import FILES
+    from oclgi.study.image import FILES
 
     out = tmp_path / "cmp"
     summary = _small_run(cornell, out)
@@ -398,7 +398,7 @@ def test_compare_with_mitsuba_writes_its_files(cornell, tmp_path):
 
 
 def test_compare_with_mitsuba_leaves_nothing_on_error(cornell, tmp_path, monkeypatch):
-    from oclgi import study_image
+    from oclgi.study import image as study_image
 
     out = tmp_path / "cmp"
     with pytest.raises(OclgiError, match="count_emitted"):

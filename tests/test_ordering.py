@@ -1,4 +1,4 @@
-"""Point orderings (oclgi/ordering.py, kernels/ordering.cl).
+"""Point orderings (oclgi/accel/ordering.py, kernels/ordering.cl).
 
 The Hilbert keys must be a true Hilbert curve: over a whole grid the
 key -> cell map is a bijection and consecutive keys are face-adjacent cells;
@@ -11,7 +11,7 @@ argsort exactly.
 import numpy as np
 import pytest
 
-from oclgi import ordering
+from oclgi.accel import ordering
 from oclgi.errors import OclgiError
 
 

@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 import oclgi
 from oclgi.errors import OclgiError
 from oclgi.estimators import photon_map as pm
-from oclgi.estimators.photon_map import KnnIndex
+from oclgi.accel.point_index import KnnIndex
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from exactness import surface_points  # noqa: E402

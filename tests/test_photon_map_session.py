@@ -1,4 +1,4 @@
-"""Photon Map sessions (oclgi/photon_map_session.py): the map, the two modes, the drift.
+"""Photon Map sessions (oclgi/incremental/photon_map_session.py): the map, the two modes, the drift.
 
 After a sequence of moves of the bunny in the Cornell box:
 

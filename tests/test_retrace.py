@@ -7,7 +7,7 @@ import pytest
 
 import oclgi
 from oclgi.cl.layout import Segment
-from oclgi.photon_trace import PhotonTracer
+from oclgi.tracing.photon_trace import PhotonTracer
 from test_instances import _rigid, _scene
 
 

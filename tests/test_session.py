@@ -172,7 +172,7 @@ def test_view_rectangle_holds_every_pixel_on_the_object(scenes_dir, rng):
     pixel that sees the object (else a dynamic point would be missed), also
     when the object is close to the eye or partly behind it; the composite
     view then equals a full camera pass bit for bit."""
-    from oclgi.dynamic_view import DynamicView
+    from oclgi.incremental.dynamic_view import DynamicView
 
     scene = _scene(scenes_dir)
     scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=96, height=80)
@@ -204,7 +204,7 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
     """The find examines only paths whose cell mask meets the object's old
     and new boxes: over random moves (kept up to date by re-tracing) it must
     list exactly the paths and first bounces a scan of every path lists."""
-    from oclgi.segment_store import SegmentStore
+    from oclgi.incremental.segment_store import SegmentStore
 
     engine.move("bunny", np.eye(4))
     masked, full = (SegmentStore(engine, 20_000, 5, 10) for _ in range(2))
@@ -225,7 +225,7 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
 
 
 def test_grid_dims_fit_the_mask_and_follow_the_scene():
-    from oclgi.segment_store import MAX_CELLS, grid_dims
+    from oclgi.incremental.segment_store import MAX_CELLS, grid_dims
 
     for extent, expect in (([2, 2, 2], [5, 5, 5]), ([35.5, 17.4, 16.3], [7, 4, 4]), ([1, 1, 0], [11, 11, 1]),
                            ([1e6, 1, 1], [127, 1, 1])):

@@ -1,6 +1,6 @@
-"""The estimator study (oclgi/study.py) on scenes with closed-form irradiance.
+"""The estimator study (oclgi/study/run.py) on scenes with closed-form irradiance.
 
-1. Variance against the theoretical bounds (oclgi/study_bounds.py says what
+1. Variance against the theoretical bounds (oclgi/study/bound_inputs.py says what
    is bounded and how each input is read off the scene). DETP and Impact
    Count: every point's sample variance over R seeds is consistent with
    lying under its bound (a one-sided chi-square test per point) and the
@@ -104,7 +104,7 @@ def test_photon_map_variance_gamma_law_and_bound(furnace_study):
     (k/(k-1))^2 for k), whatever the photon count; the thesis' bound is
     smaller than that (the study says so: ratio > 1). Medians over the
     points: single points have shown a rare outlier run far in the tail."""
-    from oclgi import bounds
+    from oclgi.study import bounds
 
     res = furnace_study
     inputs = res.inputs
@@ -165,7 +165,7 @@ def test_detp_unbiased_in_the_furnace(furnace_study):
 def test_reference_from_detp_states_its_error(plane):
     """The high-photon DETP reference: several runs, its standard error from
     their spread, close to the exact values within it."""
-    from oclgi.study_reference import Reference
+    from oclgi.study.reference import Reference
 
     pts = np.array([[x, 0.0, 0.0, 0.0, 1.0, 0.0] for x in (0.0, 0.3, 0.6)])
     res = run_study(plane, [Config("detp", [20_000], radius=0.1)], points=pts, seeds=2,

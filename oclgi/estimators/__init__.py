@@ -9,6 +9,7 @@ resolves them to irradiance at the query points (see base.py).
     photon_map         Photon Maps: the k nearest impacts over pi r_k^2 (Jensen 1995)
 """
 
+from ..params import METHODS
 from .detp import Detp
 from .detp_disc_index import DetpDiscIndex
 from .detp_ray_map import DetpRayMap
@@ -24,4 +25,4 @@ ESTIMATORS = {
     "impact": ImpactCount,
     "photon_map": PhotonMap,
 }
-METHODS = tuple(ESTIMATORS)
+assert tuple(ESTIMATORS) == METHODS, "oclgi/params.py's METHODS must list every estimator"

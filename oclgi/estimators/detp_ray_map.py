@@ -63,7 +63,7 @@ from ..accel.bvh_build import build_bvh, morton_codes
 from ..cl.programs import launch
 from ..errors import OclgiError
 from .base import DetpEstimator
-from .detp_disc_index import LANES, PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
+from ..accel.boxes import LANES, PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
 
 MAX_LEAF = 32
 MAX_PIECES = 64  # pieces per segment, at most

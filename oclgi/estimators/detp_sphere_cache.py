@@ -1,7 +1,7 @@
 """DETP with a sphere cache (Lastra 2002b; cost model García 2006).
 
 Plain DETP tests every segment against every disc. The sphere cache visits
-the query points along a space-filling curve (oclgi/ordering.py) and keeps,
+the query points along a space-filling curve (oclgi/accel/ordering.py) and keeps,
 around the last point, a stack of nested spheres ``S_0 ⊃ S_1 ⊃ ... ⊃ S_L``
 of radii ``R_k = R_L Q^(k-L)``, each with the list of segments that meet it.
 For the next disc (centre x, radius d) it finds the deepest ``j`` such that
@@ -90,7 +90,7 @@ import math
 import numpy as np
 import pyopencl as cl
 
-from .. import ordering
+from ..accel import ordering
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import DetpEstimator

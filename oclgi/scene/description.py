@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
-from ..estimators import METHODS
+from ..params import check_method
 from .mesh import load_mesh
 from .scene import Camera, Material, PointLight, Scene, SceneObject, Settings
 
@@ -337,12 +337,6 @@ def _table_list(value, name):
     if not isinstance(value, list):
         raise OclgiError(f"{name}: expected [[{name}]] tables, got {value!r}")
     return value
-
-
-def check_method(method) -> str:
-    if method not in METHODS:
-        raise OclgiError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    return method
 
 
 def validate_camera(c: Camera) -> None:

@@ -33,8 +33,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from .cl.layout import Instance
-from .queries import QueryPoints
+from ..cl.layout import Instance
+from ..queries import QueryPoints
 
 MARGIN = 2  # pixels around a projected box (float rounding of the rays)
 

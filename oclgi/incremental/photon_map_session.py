@@ -62,14 +62,14 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from .accel.bvh_build import build_bvh
-from .cl.programs import launch, programs
-from .engine import as_query_points
-from .errors import OclgiError
-from .estimators.detp_disc_index import PAD, active_discs, check_depth, coordinate_scale, outward_f32
-from .estimators.photon_map import DEFAULT_K
-from .queries import QueryPoints
-from .scene.compiled import as_transform
+from ..accel.bvh_build import build_bvh
+from ..cl.programs import launch, programs
+from ..engine import as_query_points
+from ..errors import OclgiError
+from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, outward_f32
+from ..estimators.photon_map import DEFAULT_K
+from ..queries import QueryPoints
+from ..scene.compiled import as_transform
 from .segment_store import SegmentStore
 from .session import UpdateStats
 

@@ -1,8 +1,8 @@
 """The image part of the estimator study: oclgi against Mitsuba 3.
 
 :func:`compare_with_mitsuba` renders the scene's camera view with oclgi and
-with Mitsuba's path tracer (:mod:`oclgi.mitsuba_reference`), compares them
-away from geometric edges (:mod:`oclgi.image_compare`) and writes, all or
+with Mitsuba's path tracer (:mod:`oclgi.study.mitsuba`), compares them
+away from geometric edges (:mod:`oclgi.study.image_compare`) and writes, all or
 nothing, into ``out_dir``:
 
     oclgi.exr         oclgi's linear radiance
@@ -21,9 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import image_compare, mitsuba_reference
-from .errors import OclgiError
-from .io import _write_image_file, atomic_path, check_output
+from . import image_compare
+from . import mitsuba as mitsuba_reference
+from ..errors import OclgiError
+from ..io import _write_image_file, atomic_path, check_output
 
 FILES = ("oclgi.exr", "mitsuba.exr", "error.exr", "error.png", "comparison.json")
 RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")

@@ -38,8 +38,8 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from .cl.programs import launch, programs
-from .errors import OclgiError
+from ..cl.programs import launch, programs
+from ..errors import OclgiError
 
 METHODS = ("hilbert", "morton", "none")
 _METHOD_ID = {"hilbert": 1, "morton": 2}

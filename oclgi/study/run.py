@@ -42,7 +42,7 @@ the points (and channels) whose reference is positive and known to 10%
   variance, here over the squared mean reference, a constant of the scene,
   so that it does not depend on units);
 - the theoretical bound and the measured Var(L_hat) = (rho / pi)^2 Var(E_hat)
-  per point (see oclgi/study_bounds.py for what is bounded and every input):
+  per point (see oclgi/study/bound_inputs.py for what is bounded and every input):
   var_L and bound (means over the points), bound_ratio_mean and
   bound_ratio_max (measured over bound), under_bound (the fraction of
   points and channels whose sample variance is under the bound).
@@ -56,16 +56,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import queries, study_bounds, study_reference
-from .engine import _check_options, as_query_points
-from .errors import OclgiError
-from .estimators import ESTIMATORS
-from .progress import Progress
-from .scene.description import check_method
-from .scene.scene import MAX_PHOTONS
+from .. import queries
+from . import bound_inputs as study_bounds
+from . import reference as study_reference
+from ..engine import _check_options, as_query_points
+from ..errors import OclgiError
+from ..estimators import ESTIMATORS
+from ..progress import Progress
+from ..params import check_method
+from ..scene.scene import MAX_PHOTONS
+from .stats import REFERENCE_TRUST
 
 WARMUP_PHOTONS = 20_000
-REFERENCE_TRUST = 0.1  # largest relative standard error of the reference at a point the statistics use
 
 
 class Config:
@@ -174,7 +176,7 @@ def _located(engine, points, need: bool):
     """Points with the triangle under each found where it is unknown (the
     albedo at a point, and Impact Count, need it). When some point is off the
     surface, that is an error only if an Impact Count run ``need``s it."""
-    from .estimators.impact_count import locate
+    from ..estimators.impact_count import locate
 
     if points.kind == "camera" or not (points.tri < 0).any():
         return points
@@ -241,26 +243,26 @@ class StudyResult:
             out.setdefault(r.label, []).append(r)
         return out
 
-    # writers (oclgi/study_report.py)
+    # writers (oclgi/study/report.py)
     def to_markdown(self) -> str:
-        from .study_report import markdown
+        from .report import markdown
 
         return markdown(self)
 
     def to_csv(self) -> str:
-        from .study_report import csv_text
+        from .report import csv_text
 
         return csv_text(self)
 
     def to_json(self) -> dict:
-        from .study_report import json_dict
+        from .report import json_dict
 
         return json_dict(self)
 
     def write(self, out_dir, stem: str = "study", plots: bool = True) -> list:
         """Write ``stem.md``, ``stem.csv`` and (``plots``) ``error_vs_time.png``
         and ``variance_vs_photons.png`` into ``out_dir``, all or nothing."""
-        from .study_report import write_all
+        from .report import write_all
 
         return write_all(self, out_dir, stem, plots)
 
@@ -294,9 +296,9 @@ def run_study(engine, configs, points="random:256", seeds=8, reference=None, poi
     ``points``: see :func:`study_points`. ``seeds``: a count R >= 2 (seeds
     1..R) or a list. ``reference``: an (n, 3) array, a callable
     ``f(positions, normals)``, ``"detp"``/``"detp:PHOTONS"``/``"mitsuba"``
-    or a :class:`oclgi.study_reference.Reference` (default: high-photon
+    or a :class:`oclgi.study.reference.Reference` (default: high-photon
     DETP). ``bound_params``: ``l_max`` and/or ``r_max`` overriding what is
-    read off the scene (oclgi/study_bounds.py).
+    read off the scene (oclgi/study/bound_inputs.py).
     """
     t_start = time.perf_counter()
     configs = list(configs)
@@ -439,75 +441,3 @@ def summarise(result: StudyResult, row: Row) -> dict:
         "bound_ratio_max": float(np.max(ratio)) if ratio.size else math.nan,
         "under_bound": float(np.mean(ratio <= 1.0)) if ratio.size else math.nan,
     }
-
-
-# -- equal time ----------------------------------------------------------------------
-
-
-@dataclass
-class EqualTime:
-    time_s: float
-    mode: str
-    baseline: str
-    rows: list  # dicts: label, error, how, ratio (to the baseline), efficiency
-    metric: str = "nrmse"
-
-
-def equal_time(result: StudyResult, time_s: float | None = None, mode: str = "interpolate",
-               baseline: str | None = None, metric: str = "nrmse") -> EqualTime:
-    """Each configuration's error (``metric``: "nrmse", the default, or
-    "rel_rmse") at one common time.
-
-    ``mode="interpolate"``: log-log linear between the two measured points
-    around ``time_s``; outside a configuration's measured range, extrapolated
-    from its nearest point along RMSE ~ t^(-1/2) (variance-dominated error at
-    a fixed cost per photon). ``mode="fit"``: RMSE = c t^(-1/2) fitted to all
-    its points (least squares in log). ``time_s`` defaults to the geometric
-    middle of the range where all configurations were measured, else of all
-    times. ``baseline`` (default: the first DETP configuration, else the
-    first) gives the ratio column.
-    """
-    if mode not in ("interpolate", "fit"):
-        raise OclgiError(f"equal_time mode must be 'interpolate' or 'fit', got {mode!r}")
-    if metric not in ("nrmse", "rel_rmse"):
-        raise OclgiError(f"equal_time metric must be 'nrmse' or 'rel_rmse', got {metric!r}")
-    fam = result.families()
-    curves = {}
-    for label, rows in fam.items():
-        t = np.array([r.summary["time_s"] for r in rows])
-        e = np.array([r.summary[metric] for r in rows])
-        order = np.argsort(t)
-        curves[label] = (t[order], e[order], [rows[i] for i in order])
-    if time_s is None:
-        lo = max(c[0][0] for c in curves.values())
-        hi = min(c[0][-1] for c in curves.values())
-        if lo > hi:
-            ts = np.concatenate([c[0] for c in curves.values()])
-            lo, hi = ts.min(), ts.max()
-        time_s = float(math.sqrt(lo * hi))
-    if baseline is None:
-        detp = [lbl for lbl, rows in fam.items() if rows[0].config.is_detp]
-        baseline = detp[0] if detp else next(iter(fam))
-    out = []
-    for label, (t, e, rows) in curves.items():
-        value, how = _at_time(t, e, time_s, mode)
-        eff = float(np.median([r.summary["efficiency"] for r in rows]))
-        out.append({"label": label, "error": value, "how": how, "efficiency": eff})
-    base = next(r["error"] for r in out if r["label"] == baseline)
-    for r in out:
-        r["ratio"] = r["error"] / base if base > 0 else math.nan
-    return EqualTime(time_s, mode, baseline, out, metric)
-
-
-def _at_time(t, e, t0, mode):
-    if mode == "fit":
-        c = math.exp(float(np.mean(np.log(e) + 0.5 * np.log(t))))
-        return c * t0 ** -0.5, "fit c t^-1/2"
-    if t0 <= t[0] or t0 >= t[-1] or len(t) == 1:
-        i = 0 if t0 <= t[0] else len(t) - 1
-        if math.isclose(t0, t[i], rel_tol=1e-9):
-            return float(e[i]), "measured"
-        return float(e[i] * (t0 / t[i]) ** -0.5), "extrapolated t^-1/2"
-    j = int(np.searchsorted(t, t0))
-    w = (math.log(t0) - math.log(t[j - 1])) / (math.log(t[j]) - math.log(t[j - 1]))
-    return float(math.exp((1 - w) * math.log(e[j - 1]) + w * math.log(e[j]))), "interpolated"

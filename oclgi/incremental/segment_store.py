@@ -18,7 +18,7 @@ path-major, as one batch. After a movable object moves:
    and random numbers as a full trace;
 4. ``suffixes(affected, +1)`` gathers the new suffixes, to be added.
 
-Sessions (oclgi/session.py) drive these steps for their estimators.
+Sessions (oclgi/incremental/session.py) drive these steps for their estimators.
 """
 
 from __future__ import annotations
@@ -29,10 +29,10 @@ import numpy as np
 import pyopencl as cl
 from pyopencl import cltypes
 
-from .cl.layout import Segment
-from .cl.programs import launch, programs
-from .errors import OclgiError
-from .photon_trace import PathBatch, PhotonTracer
+from ..cl.layout import Segment
+from ..cl.programs import launch, programs
+from ..errors import OclgiError
+from ..tracing.photon_trace import PathBatch, PhotonTracer
 
 MAX_CELLS = 127  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
 OUTSIDE_BIT = 127  # a path's segment leaves the grid

@@ -67,7 +67,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.special import betainc, expit
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 GRID_POINTS = 4001
 TAIL = 1e-4  # grid reaches x = TAIL / n from both ends

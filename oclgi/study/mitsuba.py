@@ -28,7 +28,7 @@ carried over:
   the right in both. oclgi samples each pixel at its centre only; Mitsuba
   averages over the pixel (box filter), which differs only where the
   radiance changes within a pixel, i.e. at edges, which comparisons mask
-  (:mod:`oclgi.image_compare`).
+  (:mod:`oclgi.study.image_compare`).
 * Path length. An oclgi photon path has at most ``max_depth`` segments, the
   first leaving the light; with ``count_emitted`` every segment, that first
   one included, adds to the irradiance ``E`` of the discs it crosses. So
@@ -57,7 +57,7 @@ import os
 
 import numpy as np
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 DEFAULT_VARIANT = "scalar_rgb"
 INSTALL_HINT = "pip install 'oclgi[mitsuba]'"
@@ -84,7 +84,7 @@ def load_mitsuba(variant: str | None = None):
 
 def _split(scene_or_engine):
     """(scene, engine or None) from a Scene or an Engine."""
-    from .scene.scene import Scene
+    from ..scene.scene import Scene
 
     if isinstance(scene_or_engine, Scene):
         return scene_or_engine, None
@@ -193,8 +193,8 @@ def render(scene, camera=None, width=None, height=None, spp=256, seed=0, max_dep
     (segments of a photon path, default the scene's ``photons.max_depth``).
     ``spp`` is rounded up to a square (:func:`sample_count`).
     """
-    from .scene.description import validate_camera
-    from .scene.scene import Camera
+    from ..scene.description import validate_camera
+    from ..scene.scene import Camera
 
     sc, _ = _split(scene)
     cam = camera or sc.camera
@@ -240,7 +240,7 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
     its own sensor. ``max_depth`` is oclgi's: the segment to the square plays
     the camera's, so Mitsuba gets ``max_depth + 1``.
     """
-    from .queries import from_arrays
+    from ..queries import from_arrays
 
     sc, _ = _split(scene)
     q = from_arrays(positions, normals)  # validates: finite points, non-zero normals

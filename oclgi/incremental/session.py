@@ -1,7 +1,7 @@
 """Interactive sessions: illumination kept up to date as objects move.
 
 A session traces every photon path once and keeps all segments on the
-device (path-major, DESIGN.md section 2; oclgi/segment_store.py). After
+device (path-major, DESIGN.md section 2; oclgi/incremental/segment_store.py). After
 ``move(name, matrix)`` only the paths the move touches change (DESIGN.md
 section 4, García 2004/2007): their old suffixes are gathered with negated
 power and accumulated (their contributions leave the sums exactly), the
@@ -11,7 +11,7 @@ Sums are fixed point, so the result equals a recomputation from scratch at
 the new pose bit for bit, however many moves came before: errors never
 accumulate. Query points are either fixed (sensors: an array of points and
 normals) or the visible points of a camera (``points=None``, see
-oclgi/dynamic_view.py): pixels on static surfaces are updated like fixed
+oclgi/incremental/dynamic_view.py): pixels on static surfaces are updated like fixed
 points, pixels on a movable object are the thesis' "dynamic points", their
 sums recomputed from the whole store after each move (by ``dynamic``, a
 DETP variant: disc indexing by default, the sphere cache as the thesis
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from .engine import as_query_points
-from .errors import OclgiError
+from ..engine import as_query_points
+from ..errors import OclgiError
 from .segment_store import SegmentStore
 
 
@@ -67,7 +67,7 @@ class Session:
 
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
                  extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, **options):
-        from .estimators import ESTIMATORS
+        from ..estimators import ESTIMATORS
 
         self.engine = engine
         self.queue = engine.queue

@@ -1,4 +1,4 @@
-/* photon_map.h: the k-nearest-neighbour search of the Photon Map estimator.
+/* point_index.h: the k-nearest-neighbour search of the Photon Map estimator.
  *
  * Neighbour order. Impacts are ranked by the key (d2, id): d2 the squared
  * distance to the query point, computed as ((dx*dx + dy*dy) + dz*dz) in
@@ -23,8 +23,8 @@
  *
  * OCLGI_KNN_K (build define) is K; the host builds one program per K.
  */
-#ifndef OCLGI_PHOTON_MAP_H
-#define OCLGI_PHOTON_MAP_H
+#ifndef OCLGI_POINT_INDEX_H
+#define OCLGI_POINT_INDEX_H
 
 #pragma OPENCL FP_CONTRACT OFF
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from .cl.layout import Segment
-from .cl.programs import launch, programs
+from ..cl.layout import Segment
+from ..cl.programs import launch, programs
 
 
 @dataclass

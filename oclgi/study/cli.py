@@ -1,4 +1,4 @@
-"""``oclgi study``: the estimator study from the command line (oclgi/study.py).
+"""``oclgi study``: the estimator study from the command line (oclgi/study/run.py).
 
 Every input is checked before any photon is traced, and the report's four
 files are written together at the end (all or nothing), so bad input leaves
@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 DEFAULT_METHODS = ("detp_disc_index", "photon_map", "impact")
 DEFAULT_PHOTON_FRACTIONS = (0.1, 1 / 3, 1.0)  # of the scene's photon count: one decade
 
 
 def _reference(spec: str):
-    from . import study_reference
+    from . import reference as study_reference
 
     path = Path(spec)
     if path.suffix.lower() == ".npy":
@@ -38,7 +38,7 @@ def _reference(spec: str):
 
 
 def _points(spec: str):
-    from .queries import from_file
+    from ..queries import from_file
 
     if Path(spec).suffix.lower() in (".npy", ".csv"):
         return from_file(spec)
@@ -46,9 +46,9 @@ def _points(spec: str):
 
 
 def _configs(engine, args):
-    from .engine import _check_options
-    from .estimators import ESTIMATORS
-    from .study import Config
+    from ..engine import _check_options
+    from ..estimators import ESTIMATORS
+    from .run import Config
 
     methods = args.methods or [(m, {}) for m in DEFAULT_METHODS]
     photons = args.photons or sorted({max(1, round(f * engine.scene.settings.photons))
@@ -75,17 +75,18 @@ def _configs(engine, args):
 
 
 def _image_module():
-    """oclgi.study_image, with the mitsuba package checked before any work."""
-    from . import mitsuba_reference, study_image
+    """oclgi.study.image, with the mitsuba package checked before any work."""
+    from . import mitsuba as mitsuba_reference
+    from . import image as study_image
 
     mitsuba_reference.load_mitsuba()
     return study_image
 
 
 def run(args) -> None:
-    from .engine import Engine
-    from .scene.description import load_file
-    from .study import check_seeds, equal_time, run_study
+    from ..engine import Engine
+    from ..scene.description import load_file
+    from .run import check_seeds, equal_time, run_study
 
     out = args.output
     if out.exists() and not out.is_dir():

@@ -1,6 +1,6 @@
 """The theoretical variance bounds of a study configuration, with their
 inputs read off the scene (DESIGN.md section 3, "Efficiency"; the formulas
-are in oclgi/bounds.py).
+are in oclgi/study/bounds.py).
 
 What is bounded. The thesis states the bounds for the estimate of the
 reflected radiance, L_hat(p) = rho(p) E_hat(p) / pi (its bias is
@@ -58,7 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import bounds
-from .estimators.photon_map import DEFAULT_K
+from ..estimators.photon_map import DEFAULT_K
 
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 
 def _translate_rotate(x, y, z, degrees=0.0) -> np.ndarray:
@@ -84,7 +84,7 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
             write_exr: bool = False, progress=None) -> list[dict]:
     """Move ``name`` along the path, write one PNG (and EXR) per frame and a
     per-frame timing log (``timing.csv``); returns the log rows."""
-    from .io import write_array_text, write_images
+    from ..io import write_array_text, write_images
 
     rows = []
     for f, pose in enumerate(poses(spec, frames)):

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 COLUMNS = ["label", "method", "photons", "radius", "k", "estimator", "seeds", "points", "segments",
            "rel_bias", "rel_bias_se", "rms_bias", "rel_var", "rel_rmse", "nbias", "nvar", "nrmse", "time_s", "estimate_s",
@@ -62,7 +62,7 @@ def _pct(v) -> str:
 
 
 def markdown(result, equal=None) -> str:
-    from .study import REFERENCE_TRUST, equal_time
+    from .stats import REFERENCE_TRUST, equal_time
 
     equal = equal or equal_time(result)
     ref = result.reference
@@ -79,7 +79,7 @@ def markdown(result, equal=None) -> str:
         f"- seeds: {len(result.seeds)} ({', '.join(map(str, result.seeds[:8]))}{', ...' if len(result.seeds) > 8 else ''})",
         f"- reference: {ref.description}; its relative standard error {_md_num(ref_err)} (RMS over the "
         f"points), computed in {ref.seconds:.1f} s",
-        f"- bound inputs: {result.inputs.describe()} (oclgi/study_bounds.py)",
+        f"- bound inputs: {result.inputs.describe()} (oclgi/study/bound_inputs.py)",
         f"- study time: {result.seconds:.1f} s",
         "",
         "| configuration | photons | rel. bias (± s.e.) | RMS bias | rel. variance | rel. RMSE | nbias | nvar "
@@ -112,14 +112,14 @@ def markdown(result, equal=None) -> str:
         "per-seed means and the reference's error; the RMS bias has the noise removed; nbias, nvar, nRMSE: "
         "the absolute means over the same points over the mean reference (or its square), which dim points "
         "cannot dominate; efficiency = 1 / (time x nvar); Var(L̂) = (albedo/pi)^2 Var(Ê) against the thesis' "
-        "bound, per point (see the docstrings of oclgi/study.py and oclgi/study_bounds.py).",
+        "bound, per point (see the docstrings of oclgi/study/run.py and oclgi/study/bound_inputs.py).",
         "",
     ]
     return "\n".join(lines)
 
 
 def json_dict(result) -> dict:
-    from .study import equal_time
+    from .stats import equal_time
 
     eq = equal_time(result)
     return {
@@ -216,7 +216,7 @@ def _save(fig, path) -> None:
 def write_all(result, out_dir, stem: str = "study", plots: bool = True, prefix: str = "") -> list:
     """``stem.md``, ``stem.csv`` and the plots (``prefix`` + their names) in
     ``out_dir``, each under a temporary name until all are complete."""
-    from .io import atomic_path, check_output
+    from ..io import atomic_path, check_output
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():

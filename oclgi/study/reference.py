@@ -10,7 +10,7 @@ Three kinds:
   comes from their spread (the same photons in total as one run). Its bias
   is DETP's: the mean over a disc of radius d instead of the value at the
   point, second order in d where the irradiance is smooth.
-- ``mitsuba``: ``oclgi.mitsuba_reference.irradiance(scene, positions,
+- ``mitsuba``: ``oclgi.study.mitsuba.irradiance(scene, positions,
   normals, spp=..., seed=...)``, an independent path tracer (the ``mitsuba``
   extra); also the mean of ``runs`` runs with distinct seeds.
 
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import OclgiError
+from ..errors import OclgiError
 
 REFERENCE_SEED_BASE = 1 << 40
 DEFAULT_RUNS = 4
@@ -89,7 +89,7 @@ def check_available(ref) -> None:
 
 
 def _mitsuba_module():
-    from . import mitsuba_reference
+    from . import mitsuba as mitsuba_reference
 
     return mitsuba_reference
 

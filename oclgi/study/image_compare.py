@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import OclgiError
-from .queries import QueryPoints
+from ..errors import OclgiError
+from ..queries import QueryPoints
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of linear RGB
 

@@ -1,0 +1,71 @@
+"""Boxes of discs and of segment pieces for the overlap trees, rounded so
+that float32 never shrinks them, and the leaf blocks the device walks read
+(kernels/box_bvh.h). Shared by the disc index, the ray map and the Photon
+Map session's ball tree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import OclgiError
+
+# Box pad, relative to the scene's coordinate scale (why: estimators/detp_disc_index.py).
+PAD = 2e-5
+# Depth limit of the device walk (OCLGI_BOX_BVH_STACK in kernels/box_bvh.h).
+STACK = 64
+LANES = 8  # discs (or segments) per float8 block
+
+
+def coordinate_scale(compiled, positions: np.ndarray) -> float:
+    """Largest of the scene's diagonal and its (and the points') coordinates:
+    float32 rounding is relative to the coordinates, not to the extent."""
+    lo, hi = compiled.bounds
+    lo = np.minimum(lo, positions.min(axis=0)) if len(positions) else lo
+    hi = np.maximum(hi, positions.max(axis=0)) if len(positions) else hi
+    return float(max(np.linalg.norm(hi - lo), np.abs(lo).max(), np.abs(hi).max(), 1e-30))
+
+
+def outward_f32(lo: np.ndarray, hi: np.ndarray):
+    """float64 boxes rounded outward to float32 (never shrink a box)."""
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
+    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
+    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
+    return lo32, hi32
+
+
+def active_discs(points):
+    """Ids of the points whose normal is not zero (the others never count)."""
+    return np.nonzero((points.normals[:, :3] != 0).any(axis=1))[0]
+
+
+def disc_boxes(positions: np.ndarray, normals: np.ndarray, radius: float, pad: float):
+    """Padded float32 boxes of the discs: half-extent d sqrt(1 - n_a^2) + pad."""
+    n = normals.astype(np.float64)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    half = radius * np.sqrt(np.clip(1.0 - n * n, 0.0, 1.0)) + pad
+    x = positions.astype(np.float64)
+    return outward_f32(x - half, x + half)
+
+
+def leaf_blocks(nodes: np.ndarray, n_prims: int):
+    """Blocks of LANES primitives per leaf: rewrites each leaf's ``first`` to
+    its first block; returns (nodes, block of each primitive, lane of each
+    primitive, number of blocks), primitives numbered in leaf order."""
+    nodes = nodes.copy()
+    leaves = np.nonzero(nodes["count"] > 0)[0]
+    leaves = leaves[np.argsort(nodes["first"][leaves], kind="stable")]
+    first = nodes["first"][leaves].astype(np.int64)
+    count = nodes["count"][leaves].astype(np.int64)
+    nblk = (count + LANES - 1) // LANES
+    blk0 = np.zeros(len(leaves), np.int64)
+    np.cumsum(nblk[:-1], out=blk0[1:])
+    leaf_of = np.repeat(np.arange(len(leaves)), count)  # leaves tile [0, n_prims) in order
+    k = np.arange(n_prims) - first[leaf_of]
+    nodes["first"][leaves] = blk0
+    return nodes, blk0[leaf_of] + k // LANES, k % LANES, int(nblk.sum())
+
+
+def check_depth(depth: int, what: str):
+    if depth + 1 > STACK:
+        raise OclgiError(f"the BVH over the {what} is {depth} levels deep; the device walk holds {STACK - 1}")
