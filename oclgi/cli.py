@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -199,6 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     sub.add_parser("info", help="list OpenCL devices")
+    for command in sub.choices.values():
+        command.add_argument("--verbose", action="store_true",
+                             help="show the OpenCL compiler's output (as OCLGI_COMPILER_OUTPUT=1 does)")
     return ap
 
 
@@ -307,6 +311,10 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.verbose:
+        from .cl.programs import COMPILER_OUTPUT_ENV
+
+        os.environ[COMPILER_OUTPUT_ENV] = "1"
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning

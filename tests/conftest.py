@@ -1,10 +1,38 @@
 """Shared fixtures. Tests run on the default OpenCL device (PoCL's CPU
-device in CI); a missing device fails the run, it never skips."""
+device in CI); a missing device fails the run, it never skips.
 
+The suite compiles every kernel cold, as a fresh machine does: PoCL gets a
+private, empty kernel cache for the session (subprocesses inherit it) and
+pyopencl's binary cache is off, so no result depends on what this machine
+compiled before. ``OCLGI_TEST_POCL_CACHE=DIR`` keeps a cache between runs
+instead, for quick local iterations; CI never sets it.
+"""
+
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+
+def _private_kernel_cache() -> None:
+    # Before anything imports pyopencl: PoCL reads its variables when the
+    # platform is first opened.
+    keep = os.environ.get("OCLGI_TEST_POCL_CACHE")
+    if keep:
+        os.environ["POCL_CACHE_DIR"] = keep
+    else:
+        cache = tempfile.mkdtemp(prefix="oclgi-test-pocl-cache-")
+        os.environ["POCL_CACHE_DIR"] = cache
+        atexit.register(shutil.rmtree, cache, ignore_errors=True)
+    os.environ["PYOPENCL_NO_CACHE"] = "1"
+    os.environ.pop("OCLGI_COMPILER_OUTPUT", None)  # tests see what a user sees by default
+
+
+_private_kernel_cache()
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"

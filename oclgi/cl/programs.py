@@ -2,9 +2,21 @@
 
 Each (file stem, define set) is built once per context, with ``-I`` on the
 kernel folder (shared headers) and pyopencl's include folder (Random123's
-Philox), and ``-cl-denorms-are-zero`` (see ``_build``). Kernel handles are fetched once per built program, never per call.
-PoCL keeps its own binary cache keyed on the preprocessed source, so editing a
-header rebuilds what includes it.
+Philox), ``-cl-denorms-are-zero`` (see ``_build``) and the constants that
+host and device share (``cl/constants.py``). Kernel handles are fetched
+once per built program, never per call, and each kernel's scalar argument
+types are declared once from the compiled kernel's own argument list
+(``set_scalar_arg_dtypes``): call sites pass plain Python numbers, and a
+call with the wrong number of arguments fails at the call.
+
+PoCL keeps its own binary cache keyed on the preprocessed source, so editing
+a header rebuilds what includes it.
+
+Compiler output (warnings, PoCL's "N warnings generated.") never reaches
+the terminal unless ``OCLGI_COMPILER_OUTPUT=1`` (the command line's
+``--verbose`` sets it): it is kept in ``ProgramCache.logs``. A failed build
+raises an :class:`OclgiError` whose first line names the file and the first
+compiler error; the whole log follows on the next lines.
 
 The kernel folder is found as ``OCLGI_KERNEL_DIR`` if set, else as the
 ``oclgi.kernels`` package (an installed copy ships the ``.cl`` and ``.h``
@@ -14,12 +26,21 @@ files there; in the source tree it maps to ``kernels/``).
 from __future__ import annotations
 
 import os
+import re
+import sys
+import tempfile
+import threading
+import warnings
+from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
 import pyopencl as cl
 
 from ..errors import OclgiError
+
+COMPILER_OUTPUT_ENV = "OCLGI_COMPILER_OUTPUT"
 
 
 def kernel_dir() -> Path:
@@ -38,14 +59,67 @@ def kernel_dir() -> Path:
     raise OclgiError("oclgi's OpenCL kernels were not found; reinstall the package")
 
 
+def compiler_output_wanted() -> bool:
+    return os.environ.get(COMPILER_OUTPUT_ENV, "").strip() not in ("", "0")
+
+
+class KernelBuildError(OclgiError):
+    """A kernel file that does not compile: an installation problem, not bad input.
+    ``log`` holds the compiler's whole output."""
+
+    exit_code = 1
+
+    def __init__(self, message: str, log: str = ""):
+        super().__init__(message)
+        self.log = log
+
+
+_SOURCE_NAME = re.compile(r"\S*tempfile_\w+\.cl(?=:)")
+
+
+def _first_error(log: str) -> str:
+    """The compiler's first error line."""
+    for line in log.splitlines():
+        line = line.strip()
+        if line.startswith("error:") or ": error:" in line:
+            return line.removeprefix("error:").strip()
+    return "the compiler gave no reason"
+
+
+# OpenCL C scalar types by name, as clGetKernelArgInfo spells them.
+_SCALARS = {
+    "char": np.int8, "uchar": np.uint8, "short": np.int16, "ushort": np.uint16,
+    "int": np.int32, "uint": np.uint32, "long": np.int64, "ulong": np.uint64,
+    "float": np.float32, "double": np.float64,
+    "unsigned char": np.uint8, "unsigned short": np.uint16, "unsigned int": np.uint32,
+    "unsigned long": np.uint64,
+}
+
+
+def scalar_arg_dtypes(kernel: cl.Kernel) -> list:
+    """Per argument: the numpy dtype of a by-value scalar, else None (buffers,
+    local memory, vectors, which callers pass as buffers or numpy arrays)."""
+    private = cl.kernel_arg_address_qualifier.PRIVATE
+    out = []
+    for i in range(kernel.num_args):
+        qualifier = kernel.get_arg_info(i, cl.kernel_arg_info.ADDRESS_QUALIFIER)
+        name = kernel.get_arg_info(i, cl.kernel_arg_info.TYPE_NAME).strip()
+        out.append(_SCALARS.get(name) if qualifier == private and not name.endswith("*") else None)
+    return out
+
+
 class Program:
     """A built program and its kernels, fetched once (``program.kernels[name]``)."""
 
-    def __init__(self, program: cl.Program, stem: str, options: tuple[str, ...]):
+    def __init__(self, program: cl.Program, stem: str, options: tuple[str, ...], log: str = ""):
         self.program = program
         self.stem = stem
         self.options = options
-        self.kernels = {k.function_name: k for k in program.all_kernels()}
+        self.log = log
+        self.kernels = {}
+        for k in program.all_kernels():
+            k.set_scalar_arg_dtypes(scalar_arg_dtypes(k))
+            self.kernels[k.function_name] = k
 
     def __getattr__(self, name):
         try:
@@ -54,11 +128,42 @@ class Program:
             raise AttributeError(f"{self.stem}.cl has no kernel {name!r}") from None
 
 
+# PoCL's compiler writes its diagnostic summary ("4 warnings generated.")
+# straight to the process' stderr, not to the build log: a build redirects
+# file descriptor 2 for its duration and keeps what it caught with the log.
+# One build at a time (PoCL serialises its compiler anyway).
+_build_lock = threading.Lock()
+
+
+@contextmanager
+def _captured_fd2(sink: list):
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no usable stderr (embedded interpreters): nothing to catch
+        yield
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            try:
+                sys.stderr.flush()
+            except (OSError, ValueError):
+                pass
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            sink.append(tmp.read().decode(errors="replace"))
+
+
 class ProgramCache:
     def __init__(self, ctx: cl.Context):
         self.ctx = ctx
         self.dir = kernel_dir()
         self._programs: dict[tuple, Program] = {}
+        self.logs: dict[tuple, str] = {}  # (stem, defines) -> what the compiler said
 
     def get(self, stem: str, **defines) -> Program:
         key = (stem, tuple(sorted(defines.items())))
@@ -68,25 +173,56 @@ class ProgramCache:
             self._programs[key] = prog
         return prog
 
-    def _build(self, stem: str, defines) -> Program:
-        path = self.dir / f"{stem}.cl"
-        if not path.is_file():
-            raise OclgiError(f"kernel file {stem}.cl is missing from {self.dir}")
+    def options(self, defines) -> list[str]:
         # Denormals flushed to zero: integers kept in float lanes (a segment's
         # triangle id, a point's triangle) are denormal floats, and x86 cores
         # take a microcode assist on every denormal operand; vectorised code
         # touches those lanes, which made the segment scans ~1.8x slower.
         # Every program is built the same way, so results stay comparable bit
         # for bit across kernels; no quantity oclgi computes is near 1e-38.
-        options = ["-I", str(self.dir), "-cl-denorms-are-zero"]
+        # Argument info lets the cache declare each kernel's scalar types.
+        options = ["-I", str(self.dir), "-cl-denorms-are-zero", "-cl-kernel-arg-info"]
         for name, value in defines:
             options.append(f"-DOCLGI_{name.upper()}={int(value) if isinstance(value, bool) else value}")
+        return options
+
+    def _build(self, stem: str, defines) -> Program:
+        path = self.dir / f"{stem}.cl"
+        if not path.is_file():
+            raise OclgiError(f"kernel file {stem}.cl is missing from {self.dir}")
+        options = self.options(defines)
         source = path.read_text()
-        try:
-            program = cl.Program(self.ctx, source).build(options=options)
-        except cl.RuntimeError as exc:  # build failure: keep the compiler log
-            raise RuntimeError(f"building {path.name} with {options} failed:\n{exc}") from exc
-        return Program(program, stem, tuple(options))
+        caught: list[str] = []
+        failure = None
+        with _build_lock, warnings.catch_warnings():
+            # pyopencl warns about any non-empty build log; the log is kept here instead.
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+            with _captured_fd2(caught):
+                try:
+                    program = cl.Program(self.ctx, source).build(options=options)
+                except cl.RuntimeError as exc:
+                    failure = exc
+        compiler_text = "".join(caught).strip()
+        if failure is not None:
+            log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (str(failure), compiler_text) if t.strip()))
+            if compiler_output_wanted():
+                print(f"oclgi: compiler output for {path.name} ({' '.join(o for o in options if o.startswith('-D')) or 'no defines'}):\n{log}", file=sys.stderr)
+            raise KernelBuildError(f"kernel {path.name} does not build: {_first_error(log)} "
+                                   f"({COMPILER_OUTPUT_ENV}=1 shows the compiler's log)", log) from None
+        log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (_program_log(program), compiler_text) if t.strip()))
+        self.logs[(stem, defines)] = log
+        if log and compiler_output_wanted():
+            print(f"oclgi: compiler output for {path.name} ({' '.join(o for o in options if o.startswith('-D')) or 'no defines'}):\n{log}", file=sys.stderr)
+        return Program(program, stem, tuple(options), log)
+
+
+def _program_log(program: cl.Program) -> str:
+    logs = []
+    for dev in program.get_info(cl.program_info.DEVICES):
+        log = program.get_build_info(dev, cl.program_build_info.LOG)
+        if log and log.strip():
+            logs.append(log.strip())
+    return "\n".join(logs)
 
 
 _caches: dict[int, ProgramCache] = {}
@@ -102,8 +238,6 @@ def programs(ctx: cl.Context) -> ProgramCache:
         cache = ProgramCache(ctx)
         _caches[ctx.int_ptr] = cache
     return cache
-
-
 # A fixed work-group size for launches that do not ask for one. Left to
 # itself, the runtime picks a size from the global size, and PoCL compiles a
 # kernel anew for every work-group size it meets (about 0.4 s each): an
