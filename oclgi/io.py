@@ -78,6 +78,9 @@ def _write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
     if out is None:
         raise OclgiError(f"cannot write {path}: {oiio.geterror()}")
     spec = oiio.ImageSpec(w, h, c, fmt)
+    # No time stamp (OpenEXR's writer adds one unless told otherwise): the
+    # same run gives the same bytes, so renders can be compared with cmp.
+    spec.attribute("DateTime", "")
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
     ok = out.open(str(tmp), spec) and out.write_image(np.ascontiguousarray(pixels))
