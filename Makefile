@@ -8,9 +8,9 @@ PYTHON ?= python3
 PY     := $(VENV)/bin/python
 SCENE  ?= scenes/cornell_box.toml
 
-.PHONY: render test bench setup opencl clean
+.PHONY: render test bench setup opencl warm clean
 
-render: setup
+render: setup $(VENV)/.warm
 	$(VENV)/bin/oclgi render $(SCENE) -o out/$(basename $(notdir $(SCENE))).exr
 
 test: setup
@@ -30,6 +30,14 @@ $(VENV)/.installed: setup.cfg pyproject.toml
 
 $(VENV)/.bench: $(VENV)/.installed
 	$(PY) -m pip install -q -e '.[test,bench]'
+	touch $@
+
+# PoCL's kernel cache filled once per machine (oclgi warm), so that the first
+# render does not spend seconds compiling; redone when a kernel changes. The
+# tests compile cold in a private cache of their own and do not need it.
+warm: $(VENV)/.warm
+$(VENV)/.warm: $(VENV)/.installed $(wildcard kernels/*.cl kernels/*.h) | opencl
+	$(VENV)/bin/oclgi warm
 	touch $@
 
 # Debian's PoCL when no OpenCL CPU device answers (never the PyPI PoCL wheel:

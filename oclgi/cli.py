@@ -200,6 +200,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
     sub.add_parser("info", help="list OpenCL devices")
+    w = sub.add_parser("warm", help="compile every kernel into PoCL's cache, so that later runs start at once "
+                       "(the make targets' set-up runs it)")
+    w.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
+    w.add_argument("--quiet", action="store_true", help="no progress or summary")
     for command in sub.choices.values():
         command.add_argument("--verbose", action="store_true",
                              help="show the OpenCL compiler's output (as OCLGI_COMPILER_OUTPUT=1 does)")
@@ -292,6 +296,19 @@ def cmd_study(args):
     run(args)
 
 
+def cmd_warm(args):
+    from .warm import warm
+
+    show = None if args.quiet or not sys.stderr.isatty() else (
+        lambda text: print(f"\roclgi warm: {text:<40}", end="", file=sys.stderr))
+    done = warm(args.device, show)
+    if show:
+        print(file=sys.stderr)
+    if not args.quiet:
+        print(f"oclgi warm: {done['programs']} programs, {done['kernels']} kernels compiled into the cache "
+              f"in {done['seconds']:.1f}s", file=sys.stderr)
+
+
 def cmd_info(_args):
     from .cl.device import INSTALL_HINT, describe_devices, list_devices
 
@@ -319,7 +336,7 @@ def main(argv=None) -> int:
         with warnings.catch_warnings():
             warnings.showwarning = _show_warning
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
-             "study": cmd_study, "info": cmd_info}[args.command](args)
+             "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code

@@ -16,6 +16,15 @@ import pyopencl as cl
 
 from ..errors import OclgiError
 
+# PoCL compiles a kernel anew for every work-group size, global offset and
+# grid size class it is launched with ("specialisation"); one generic
+# version per kernel serves every launch instead. Measured: no slower on
+# oclgi's loop-bound kernels (PoCL does not vectorise them across
+# work-items), fewer compiles per run, and a kernel cache that a tiny run
+# (``oclgi warm``) fills for any later size. Set before PoCL reads it at its
+# first compile; a user's own setting wins.
+os.environ.setdefault("POCL_WORK_GROUP_SPECIALIZATION", "0")
+
 INSTALL_HINT = "install an OpenCL runtime, e.g. `apt-get install pocl-opencl-icd` (or run `make setup`)"
 
 

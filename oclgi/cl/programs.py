@@ -173,6 +173,10 @@ class ProgramCache:
             self._programs[key] = prog
         return prog
 
+    def built(self) -> list[Program]:
+        """The programs built so far."""
+        return list(self._programs.values())
+
     def options(self, defines) -> list[str]:
         # Denormals flushed to zero: integers kept in float lanes (a segment's
         # triangle id, a point's triangle) are denormal floats, and x86 cores
