@@ -86,7 +86,8 @@ def _image_module():
 def run(args) -> None:
     from ..engine import Engine
     from ..scene.description import load_file
-    from .run import check_seeds, equal_time, run_study
+    from .run import check_seeds, run_study
+    from .stats import equal_time
 
     out = args.output
     if out.exists() and not out.is_dir():
