@@ -46,17 +46,21 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
-from ..params import check_method
+from .. import params
 from .mesh import load_mesh
-from .scene import Camera, Material, PointLight, Scene, SceneObject, Settings
+from .scene import Camera, Material, PointLight, Scene, SceneObject
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
-_PHOTONS = {"count", "seed", "max_depth"}
-_ESTIMATOR = {"method", "radius", "extension", "count_emitted"}
+# The run parameters a scene file sets: (table, key) -> RunParams field.
+_SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("photons", "max_depth"): "max_depth",
+             ("estimator", "method"): "method", ("estimator", "radius"): "radius",
+             ("estimator", "extension"): "extension", ("estimator", "count_emitted"): "count_emitted"}
+_PHOTONS = {key for table, key in _SETTINGS if table == "photons"}
+_ESTIMATOR = {key for table, key in _SETTINGS if table == "estimator"}
 
 
 def load_file(path) -> Scene:
@@ -273,29 +277,12 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         )
         validate_camera(camera)
 
-    settings = Settings()
-    ph = desc.get("photons", {})
-    _check_keys(ph, _PHOTONS, "photons")
-    if "count" in ph:
-        settings.photons = _number(ph["count"], "photons.count", int)
-    if "seed" in ph:
-        settings.seed = _number(ph["seed"], "photons.seed", int)
-    if "max_depth" in ph:
-        settings.max_depth = _number(ph["max_depth"], "photons.max_depth", int)
-    est = desc.get("estimator", {})
-    _check_keys(est, _ESTIMATOR, "estimator")
-    if "method" in est:
-        settings.method = check_method(est["method"])
-    if "radius" in est:
-        settings.radius = _number(est["radius"], "estimator.radius")
-    if "extension" in est:
-        settings.extension = _number(est["extension"], "estimator.extension")
-    if "count_emitted" in est:
-        if not isinstance(est["count_emitted"], bool):
-            raise OclgiError("estimator.count_emitted: expected true or false")
-        settings.count_emitted = est["count_emitted"]
-    if not 0 <= settings.seed < 2**64:
-        raise OclgiError(f"photons.seed must be in 0..2^64-1, got {settings.seed}")
+    tables = {"photons": desc.get("photons", {}), "estimator": desc.get("estimator", {})}
+    _check_keys(tables["photons"], _PHOTONS, "photons")
+    _check_keys(tables["estimator"], _ESTIMATOR, "estimator")
+    given = {(t, k): field for (t, k), field in _SETTINGS.items() if k in tables[t]}
+    settings = params.RunParams.read({field: tables[t][k] for (t, k), field in given.items()},
+                                     names={field: f"{t}.{k}" for (t, k), field in given.items()})
 
     return Scene(
         vertices=np.concatenate(verts),
