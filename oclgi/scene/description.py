@@ -61,6 +61,11 @@ _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("pho
              ("estimator", "extension"): "extension", ("estimator", "count_emitted"): "count_emitted"}
 _PHOTONS = {key for table, key in _SETTINGS if table == "photons"}
 _ESTIMATOR = {key for table, key in _SETTINGS if table == "estimator"}
+# The device holds emission and intensity in float32: a positive value
+# outside its normal range would round to 0 or inf, and so would the
+# photons' power (a division by zero, or NaN everywhere).
+_F32_TINY = float(np.finfo(np.float32).tiny)  # 1.2e-38
+_F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 
 def load_file(path) -> Scene:
@@ -98,6 +103,16 @@ def _vec3(value, where):
         raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
+    return v
+
+
+def _radiant(value, where):
+    """An emission or intensity: 3 numbers, each 0 or in float32's normal
+    range (negative ones are the scene's to refuse, with the material's name)."""
+    v = _vec3(value, where)
+    if any(0 < x < _F32_TINY or x > _F32_MAX for x in v):
+        raise OclgiError(f"{where}: expected 3 numbers, each 0 or from 1.2e-38 to 3.4e38 "
+                         f"(float32 on the device), got {value!r}")
     return v
 
 
@@ -140,7 +155,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     default = Material(
         name=f"{where}.default",
         albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
-        emission=_vec3(desc.get("emission", (0, 0, 0)), where + ".emission"),
+        emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"),
     )
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
@@ -173,7 +188,8 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             mat = Material(
                 name=f"{label}:{name}",
                 albedo=fm.albedo if fm and fm.albedo is not None else default.albedo,
-                emission=fm.emission if fm and fm.emission is not None else default.emission,
+                emission=(_radiant(fm.emission, f"{label}: material {name!r} (Ke)")
+                          if fm and fm.emission is not None else default.emission),
             )
             if name in overrides:
                 o = overrides[name]
@@ -181,7 +197,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                 if "albedo" in o:
                     mat.albedo = _vec3(o["albedo"], f"{where}.materials.{name}.albedo")
                 if "emission" in o:
-                    mat.emission = _vec3(o["emission"], f"{where}.materials.{name}.emission")
+                    mat.emission = _radiant(o["emission"], f"{where}.materials.{name}.emission")
         local.append(len(materials))
         materials.append(mat)
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
@@ -259,7 +275,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
         _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
         lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position"),
-                                 _vec3(pl.get("intensity"), f"point_light[{i}].intensity")))
+                                 _radiant(pl.get("intensity"), f"point_light[{i}].intensity")))
 
     camera = None
     if "camera" in desc:
