@@ -15,7 +15,6 @@ OpenCL device) print one line and exit with status 2, leaving no output file.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import warnings
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import params
 from .errors import OclgiError
 from .params import METHODS
 
@@ -35,35 +35,41 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+def _type_error(exc: OclgiError, name: str) -> argparse.ArgumentTypeError:
+    """argparse's error for oclgi.params' one: argparse puts ``argument NAME:``
+    before it, so a message about ``name`` itself drops its own ``NAME:``."""
+    if isinstance(exc, params.ParamError) and exc.name == name:
+        return argparse.ArgumentTypeError(exc.problem)
+    return argparse.ArgumentTypeError(str(exc))
+
+
+def _param(reader, name, read_text=params.number_text):
+    """An argparse type reading a run parameter with oclgi.params, so that the
+    command line refuses what the scene file and the API refuse, in the same
+    words."""
+    def read(text):
+        try:
+            return reader(read_text(text), name)
+        except OclgiError as exc:
+            raise _type_error(exc, name) from None
+
+    read.__name__ = reader.__name__  # argparse names the type in some messages
+    return read
+
+
+def _number_list(text):
+    return [params.number_text(part) for part in text.split(",")]
+
+
 def _integer(text):
     """An integer written plainly or in exponent form (``2e5``); never rounds."""
-    text = text.strip()
-    try:
-        return int(text)
-    except ValueError:
-        pass
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    if not math.isfinite(value) or not value.is_integer():
-        return None
-    return int(value)
+    return params.integral(params.number_text(text))
 
 
 def _positive_int(text):
     value = _integer(text)
     if value is None or value <= 0:
         raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _max_depth(text):
-    from .scene.scene import MAX_DEPTH_LIMIT
-
-    value = _integer(text)
-    if value is None or not 1 <= value <= MAX_DEPTH_LIMIT:
-        raise argparse.ArgumentTypeError(f"expected an integer in 1..{MAX_DEPTH_LIMIT}, got {text!r}")
     return value
 
 
@@ -77,13 +83,6 @@ def _positive_float(text):
     return value
 
 
-def _seed(text):
-    value = _integer(text)
-    if value is None or not 0 <= value < 2**64:
-        raise argparse.ArgumentTypeError(f"expected an integer in 0..2^64-1, got {text!r}")
-    return value
-
-
 def _int_text(text):
     value = _integer(text)
     if value is None:
@@ -91,14 +90,12 @@ def _int_text(text):
     return value
 
 
-def _photon_list(text):
-    counts = []
-    for part in text.split(","):
-        value = _integer(part) if part.strip() else None
-        if value is None or value <= 0:
-            raise argparse.ArgumentTypeError(f"expected positive integers separated by commas, got {text!r}")
-        counts.append(value)
-    return counts
+def _option(text):
+    """KEY=VALUE of -O (oclgi.params.option_text: numbers, true/false, words)."""
+    try:
+        return params.option_text(text)
+    except OclgiError as exc:
+        raise _type_error(exc, "-O") from None
 
 
 def _method_list(text):
@@ -106,38 +103,33 @@ def _method_list(text):
     out = []
     for part in text.split(","):
         name, *opts = part.strip().split(":")
-        if name not in METHODS:
-            raise argparse.ArgumentTypeError(f"unknown method {name!r} in {text!r}; choose from {', '.join(METHODS)}")
-        out.append((name, dict(_option(o) for o in opts)))
+        options = dict(_option(o) for o in opts)
+        try:
+            params.method(name, "--methods")
+            params.options(name, {k: v for k, v in options.items() if k not in params.OPTION_PARAMS})
+        except OclgiError as exc:
+            raise _type_error(exc, "--methods") from None
+        out.append((name, options))
     return out
 
 
 def _estimate_args(p):
     p.add_argument("scene", type=Path, help="scene file (TOML)")
-    p.add_argument("--method", choices=METHODS, help="estimator (default: the scene's, else detp)")
-    p.add_argument("--photons", type=_positive_int, help="number of photon paths (default: the scene's)")
-    p.add_argument("--radius", type=_positive_float, help="DETP disc radius (default: the scene's)")
-    p.add_argument("--seed", type=_seed, help="random seed (default: the scene's)")
-    p.add_argument("--max-depth", type=_max_depth, help="maximum path length in segments")
+    p.add_argument("--method", type=_param(params.method, "--method"), choices=METHODS,
+                   help="estimator (default: the scene's, else detp)")
+    p.add_argument("--photons", type=_param(params.photons, "--photons"),
+                   help="number of photon paths (default: the scene's)")
+    p.add_argument("--radius", type=_param(params.radius, "--radius"), help="DETP disc radius (default: the scene's)")
+    p.add_argument("--seed", type=_param(params.seed, "--seed"), help="random seed (default: the scene's)")
+    p.add_argument("--max-depth", type=_param(params.max_depth, "--max-depth"),
+                   help="maximum path length in segments")
     p.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
     p.add_argument("--local-size", type=_positive_int, help="work-group size (results do not depend on it)")
     p.add_argument("-O", "--option", action="append", type=_option, default=[], metavar="KEY=VALUE",
                    help="an option of the method, e.g. -O q=0.6 -O order=morton (sphere cache), "
-                        "-O leaf_size=8 (disc index), -O k=50 (photon map); repeatable")
+                        "-O leaf_size=8 (disc index), -O k=50 (photon map); also -O extension=E and "
+                        "-O count_emitted=false; repeatable")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-
-
-def _option(text):
-    """KEY=VALUE, the value read as an int, else a float, else a string."""
-    key, sep, value = text.partition("=")
-    if not sep or not key.strip().isidentifier():
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
-    for kind in (int, float):
-        try:
-            return key.strip(), kind(value)
-        except ValueError:
-            pass
-    return key.strip(), value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -176,19 +168,22 @@ def build_parser() -> argparse.ArgumentParser:
                    help="estimators, each optionally with its own options, e.g. "
                         "detp_disc_index,photon_map,photon_map:estimator=k,impact "
                         "(default: detp_disc_index,photon_map,impact)")
-    s.add_argument("--photons", type=_photon_list, default=None, metavar="N1,N2,...",
+    s.add_argument("--photons", type=_param(params.photon_counts, "--photons", _number_list), default=None,
+                   metavar="N1,N2,...",
                    help="photon counts, each run by every method (default: the scene's count /10, /3 and x1)")
     s.add_argument("--seeds", type=_int_text, default=8, metavar="R",
                    help="independent runs per configuration, at least 2 (default 8)")
     s.add_argument("--points", default="random:256",
                    help="vertices | camera[:WxH] | random:N | FILE.npy|.csv (default random:256)")
-    s.add_argument("--point-seed", type=_seed, default=0, help="seed of the random points (default 0)")
+    s.add_argument("--point-seed", type=_param(params.seed, "--point-seed"), default=0,
+                   help="seed of the random points (default 0)")
     s.add_argument("--reference", default="detp",
                    help="detp[:PHOTONS] (high-photon DETP, default) | mitsuba[:SPP] | FILE.npy "
                         "(exact irradiance, (n, 3) or (n,))")
-    s.add_argument("--radius", type=_positive_float, help="DETP disc radius (default: the scene's)")
+    s.add_argument("--radius", type=_param(params.radius, "--radius"), help="DETP disc radius (default: the scene's)")
     s.add_argument("-O", "--option", action="append", type=_option, default=[], metavar="KEY=VALUE",
-                   help="an option given to every method that takes it, e.g. -O k=50; repeatable")
+                   help="an option given to every method that takes it, e.g. -O k=50 (extension and "
+                        "count_emitted: to every method); repeatable")
     s.add_argument("--image", action="store_true",
                    help="also render the first method at the largest count and compare the image with "
                         "Mitsuba's (oclgi.exr, mitsuba.exr, error.exr, error.png in DIR)")

@@ -14,9 +14,8 @@ True
 
 from __future__ import annotations
 
-import functools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pyopencl as cl
@@ -28,9 +27,9 @@ from .errors import OclgiError
 from .estimators import ESTIMATORS
 from .tracing.photon_trace import PhotonTracer
 from .scene.compiled import CompiledScene
-from .params import check_method
+from .params import RunParams, options as check_options, radius as read_radius
 from .scene.description import validate_camera
-from .scene.scene import MAX_DEPTH_LIMIT, MAX_PHOTONS, Camera, Scene
+from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
 
@@ -48,17 +47,6 @@ class Stats:
         t = " ".join(f"{k} {v:.2f}s" for k, v in self.seconds.items())
         return (f"{self.method}: {self.photons:,} photons, {self.segments:,} segments, "
                 f"{self.points:,} points, radius {self.radius:.4g} | {t}")
-
-
-@dataclass(frozen=True)
-class RunParams:
-    method: str
-    photons: int
-    radius: float
-    seed: int
-    max_depth: int
-    extension: float
-    count_emitted: bool
 
 
 def as_query_points(points) -> queries.QueryPoints:
@@ -91,35 +79,6 @@ class Render:
     @property
     def stats(self) -> Stats:
         return self.estimate.stats
-
-
-def _check_run(seed, max_depth):
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**64:
-        raise OclgiError(f"seed must be an integer in 0..2^64-1, got {seed!r}")
-    if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or \
-            not 1 <= max_depth <= MAX_DEPTH_LIMIT:
-        raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {max_depth!r}")
-
-
-@functools.lru_cache(maxsize=None)
-def _accepted_options(cls) -> frozenset:
-    """Keyword parameters of an estimator class' constructors (sessions
-    build estimators every frame: inspect once)."""
-    import inspect
-
-    accepted = set()
-    for klass in cls.__mro__:
-        init = klass.__dict__.get("__init__")
-        if init is not None:
-            accepted |= {p.name for p in inspect.signature(init).parameters.values()
-                         if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
-    return frozenset(accepted - {"self", "queue", "compiled", "points"})
-
-
-def _check_options(cls, options):
-    unknown = set(options) - _accepted_options(cls)
-    if unknown:
-        raise OclgiError(f"method {cls.name!r} takes no option(s) {sorted(unknown)}")
 
 
 class Engine:
@@ -256,27 +215,21 @@ class Engine:
 
     def run_params(self, method=None, photons=None, radius=None, seed=None, max_depth=None, extension=None,
                    count_emitted=None) -> RunParams:
-        """The parameters of a run: the given ones, else the scene's, validated."""
-        s = self.scene.settings
-        method = check_method(method or s.method)
-        photons = s.photons if photons is None else photons
-        if isinstance(photons, bool) or not isinstance(photons, (int, np.integer)) or not 0 < photons <= MAX_PHOTONS:
-            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {photons!r}")
-        radius = self.scene.radius if radius is None else radius
-        if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0):
-            raise OclgiError(f"radius must be a positive number, got {radius!r}")
-        seed = s.seed if seed is None else seed
-        max_depth = s.max_depth if max_depth is None else max_depth
-        _check_run(seed, max_depth)
-        extension = s.extension if extension is None else extension
-        count_emitted = s.count_emitted if count_emitted is None else count_emitted
-        return RunParams(method, int(photons), float(radius), int(seed), int(max_depth), float(extension),
-                         bool(count_emitted))
+        """The parameters of a run: the given ones (those not None), else the
+        scene's, checked (oclgi/params.py); the radius defaults to 1% of the
+        scene's diagonal when the scene gives none."""
+        given = dict(method=method, photons=photons, radius=radius, seed=seed, max_depth=max_depth,
+                     extension=extension, count_emitted=count_emitted)
+        run = RunParams.read({k: v for k, v in given.items() if v is not None}, base=self.scene.settings)
+        if run.radius is None:
+            run = replace(run, radius=read_radius(self.scene.radius, "radius (by default 1% of the scene's diagonal)"))
+        return run
 
     def estimator(self, points, params: RunParams, count_work: bool = False, **options):
-        """A fresh estimator of ``params.method`` over ``points``."""
+        """A fresh estimator of ``params.method`` over ``points``; ``options``
+        are the method's own (oclgi/params.py checks their names)."""
         cls = ESTIMATORS[params.method]
-        _check_options(cls, options)
+        check_options(params.method, options)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size, count_work=count_work,
                    **options)
@@ -289,11 +242,9 @@ class Engine:
         number of segments of each path. For inspection and studies; the
         estimators stream batches instead of keeping every segment.
         """
-        s = self.scene.settings
-        photons = s.photons if photons is None else photons
-        seed = s.seed if seed is None else seed
-        max_depth = s.max_depth if max_depth is None else max_depth
-        _check_run(seed, max_depth)
+        given = dict(photons=photons, seed=seed, max_depth=max_depth)
+        run = RunParams.read({k: v for k, v in given.items() if v is not None}, base=self.scene.settings)
+        photons, seed, max_depth = run.photons, run.seed, run.max_depth
         if photons * max_depth * 48 > self.batch_bytes:
             raise OclgiError(f"{photons:,} paths of up to {max_depth} segments do not fit one batch "
                              f"({self.batch_bytes >> 20} MiB); trace fewer")

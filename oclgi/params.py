@@ -1,12 +1,32 @@
 """Parameters of a run, read and checked in one place for the command line,
 the scene file and the Python API, with one set of messages.
 
-Each reader takes the value as given (a Python number, a TOML value or a
-command-line string already converted) and the name to report, and returns
-the value in the type the engine uses or raises OclgiError.
+Each reader takes the value as given (a Python number, a TOML value, or a
+command-line word that :func:`number_text` has turned into a number where it
+could) and the name to report, the caller's: ``--photons`` on the command
+line, ``photons.count`` in a scene file, ``photons`` in the API. It returns
+the value in the type the engine uses, or raises :class:`ParamError`, whose
+message is ``NAME: PROBLEM`` with one PROBLEM per parameter whichever way the
+value came in (the command line prints it after argparse's ``argument NAME:``).
+
+>>> photons(1e5)
+100000
+>>> photons(2.5, "photons.count")
+Traceback (most recent call last):
+...
+oclgi.params.ParamError: photons.count: expected a positive integer up to 2^31, got 2.5
+>>> RunParams(method="impact", photons=2e3).photons
+2000
 """
 
 from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
 
 from .errors import OclgiError
 
@@ -15,8 +35,244 @@ from .errors import OclgiError
 # can check a method name without importing the estimators.
 METHODS = ("detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact", "photon_map")
 
+MAX_PHOTONS = 1 << 31
+MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63
+# Lengths the device squares in float32 (the DETP disc's d^2): from 1e-18 to
+# 1e18 their squares stay normal float32 numbers (1.2e-38 .. 3.4e38) with
+# room to spare, as vertex coordinates do (scene.MAX_COORDINATE).
+MIN_RADIUS = 1e-18
+MAX_LENGTH = 1e18
 
-def check_method(method) -> str:
-    if method not in METHODS:
-        raise OclgiError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    return method
+# The run parameters, in RunParams' order.
+RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")
+# Run parameters that may come among a method's options (``-O extension=0.1``,
+# ``Config(..., count_emitted=False)``): the estimators take them as keyword
+# arguments, and the command line has no flag of their own for them.
+OPTION_PARAMS = ("extension", "count_emitted")
+# What the engine hands every estimator itself: never an option.
+_ENGINE_ARGS = frozenset({"self", "queue", "compiled", "points", "local_size", "count_work"})
+
+
+class ParamError(OclgiError):
+    """A bad parameter value: ``name: problem``."""
+
+    def __init__(self, name: str, problem: str):
+        super().__init__(f"{name}: {problem}")
+        self.name, self.problem = name, problem
+
+
+def _number(x: float) -> str:
+    """A bound as messages write it: 1e18, not 1e+18."""
+    return f"{x:g}".replace("e+", "e")
+
+
+def _show(value) -> str:
+    """The value as the message shows it (numpy scalars as plain numbers)."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    return repr(value)
+
+
+def number_text(text: str):
+    """A command-line word as an int, else a float, else the word itself
+    (for the readers to refuse), so that ``--photons 1e5`` and ``count =
+    1e5`` reach the reader as the same value."""
+    text = text.strip()
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def integral(value) -> int | None:
+    """``value`` as an int if it is an integer (an int, or a float with no
+    fraction: ``1e5``); None otherwise. Never rounds; a bool is no integer."""
+    if isinstance(value, (bool, np.bool_)):
+        return None
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)) and math.isfinite(value) and float(value).is_integer():
+        return int(value)
+    return None
+
+
+def _real(value) -> float | None:
+    """``value`` as a finite float if it is a number; None otherwise."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return None
+    try:
+        v = float(value)
+    except OverflowError:  # an int beyond float's range
+        return None
+    return v if math.isfinite(v) else None
+
+
+# -- one reader per parameter ---------------------------------------------------------
+
+
+def method(value, name: str = "method") -> str:
+    if not isinstance(value, str) or value not in METHODS:
+        raise ParamError(name, f"unknown method {_show(value)}; choose one of {', '.join(METHODS)}")
+    return value
+
+
+def photons(value, name: str = "photons") -> int:
+    n = integral(value)
+    if n is None or not 0 < n <= MAX_PHOTONS:
+        raise ParamError(name, f"expected a positive integer up to 2^31, got {_show(value)}")
+    return n
+
+
+def photon_counts(values, name: str = "photons") -> list:
+    """One photon count or a sequence of them, as a list of ints."""
+    if isinstance(values, (str, bytes)) or np.isscalar(values):
+        items = [values]
+    else:
+        try:
+            items = list(values)
+        except TypeError:
+            items = [values]
+    counts = [integral(v) for v in items]
+    if not counts or any(n is None or not 0 < n <= MAX_PHOTONS for n in counts):
+        raise ParamError(name, f"expected photon counts (positive integers up to 2^31), got {_show(values)}")
+    return counts
+
+
+def seed(value, name: str = "seed") -> int:
+    s = integral(value)
+    if s is None or not 0 <= s < 2**64:
+        raise ParamError(name, f"expected an integer in 0..2^64-1, got {_show(value)}")
+    return s
+
+
+def max_depth(value, name: str = "max_depth") -> int:
+    d = integral(value)
+    if d is None or not 1 <= d <= MAX_DEPTH_LIMIT:
+        raise ParamError(name, f"expected an integer in 1..{MAX_DEPTH_LIMIT}, got {_show(value)}")
+    return d
+
+
+def radius(value, name: str = "radius") -> float:
+    r = _real(value)
+    if r is None or not MIN_RADIUS <= r <= MAX_LENGTH:
+        raise ParamError(name, f"expected a number from {_number(MIN_RADIUS)} to {_number(MAX_LENGTH)} "
+                               f"(the device squares it in float32), got {_show(value)}")
+    return r
+
+
+def extension(value, name: str = "extension") -> float:
+    e = _real(value)
+    if e is None or not 0 <= e <= MAX_LENGTH:
+        raise ParamError(name, f"expected a number from 0 to {_number(MAX_LENGTH)}, got {_show(value)}")
+    return e
+
+
+def count_emitted(value, name: str = "count_emitted") -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ParamError(name, f"expected true or false, got {_show(value)}")
+    return bool(value)
+
+
+READERS = {"method": method, "photons": photons, "radius": radius, "seed": seed, "max_depth": max_depth,
+           "extension": extension, "count_emitted": count_emitted}
+
+
+# -- a method's own options -------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=None)
+def option_names(method_name: str) -> frozenset:
+    """The options of a method: the keyword parameters of its estimator's
+    constructors other than the run parameters and what the engine passes.
+    (Sessions build estimators every frame: inspected once per method.)"""
+    import inspect
+
+    from .estimators import ESTIMATORS
+
+    names = set()
+    for klass in ESTIMATORS[method_name].__mro__:
+        init = klass.__dict__.get("__init__")
+        if init is not None:
+            names |= {p.name for p in inspect.signature(init).parameters.values()
+                      if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
+    return frozenset(names - _ENGINE_ARGS - set(RUN_KEYS))
+
+
+def options(method_name: str, given: dict) -> dict:
+    """The method's own options, their names checked (each estimator checks
+    its values when it is built, before any photon is traced)."""
+    method_name = method(method_name)
+    for key in given:
+        _not_a_parameter(key)
+    unknown = set(given) - option_names(method_name)
+    if unknown:
+        takes = ", ".join(sorted(option_names(method_name))) or "none"
+        raise OclgiError(f"method {method_name!r} takes no option(s) {sorted(unknown)} (its options: {takes})")
+    return dict(given)
+
+
+def option(key: str, value):
+    """One ``key=value`` given among a method's options: a run parameter of
+    OPTION_PARAMS is read as such, the other run parameters are refused (they
+    have their own argument), a method's own option passes as it is."""
+    if key in OPTION_PARAMS:
+        return READERS[key](value, key)
+    _not_a_parameter(key)
+    return value
+
+
+def _not_a_parameter(key: str) -> None:
+    if key in RUN_KEYS or key in _ENGINE_ARGS:
+        raise OclgiError(f"{key} is a parameter of its own, not an option of a method")
+
+
+def option_text(text: str) -> tuple:
+    """``KEY=VALUE`` as the command line's ``-O`` gives it: the value read as
+    an int, else a float, else true/false, else a string (then ``option``)."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key.isidentifier():
+        raise ParamError("-O", f"expected KEY=VALUE, got {text!r}")
+    word = number_text(value)
+    if isinstance(word, str) and word.lower() in ("true", "false"):
+        word = word.lower() == "true"
+    return key, option(key, word)
+
+
+# -- the parameters of a run ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RunParams:
+    """The parameters of a run, checked when made (a bad one raises
+    ParamError under its field's name). A scene's ``settings`` are one, its
+    ``radius`` None unless the scene file gives one (the scene's default, 1%
+    of its diagonal); ``Engine.run_params`` gives one with every value set.
+    Change one with ``dataclasses.replace``."""
+
+    method: str = "detp"
+    photons: int = 100_000
+    radius: float | None = None
+    seed: int = 1
+    max_depth: int = 16
+    extension: float = 0.0
+    count_emitted: bool = True
+
+    def __post_init__(self):
+        for key in RUN_KEYS:
+            value = getattr(self, key)
+            if not (key == "radius" and value is None):
+                object.__setattr__(self, key, READERS[key](value, key))
+
+    @classmethod
+    def read(cls, values: dict, names: dict | None = None, base: RunParams | None = None) -> RunParams:
+        """``base`` (default: the defaults) with ``values``, each read under
+        its name in ``names`` (default: its key), in the order given."""
+        unknown = set(values) - set(RUN_KEYS)
+        if unknown:
+            raise OclgiError(f"unknown run parameter(s) {sorted(unknown)} (they are {', '.join(RUN_KEYS)})")
+        names = names or {}
+        checked = {k: READERS[k](v, names.get(k, k)) for k, v in values.items()}
+        return dataclasses.replace(base if base is not None else cls(), **checked)

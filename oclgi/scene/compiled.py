@@ -21,6 +21,7 @@ from .scene import Scene
 
 FIXED_BITS = 24  # see kernels/oclgi_types.h: one photon's power = 2^24 units
 BVH_STACK_SIZE = 64
+F32_MAX = float(np.finfo(np.float32).max)
 
 
 def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
@@ -76,6 +77,9 @@ class CompiledScene:
         self.total_power = power.sum(axis=0)  # RGB watts
         # Largest power any photon carries, times n_paths (fixed-point scale).
         self.photon_power_max = float(em["power"].max())
+        if not (np.isfinite(em["power"]).all() and self.photon_power_max > 0):
+            raise OclgiError(f"{scene.name}: the emitters' power ({weight.sum():.3g} W) is out of float32's range "
+                             "on the device; scale the emission or intensity")
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)
@@ -158,4 +162,9 @@ class CompiledScene:
 
     def fixed_scale(self, n_paths: int) -> float:
         """Fixed-point units per watt for a run of n_paths (oclgi_types.h)."""
-        return float(2.0**FIXED_BITS / (self.photon_power_max / n_paths))
+        scale = float(2.0**FIXED_BITS / (self.photon_power_max / n_paths))
+        if not scale < F32_MAX:  # the kernels take it as a float32
+            raise OclgiError(f"{self.scene.name}: the emitters' power ({self.photon_power_max:.3g} W per photon "
+                             f"path) is too small for fixed-point sums of {n_paths:,} paths in float32; "
+                             "scale the emission or intensity up")
+        return scale

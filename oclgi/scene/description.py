@@ -46,17 +46,26 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
-from ..params import check_method
+from .. import params
 from .mesh import load_mesh
-from .scene import Camera, Material, PointLight, Scene, SceneObject, Settings
+from .scene import Camera, Material, PointLight, Scene, SceneObject
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
-_PHOTONS = {"count", "seed", "max_depth"}
-_ESTIMATOR = {"method", "radius", "extension", "count_emitted"}
+# The run parameters a scene file sets: (table, key) -> RunParams field.
+_SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("photons", "max_depth"): "max_depth",
+             ("estimator", "method"): "method", ("estimator", "radius"): "radius",
+             ("estimator", "extension"): "extension", ("estimator", "count_emitted"): "count_emitted"}
+_PHOTONS = {key for table, key in _SETTINGS if table == "photons"}
+_ESTIMATOR = {key for table, key in _SETTINGS if table == "estimator"}
+# The device holds emission and intensity in float32: a positive value
+# outside its normal range would round to 0 or inf, and so would the
+# photons' power (a division by zero, or NaN everywhere).
+_F32_TINY = float(np.finfo(np.float32).tiny)  # 1.2e-38
+_F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 
 def load_file(path) -> Scene:
@@ -94,6 +103,16 @@ def _vec3(value, where):
         raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
+    return v
+
+
+def _radiant(value, where):
+    """An emission or intensity: 3 numbers, each 0 or in float32's normal
+    range (negative ones are the scene's to refuse, with the material's name)."""
+    v = _vec3(value, where)
+    if any(0 < x < _F32_TINY or x > _F32_MAX for x in v):
+        raise OclgiError(f"{where}: expected 3 numbers, each 0 or from 1.2e-38 to 3.4e38 "
+                         f"(float32 on the device), got {value!r}")
     return v
 
 
@@ -136,7 +155,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     default = Material(
         name=f"{where}.default",
         albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
-        emission=_vec3(desc.get("emission", (0, 0, 0)), where + ".emission"),
+        emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"),
     )
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
@@ -169,7 +188,8 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             mat = Material(
                 name=f"{label}:{name}",
                 albedo=fm.albedo if fm and fm.albedo is not None else default.albedo,
-                emission=fm.emission if fm and fm.emission is not None else default.emission,
+                emission=(_radiant(fm.emission, f"{label}: material {name!r} (Ke)")
+                          if fm and fm.emission is not None else default.emission),
             )
             if name in overrides:
                 o = overrides[name]
@@ -177,7 +197,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                 if "albedo" in o:
                     mat.albedo = _vec3(o["albedo"], f"{where}.materials.{name}.albedo")
                 if "emission" in o:
-                    mat.emission = _vec3(o["emission"], f"{where}.materials.{name}.emission")
+                    mat.emission = _radiant(o["emission"], f"{where}.materials.{name}.emission")
         local.append(len(materials))
         materials.append(mat)
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
@@ -255,7 +275,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
         _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
         lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position"),
-                                 _vec3(pl.get("intensity"), f"point_light[{i}].intensity")))
+                                 _radiant(pl.get("intensity"), f"point_light[{i}].intensity")))
 
     camera = None
     if "camera" in desc:
@@ -273,29 +293,12 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         )
         validate_camera(camera)
 
-    settings = Settings()
-    ph = desc.get("photons", {})
-    _check_keys(ph, _PHOTONS, "photons")
-    if "count" in ph:
-        settings.photons = _number(ph["count"], "photons.count", int)
-    if "seed" in ph:
-        settings.seed = _number(ph["seed"], "photons.seed", int)
-    if "max_depth" in ph:
-        settings.max_depth = _number(ph["max_depth"], "photons.max_depth", int)
-    est = desc.get("estimator", {})
-    _check_keys(est, _ESTIMATOR, "estimator")
-    if "method" in est:
-        settings.method = check_method(est["method"])
-    if "radius" in est:
-        settings.radius = _number(est["radius"], "estimator.radius")
-    if "extension" in est:
-        settings.extension = _number(est["extension"], "estimator.extension")
-    if "count_emitted" in est:
-        if not isinstance(est["count_emitted"], bool):
-            raise OclgiError("estimator.count_emitted: expected true or false")
-        settings.count_emitted = est["count_emitted"]
-    if not 0 <= settings.seed < 2**64:
-        raise OclgiError(f"photons.seed must be in 0..2^64-1, got {settings.seed}")
+    tables = {"photons": desc.get("photons", {}), "estimator": desc.get("estimator", {})}
+    _check_keys(tables["photons"], _PHOTONS, "photons")
+    _check_keys(tables["estimator"], _ESTIMATOR, "estimator")
+    given = {(t, k): field for (t, k), field in _SETTINGS.items() if k in tables[t]}
+    settings = params.RunParams.read({field: tables[t][k] for (t, k), field in given.items()},
+                                     names={field: f"{t}.{k}" for (t, k), field in given.items()})
 
     return Scene(
         vertices=np.concatenate(verts),

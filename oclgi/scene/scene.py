@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import OclgiError
+from ..params import RunParams
 
 
 class OclgiWarning(UserWarning):
@@ -72,19 +73,6 @@ class Camera:
         return eye, fwd, right * half_w, up * half_h
 
 
-@dataclass
-class Settings:
-    photons: int = 100_000
-    seed: int = 1
-    max_depth: int = 16
-    method: str = "detp"
-    radius: float | None = None  # None: 1% of the scene's bounding-box diagonal
-    extension: float = 0.0
-    count_emitted: bool = True
-
-
-MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63
-MAX_PHOTONS = 1 << 31
 MAX_COORDINATE = 1e18  # squared lengths stay finite in float32
 
 
@@ -96,7 +84,7 @@ class Scene:
     materials: list[Material]
     point_lights: list[PointLight] = field(default_factory=list)
     camera: Camera | None = None
-    settings: Settings = field(default_factory=Settings)
+    settings: RunParams = field(default_factory=RunParams)  # the run's defaults (radius None: 1% of the diagonal)
     name: str = "scene"
     tri_object: np.ndarray | None = None  # (F,) int64 into objects; None: one static object
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
@@ -184,15 +172,9 @@ class Scene:
         for pl in self.point_lights:
             if not (np.isfinite(pl.position).all() and np.isfinite(pl.intensity).all()) or min(pl.intensity) < 0:
                 raise OclgiError(f"point light at {pl.position}: bad position or intensity")
-        s = self.settings
-        if not isinstance(s.photons, (int, np.integer)) or not 0 < s.photons <= MAX_PHOTONS:
-            raise OclgiError(f"photon count must be a positive integer up to 2^31, got {s.photons!r}")
-        if not isinstance(s.max_depth, (int, np.integer)) or not 1 <= s.max_depth <= MAX_DEPTH_LIMIT:
-            raise OclgiError(f"max_depth must be an integer in 1..{MAX_DEPTH_LIMIT}, got {s.max_depth!r}")
-        if s.radius is not None and not (isinstance(s.radius, (int, float)) and math.isfinite(s.radius) and s.radius > 0):
-            raise OclgiError(f"radius must be a positive number, got {s.radius!r}")
-        if not (math.isfinite(s.extension) and s.extension >= 0):
-            raise OclgiError(f"extension must be a number >= 0, got {s.extension!r}")
+        if not isinstance(self.settings, RunParams):  # a RunParams checks its values when made
+            raise OclgiError(f"{self.name}: settings must be an oclgi.params.RunParams, "
+                             f"got {type(self.settings).__name__}")
         self.tri_object = np.asarray(self.tri_object, dtype=np.int64)
         if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
             raise OclgiError(f"{self.name}: triangles must be grouped object by object")

@@ -46,8 +46,7 @@ def _points(spec: str):
 
 
 def _configs(engine, args):
-    from ..engine import _check_options
-    from ..estimators import ESTIMATORS
+    from .. import params
     from .run import Config
 
     methods = args.methods or [(m, {}) for m in DEFAULT_METHODS]
@@ -57,14 +56,10 @@ def _configs(engine, args):
     used = set()
     configs = []
     for method, own in methods:
-        options = {}
-        for key, value in shared.items():  # an -O option goes to every method that takes it
-            try:
-                _check_options(ESTIMATORS[method], {key: value})
-            except OclgiError:
-                continue
-            options[key] = value
-            used.add(key)
+        # an -O option goes to every method that takes it (extension and
+        # count_emitted: to every method)
+        options = {k: v for k, v in shared.items() if k in params.OPTION_PARAMS or k in params.option_names(method)}
+        used |= set(options)
         options.update(own)
         radius = args.radius if method.startswith("detp") else None
         configs.append(Config(method, photons, radius=radius, **options))

@@ -25,9 +25,9 @@ from . import image_compare
 from . import mitsuba as mitsuba_reference
 from ..errors import OclgiError
 from ..io import _write_image_file, atomic_path, check_output
+from ..params import RUN_KEYS
 
 FILES = ("oclgi.exr", "mitsuba.exr", "error.exr", "error.png", "comparison.json")
-RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")
 
 
 def compare_with_mitsuba(engine, out_dir, spp: int = 256, edge_px: int = 3, width: int | None = None,

@@ -57,6 +57,7 @@ import os
 
 import numpy as np
 
+from .. import params
 from ..errors import OclgiError
 
 DEFAULT_VARIANT = "scalar_rgb"
@@ -178,9 +179,7 @@ def _check_seed(seed):
 def _mitsuba_depth(scene, max_depth):
     if max_depth is None:
         max_depth = scene.settings.max_depth
-    if isinstance(max_depth, bool) or not isinstance(max_depth, (int, np.integer)) or max_depth < 1:
-        raise OclgiError(f"max_depth must be a positive integer, got {max_depth!r}")
-    return max_depth_for(max_depth)
+    return max_depth_for(params.max_depth(max_depth))  # oclgi's max_depth, checked as for a run
 
 
 def render(scene, camera=None, width=None, height=None, spp=256, seed=0, max_depth=None,

@@ -59,12 +59,10 @@ import numpy as np
 from .. import queries
 from . import bound_inputs as study_bounds
 from . import reference as study_reference
-from ..engine import _check_options, as_query_points
+from .. import params
+from ..engine import as_query_points
 from ..errors import OclgiError
-from ..estimators import ESTIMATORS
 from ..progress import Progress
-from ..params import check_method
-from ..scene.scene import MAX_PHOTONS
 from .stats import REFERENCE_TRUST
 
 WARMUP_PHOTONS = 20_000
@@ -73,19 +71,16 @@ WARMUP_PHOTONS = 20_000
 class Config:
     """One estimator configuration: ``method``, its photon counts, the DETP
     ``radius`` (None: the scene's) and the method's options (``k``,
-    ``estimator``, ``leaf_size``, ...)."""
+    ``estimator``, ``leaf_size``, ...; also ``extension`` and
+    ``count_emitted``), all checked by oclgi/params.py."""
 
     def __init__(self, method: str, photons, radius: float | None = None, **options):
-        self.method = check_method(method)
-        counts = [photons] if np.isscalar(photons) else list(photons)
-        if not counts:
-            raise OclgiError(f"{method}: no photon counts given")
-        self.photons = tuple(sorted({_photon_count(p) for p in counts}))
-        if radius is not None and not (isinstance(radius, (int, float)) and math.isfinite(radius) and radius > 0):
-            raise OclgiError(f"{method}: radius must be a positive number, got {radius!r}")
-        self.radius = None if radius is None else float(radius)
-        _check_options(ESTIMATORS[self.method], options)
-        self.options = dict(options)
+        self.method = params.method(method)
+        self.photons = tuple(sorted(set(params.photon_counts(photons))))
+        self.radius = None if radius is None else params.radius(radius)
+        own = {k: v for k, v in options.items() if k not in params.OPTION_PARAMS}
+        params.options(self.method, own)
+        self.options = {k: params.option(k, v) for k, v in options.items()}
 
     @property
     def is_detp(self) -> bool:
@@ -106,13 +101,6 @@ class Config:
 
     def __repr__(self):
         return f"Config({self.label()!r}, photons={list(self.photons)})"
-
-
-def _photon_count(p) -> int:
-    if isinstance(p, bool) or not isinstance(p, (int, float, np.integer, np.floating)) or \
-            not (math.isfinite(p) and float(p).is_integer() and 0 < p <= MAX_PHOTONS):
-        raise OclgiError(f"photon counts must be positive integers up to 2^31, got {p!r}")
-    return int(p)
 
 
 # -- query points ------------------------------------------------------------------
@@ -308,6 +296,7 @@ def run_study(engine, configs, points="random:256", seeds=8, reference=None, poi
         if not isinstance(c, Config):
             raise OclgiError(f"configurations must be oclgi.study.Config, got {c!r}")
     seeds = check_seeds(seeds)
+    point_seed = params.seed(point_seed, "point_seed")
     reference = study_reference.Reference() if reference is None else study_reference.parse(reference)
     study_reference.check_available(reference)
     bound_params = dict(bound_params or {})
