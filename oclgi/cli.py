@@ -106,7 +106,9 @@ def _method_list(text):
         options = dict(_option(o) for o in opts)
         try:
             params.method(name, "--methods")
-            params.options(name, {k: v for k, v in options.items() if k not in params.OPTION_PARAMS})
+            from .estimators import check_options
+
+            check_options(name, {k: v for k, v in options.items() if k not in params.OPTION_PARAMS})
         except OclgiError as exc:
             raise _type_error(exc, "--methods") from None
         out.append((name, options))

@@ -24,10 +24,10 @@ from . import queries
 from .cl.device import create_context
 from .cl.programs import launch, programs
 from .errors import OclgiError
-from .estimators import ESTIMATORS
+from .estimators import ESTIMATORS, check_options
 from .tracing.photon_trace import PhotonTracer
 from .scene.compiled import CompiledScene
-from .params import RunParams, options as check_options, radius as read_radius
+from .params import RunParams, radius as read_radius
 from .scene.description import validate_camera
 from .scene.scene import Camera, Scene
 

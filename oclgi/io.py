@@ -69,7 +69,9 @@ def atomic_path(path: Path):
         raise
 
 
-def _write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
+def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
+    """Write an image to ``tmp`` (a temporary name from :func:`atomic_path`; ``path``
+    names it in errors): the one OpenImageIO writer of every image oclgi makes."""
     import OpenImageIO as oiio
 
     h, w, c = pixels.shape
@@ -94,7 +96,7 @@ def write_image(path, pixels: np.ndarray) -> Path:
     """Write an (H, W, C) image: float32 for EXR (linear), uint8 for PNG."""
     path = Path(path)
     with atomic_path(path) as tmp:
-        _write_image_file(tmp, path, pixels)
+        write_image_file(tmp, path, pixels)
     return path
 
 
@@ -110,7 +112,7 @@ def write_images(images: dict) -> list[Path]:
     with ExitStack() as stack:
         for p, pixels in zip(paths, images.values()):
             tmp = stack.enter_context(atomic_path(p))
-            _write_image_file(tmp, p, pixels)
+            write_image_file(tmp, p, pixels)
     return paths
 
 

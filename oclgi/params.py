@@ -22,7 +22,6 @@ oclgi.params.ParamError: photons.count: expected a positive integer up to 2^31, 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass
 
@@ -50,7 +49,7 @@ RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "co
 # arguments, and the command line has no flag of their own for them.
 OPTION_PARAMS = ("extension", "count_emitted")
 # What the engine hands every estimator itself: never an option.
-_ENGINE_ARGS = frozenset({"self", "queue", "compiled", "points", "local_size", "count_work"})
+ENGINE_ARGS = frozenset({"self", "queue", "compiled", "points", "local_size", "count_work"})
 
 
 class ParamError(OclgiError):
@@ -182,49 +181,18 @@ READERS = {"method": method, "photons": photons, "radius": radius, "seed": seed,
 # -- a method's own options -------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=None)
-def option_names(method_name: str) -> frozenset:
-    """The options of a method: the keyword parameters of its estimator's
-    constructors other than the run parameters and what the engine passes.
-    (Sessions build estimators every frame: inspected once per method.)"""
-    import inspect
-
-    from .estimators import ESTIMATORS
-
-    names = set()
-    for klass in ESTIMATORS[method_name].__mro__:
-        init = klass.__dict__.get("__init__")
-        if init is not None:
-            names |= {p.name for p in inspect.signature(init).parameters.values()
-                      if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
-    return frozenset(names - _ENGINE_ARGS - set(RUN_KEYS))
-
-
-def options(method_name: str, given: dict) -> dict:
-    """The method's own options, their names checked (each estimator checks
-    its values when it is built, before any photon is traced)."""
-    method_name = method(method_name)
-    for key in given:
-        _not_a_parameter(key)
-    unknown = set(given) - option_names(method_name)
-    if unknown:
-        takes = ", ".join(sorted(option_names(method_name))) or "none"
-        raise OclgiError(f"method {method_name!r} takes no option(s) {sorted(unknown)} (its options: {takes})")
-    return dict(given)
-
-
 def option(key: str, value):
     """One ``key=value`` given among a method's options: a run parameter of
     OPTION_PARAMS is read as such, the other run parameters are refused (they
     have their own argument), a method's own option passes as it is."""
     if key in OPTION_PARAMS:
         return READERS[key](value, key)
-    _not_a_parameter(key)
+    not_a_parameter(key)
     return value
 
 
-def _not_a_parameter(key: str) -> None:
-    if key in RUN_KEYS or key in _ENGINE_ARGS:
+def not_a_parameter(key: str) -> None:
+    if key in RUN_KEYS or key in ENGINE_ARGS:
         raise OclgiError(f"{key} is a parameter of its own, not an option of a method")
 
 

@@ -458,14 +458,14 @@ def test_points_binary_csv(fails_cleanly, scene, tmp_path):
 def test_write_images_all_or_nothing(tmp_path, monkeypatch):
     from oclgi import io
 
-    real = io._write_image_file
+    real = io.write_image_file
 
     def fail_on_png(tmp, path, pixels):
         if path.suffix == ".png":
             raise OclgiError(f"cannot write {path}: disk full")
         real(tmp, path, pixels)
 
-    monkeypatch.setattr(io, "_write_image_file", fail_on_png)
+    monkeypatch.setattr(io, "write_image_file", fail_on_png)
     img = np.ones((2, 3, 3), np.float32)
     with pytest.raises(OclgiError, match="disk full"):
         io.write_images({tmp_path / "x.exr": img, tmp_path / "x.png": (img * 255).astype(np.uint8)})

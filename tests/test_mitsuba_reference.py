@@ -414,7 +414,7 @@ def test_compare_with_mitsuba_leaves_nothing_on_error(cornell, tmp_path, monkeyp
     assert not out.exists() or not any(out.iterdir())
 
     # a failure while writing the fourth file: none of the five appear, nor temporaries
-    real_write = study_image._write_image_file
+    real_write = study_image.write_image_file
     calls = []
 
     def failing_write(tmp, path, pixels):
@@ -424,7 +424,7 @@ def test_compare_with_mitsuba_leaves_nothing_on_error(cornell, tmp_path, monkeyp
         real_write(tmp, path, pixels)
 
     with monkeypatch.context() as m:
-        m.setattr(study_image, "_write_image_file", failing_write)
+        m.setattr(study_image, "write_image_file", failing_write)
         with pytest.raises(OclgiError, match="disk full"):
             _small_run(cornell, out)
     assert len(calls) == 4

@@ -9,6 +9,10 @@ resolves them to irradiance at the query points (see base.py).
     photon_map         Photon Maps: the k nearest impacts over pi r_k^2 (Jensen 1995)
 """
 
+import functools
+
+from .. import params
+from ..errors import OclgiError
 from ..params import METHODS
 from .detp import Detp
 from .detp_disc_index import DetpDiscIndex
@@ -26,3 +30,32 @@ ESTIMATORS = {
     "photon_map": PhotonMap,
 }
 assert tuple(ESTIMATORS) == METHODS, "oclgi/params.py's METHODS must list every estimator"
+
+
+@functools.lru_cache(maxsize=None)
+def option_names(method_name: str) -> frozenset:
+    """The options of a method: the keyword parameters of its estimator's
+    constructors other than the run parameters and what the engine passes.
+    (Sessions build estimators every frame: inspected once per method.)"""
+    import inspect
+
+    names = set()
+    for klass in ESTIMATORS[method_name].__mro__:
+        init = klass.__dict__.get("__init__")
+        if init is not None:
+            names |= {p.name for p in inspect.signature(init).parameters.values()
+                      if p.kind is p.KEYWORD_ONLY or p.kind is p.POSITIONAL_OR_KEYWORD}
+    return frozenset(names - params.ENGINE_ARGS - set(params.RUN_KEYS))
+
+
+def check_options(method_name: str, given: dict) -> dict:
+    """The method's own options, their names checked (each estimator checks
+    its values when it is built, before any photon is traced)."""
+    method_name = params.method(method_name)
+    for key in given:
+        params.not_a_parameter(key)
+    unknown = set(given) - option_names(method_name)
+    if unknown:
+        takes = ", ".join(sorted(option_names(method_name))) or "none"
+        raise OclgiError(f"method {method_name!r} takes no option(s) {sorted(unknown)} (its options: {takes})")
+    return dict(given)

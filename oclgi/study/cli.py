@@ -47,6 +47,7 @@ def _points(spec: str):
 
 def _configs(engine, args):
     from .. import params
+    from ..estimators import option_names
     from .run import Config
 
     methods = args.methods or [(m, {}) for m in DEFAULT_METHODS]
@@ -58,7 +59,7 @@ def _configs(engine, args):
     for method, own in methods:
         # an -O option goes to every method that takes it (extension and
         # count_emitted: to every method)
-        options = {k: v for k, v in shared.items() if k in params.OPTION_PARAMS or k in params.option_names(method)}
+        options = {k: v for k, v in shared.items() if k in params.OPTION_PARAMS or k in option_names(method)}
         used |= set(options)
         options.update(own)
         radius = args.radius if method.startswith("detp") else None

@@ -24,7 +24,7 @@ import numpy as np
 from . import image_compare
 from . import mitsuba as mitsuba_reference
 from ..errors import OclgiError
-from ..io import _write_image_file, atomic_path, check_output
+from ..io import write_image_file, atomic_path, check_output
 from ..params import RUN_KEYS
 
 FILES = ("oclgi.exr", "mitsuba.exr", "error.exr", "error.png", "comparison.json")
@@ -86,7 +86,7 @@ def compare_with_mitsuba(engine, out_dir, spp: int = 256, edge_px: int = 3, widt
     # only once all are complete, so a failure leaves none of them.
     with ExitStack() as stack:
         for p, pixels in images.items():
-            _write_image_file(stack.enter_context(atomic_path(p)), p, pixels)
+            write_image_file(stack.enter_context(atomic_path(p)), p, pixels)
         tmp = stack.enter_context(atomic_path(paths["comparison.json"]))
         tmp.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary

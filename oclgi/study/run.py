@@ -56,13 +56,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import queries
-from . import bound_inputs as study_bounds
-from . import reference as study_reference
-from .. import params
+from .. import params, queries
 from ..engine import as_query_points
 from ..errors import OclgiError
+from ..estimators import check_options
 from ..progress import Progress
+from . import bound_inputs as study_bounds
+from . import reference as study_reference
 from .stats import REFERENCE_TRUST
 
 WARMUP_PHOTONS = 20_000
@@ -79,7 +79,7 @@ class Config:
         self.photons = tuple(sorted(set(params.photon_counts(photons))))
         self.radius = None if radius is None else params.radius(radius)
         own = {k: v for k, v in options.items() if k not in params.OPTION_PARAMS}
-        params.options(self.method, own)
+        check_options(self.method, own)
         self.options = {k: params.option(k, v) for k, v in options.items()}
 
     @property
