@@ -38,7 +38,12 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
     }
     float8 x = vload8(0, px), y = vload8(0, py), z = vload8(0, pz);
     float8 nx = vload8(0, qx), ny = vload8(0, qy), nz = vload8(0, qz);
-    long8 sr = 0, sg = 0, sb = 0;
+    /* The sums stay scalar per lane: a long8 (512 bits) passed through a
+     * builtin changes the calling convention without AVX-512 (a compiler
+     * warning on AVX2), and crossings are rare, so the lane loop below costs
+     * nothing measurable. */
+    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
+    for (int k = 0; k < DETP_LANES; ++k) r[k] = g[k] = bl[k] = 0;
     int b0 = count_emitted ? 0 : 1;
     for (int p = 0; p < n_paths; ++p) {
         __global const float4 *path = segments + (size_t)p * max_depth * 3;
@@ -55,15 +60,17 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             if (any(hit)) {
                 float4 f2 = path[3 * b + 2];
                 long3 q = convert_long3_rte(f2.xyz * scale);
-                long8 m = convert_long8(hit) & 1;
-                sr += m * q.x;
-                sg += m * q.y;
-                sb += m * q.z;
+                int h[DETP_LANES];
+                vstore8(hit, 0, h);
+                for (int k = 0; k < DETP_LANES; ++k) {
+                    if (!h[k]) continue;
+                    r[k] += q.x;
+                    g[k] += q.y;
+                    bl[k] += q.z;
+                }
             }
         }
     }
-    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
-    vstore8(sr, 0, r); vstore8(sg, 0, g); vstore8(sb, 0, bl);
     for (int k = 0; k < DETP_LANES && base + k < n_points; ++k) {
         int i = base + k;
         acc[3 * i + 0] += r[k];
