@@ -27,6 +27,7 @@
 #define OCLGI_BOX_BVH_H
 
 #include "oclgi_types.h"
+#include "box.h"
 
 #ifndef OCLGI_BOX_BVH_STACK
 #define OCLGI_BOX_BVH_STACK 64
@@ -45,18 +46,12 @@ inline void box_bvh_start(BoxBvhWalk *walk)
     walk->visited = 0;
 }
 
-/* Does the segment o + t w, 0 <= t <= tmax, meet the box? inv = 1 / w.
- * tmax may be INFINITY (escaping segments): the slabs clip it to the box.
- * fmin/fmax drop the NaN of 0 * inf (segment on a slab plane); the far end
- * gets a few ulp of slack so grazing segments are kept, never dropped. */
+/* Does the segment o + t w, 0 <= t <= tmax, meet the node's box (box.h)?
+ * inv = 1 / w; tmax may be INFINITY. */
 inline int box_meets_segment(__global const BvhNode *n, float3 o, float3 inv, float tmax)
 {
-    float3 t0 = (vload3(0, n->lo) - o) * inv;
-    float3 t1 = (vload3(0, n->hi) - o) * inv;
-    float3 tn = fmin(t0, t1), tf = fmax(t0, t1);
-    float enter = fmax(fmax(tn.x, tn.y), fmax(tn.z, 0.0f));
-    float leave = fmin(fmin(tf.x, tf.y), fmin(tf.z, tmax)) * 1.0000004f;
-    return enter <= leave;
+    float enter;
+    return box_slab(vload3(0, n->lo), vload3(0, n->hi), o, inv, tmax, &enter);
 }
 
 /* Do two closed boxes overlap? Comparisons only: exact. */

@@ -21,6 +21,7 @@
 
 #include "oclgi_types.h"
 #include "geometry.h"
+#include "box.h"
 
 #define SCENE_ARGS __global const BvhNode *nodes, __global const Tri *tris, \
                    __global const Instance *instances, int n_instances
@@ -31,17 +32,12 @@ typedef struct {
     int tri; /* scene-order triangle id, -1 for a miss */
 } Hit;
 
-/* Entry distance of the ray into a box, INFINITY when it misses the box
- * before tmax. fmin/fmax drop the NaN of 0 * inf (ray on a slab plane). */
+/* Entry distance of the ray into a box (box.h), INFINITY when it misses the
+ * box before tmax. */
 inline float box_entry3(float3 lo, float3 hi, float3 o, float3 inv, float tmax)
 {
-    float3 t0 = (lo - o) * inv;
-    float3 t1 = (hi - o) * inv;
-    float3 tn = fmin(t0, t1), tf = fmax(t0, t1);
-    float enter = fmax(fmax(tn.x, tn.y), fmax(tn.z, 0.0f));
-    /* 1 + 2 ulp-ish slack keeps rays grazing a face of the box. */
-    float leave = fmin(fmin(tf.x, tf.y), fmin(tf.z, tmax)) * 1.0000004f;
-    return enter <= leave ? enter : INFINITY;
+    float enter;
+    return box_slab(lo, hi, o, inv, tmax, &enter) ? enter : INFINITY;
 }
 
 inline float box_entry(__global const float *lo, __global const float *hi, float3 o, float3 inv, float tmax)

@@ -2,26 +2,28 @@
  *
  * detp_plain    one work-item per DETP_LANES (8) consecutive query points,
  *               held in float8 lanes: every segment slot of a batch
- *               (n_slots = paths * max_depth) is tested against the 8 discs
- *               at once with DETP_TEST (detp.h), and the fixed-point power
- *               of a crossing segment is added to that point's sums. A
+ *               (n_slots = paths * max_depth, read by segment.h) is
+ *               tested against the 8 discs at once with DETP_TEST (detp.h),
+ *               and the fixed-point power of a crossing segment is added to
+ *               that point's sums. A
  *               work-item owns its points, so no atomics; batches run in
  *               order. (PoCL does not vectorise loops across work-items, so
  *               the lanes are explicit.)
  *               Counts u = segment-disc tests (work.h).
  * detp_resolve  one work-item per point: E = acc / (scale * pi d^2).
  *
- * count_emitted = 0 skips segments leaving the light (bounce 0), i.e. the
- * estimate is of indirect light only.
+ * count_emitted = 0 skips segments leaving the light (bounce 0, segment.h),
+ * i.e. the estimate is of indirect light only.
  */
 #include "oclgi_types.h"
+#include "segment.h"
 #include "detp.h"
 #include "work.h"
 
 #define DETP_LANES 8
 
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
-                         int n_points, __global const float4 *segments, int n_paths,
+                         int n_points, __global const Segment *segments, int n_paths,
                          int max_depth, int count_emitted, float radius2, float ext,
                          float scale, __global long *acc, __global ulong *work)
 {
@@ -38,32 +40,36 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
     }
     float8 x = vload8(0, px), y = vload8(0, py), z = vload8(0, pz);
     float8 nx = vload8(0, qx), ny = vload8(0, qy), nz = vload8(0, qz);
-    long8 sr = 0, sg = 0, sb = 0;
-    int b0 = count_emitted ? 0 : 1;
+    /* The sums stay scalar per lane: a long8 (512 bits) passed through a
+     * builtin changes the calling convention without AVX-512 (a compiler
+     * warning on AVX2), and crossings are rare, so the lane loop below costs
+     * nothing measurable. */
+    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
+    for (int k = 0; k < DETP_LANES; ++k) r[k] = g[k] = bl[k] = 0;
     for (int p = 0; p < n_paths; ++p) {
-        __global const float4 *path = segments + (size_t)p * max_depth * 3;
-        for (int b = b0; b < max_depth; ++b) {
-            float4 f0 = path[3 * b], f1 = path[3 * b + 1];
-            if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) {
-                if (as_int(f1.w) == SEGMENT_HOLE) continue;
-                break; /* end of the path */
-            }
-            float tmax = f0.w + ext;
+        __global const Segment *path = segments + (size_t)p * max_depth;
+        for (int b = segment_first(count_emitted); b < max_depth; ++b) {
+            SegmentView s;
+            int status = segment_read(path + b, &s);
+            if (status == SEGMENT_END) break;
+            if (status == SEGMENT_SKIP) continue;
+            float tmax = s.t_end + ext;
             WORK_U(lanes);
             int8 hit;
-            DETP_TEST(float8, hit, x, y, z, nx, ny, nz, f0.x, f0.y, f0.z, f1.x, f1.y, f1.z, tmax, radius2);
+            DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, radius2);
             if (any(hit)) {
-                float4 f2 = path[3 * b + 2];
-                long3 q = convert_long3_rte(f2.xyz * scale);
-                long8 m = convert_long8(hit) & 1;
-                sr += m * q.x;
-                sg += m * q.y;
-                sb += m * q.z;
+                long3 q = segment_fixed_power(path + b, scale);
+                int h[DETP_LANES];
+                vstore8(hit, 0, h);
+                for (int k = 0; k < DETP_LANES; ++k) {
+                    if (!h[k]) continue;
+                    r[k] += q.x;
+                    g[k] += q.y;
+                    bl[k] += q.z;
+                }
             }
         }
     }
-    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
-    vstore8(sr, 0, r); vstore8(sg, 0, g); vstore8(sb, 0, bl);
     for (int k = 0; k < DETP_LANES && base + k < n_points; ++k) {
         int i = base + k;
         acc[3 * i + 0] += r[k];

@@ -48,10 +48,4 @@ inline int detp_crosses(float3 x, float3 n, float radius2, float ext,
     return res;
 }
 
-/* Quantised contribution of a segment (see oclgi_types.h). */
-inline long3 fixed_power(__global const float *power, float scale)
-{
-    return convert_long3_rte(vload3(0, power) * scale);
-}
-
 #endif

@@ -2,9 +2,9 @@
  *
  * detp_disc_index  one work-item per path of a batch (global size n_paths,
  *                  any local size), which walks its segments up to the
- *                  path's end: reading only the stored segments, not every
- *                  slot, halves the cost of a pass over a session's whole
- *                  store. Each segment walks a BVH over the discs' boxes
+ *                  path's end (segment.h): reading only the stored
+ *                  segments, not every slot, halves the cost of a pass over
+ *                  a session's whole store. Each segment walks a BVH over the discs' boxes
  *                  (box_bvh.h); in every leaf it meets, it is tested against
  *                  the leaf's discs 8 at a time (float8 lanes, as detp_plain)
  *                  with DETP_TEST (detp.h), and its fixed-point power is
@@ -22,12 +22,13 @@
  * count_emitted = 0 skips segments leaving the light (bounce 0), as detp.cl.
  */
 #include "oclgi_types.h"
+#include "segment.h"
 #include "detp.h"
 #include "work.h"
 #include "detp_disc_index.h"
 
 __kernel void detp_disc_index(__global const BvhNode *nodes, __global const float8 *discs,
-                              __global const float4 *segments, int n_paths, int max_depth,
+                              __global const Segment *segments, int n_paths, int max_depth,
                               int count_emitted, float radius2, float ext, float scale,
                               __global long *acc, __global ulong *work)
 {
@@ -36,17 +37,13 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const floa
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
-    __global const float4 *path = segments + (size_t)p * max_depth * 3;
-    for (int b = count_emitted ? 0 : 1; b < max_depth; ++b) {
-        __global const float4 *seg = path + 3 * b;
-        float4 f0 = seg[0], f1 = seg[1];
-        /* The first empty slot (all zeros) ends the path; a hole (an update's
-         * scratch store, update.cl) is skipped. */
-        if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) {
-            if (as_int(f1.w) == SEGMENT_HOLE) continue;
-            break;
-        }
-        disc_index_segment(nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
+    __global const Segment *path = segments + (size_t)p * max_depth;
+    for (int b = segment_first(count_emitted); b < max_depth; ++b) {
+        SegmentView s;
+        int status = segment_read(path + b, &s);
+        if (status == SEGMENT_END) break;
+        if (status == SEGMENT_SKIP) continue;
+        disc_index_segment(nodes, discs, path + b, &s, radius2, ext, scale, acc, &visited, &tests);
     }
     WORK_U(tests);
     WORK_NODE(visited);

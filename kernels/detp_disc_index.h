@@ -6,18 +6,20 @@
 #define OCLGI_DETP_DISC_INDEX_H
 
 #include "oclgi_types.h"
+#include "segment.h"
 #include "detp.h"
 #include "box_bvh.h"
 
 #define DISC_BLOCK 7 /* float8 per block of 8 discs */
 
-/* One segment against the tree: every leaf it meets, 8 discs at a time. */
+/* One segment (s, read from `slot`) against the tree: every leaf it meets,
+ * 8 discs at a time. */
 inline void disc_index_segment(__global const BvhNode *nodes, __global const float8 *discs,
-                               __global const float4 *seg, float4 f0, float4 f1, float radius2, float ext,
+                               __global const Segment *slot, const SegmentView *s, float radius2, float ext,
                                float scale, __global long *acc, uint *visited, ulong *tests)
 {
-    float3 o = f0.xyz, w = f1.xyz;
-    float tmax = f0.w + ext; /* exactly as detp_plain */
+    float3 o = s->o, w = s->w;
+    float tmax = s->t_end + ext; /* exactly as detp_plain */
     float3 inv = 1.0f / w;
     long3 q = 0;
     int have_q = 0;
@@ -35,7 +37,7 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const flo
                       tmax, radius2);
             if (!any(hit)) continue;
             if (!have_q) { /* quantised once per segment, as detp_plain does */
-                q = convert_long3_rte(seg[2].xyz * scale);
+                q = segment_fixed_power(slot, scale);
                 have_q = 1;
             }
             int ids[8], h[8];

@@ -25,6 +25,7 @@
  * box lo, box hi.
  */
 #include "oclgi_types.h"
+#include "segment.h"
 #include "detp.h"
 #include "work.h"
 #include "box_bvh.h"
@@ -32,7 +33,7 @@
 #define SEG_BLOCK 10 /* float8 per block of 8 segment pieces */
 
 __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 *blocks,
-                           __global const float4 *discs, int n_discs, __global const float4 *segments,
+                           __global const float4 *discs, int n_discs, __global const Segment *segments,
                            float radius2, float ext, float scale, __global long *acc,
                            __global ulong *work)
 {
@@ -71,7 +72,7 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 
             vstore8(as_int8(b[7]), 0, slots);
             vstore8(hit, 0, h);
             for (int k = 0; k < 8; ++k)
-                if (h[k]) sum += convert_long3_rte(segments[3 * (size_t)slots[k] + 2].xyz * scale);
+                if (h[k]) sum += segment_fixed_power(segments + slots[k], scale);
         }
     }
     int id = as_int(x.w);

@@ -43,11 +43,12 @@
  * a run that never overflowed. status[2] is the largest stack used, to
  * size the next batch.
  *
- * Sums: per point, private 64-bit sums of convert_long3_rte(power * scale),
+ * Sums: per point, private 64-bit sums of segment_fixed_power (segment.h),
  * exactly as detp.cl, added once to the point's acc (a point belongs to
  * one run, so plain adds).
  */
 #include "oclgi_types.h"
+#include "segment.h"
 #include "detp.h"
 #include "work.h"
 
@@ -90,7 +91,7 @@ inline void sc_flush(__global float4 *rec0, __global int *slot0, volatile __glob
     for (int k = 0; k < nb; ++k) slot0[at + k] = slots[k];
 }
 
-__kernel void sc_gather(__global const float4 *segments, int n_paths, int max_depth, int count_emitted,
+__kernel void sc_gather(__global const Segment *segments, int n_paths, int max_depth, int count_emitted,
                         int paths_per_item, float4 c0, float r0, float ext,
                         __global float4 *rec0, __global int *slot0, volatile __global int *n0,
                         __global ulong *work)
@@ -103,16 +104,15 @@ __kernel void sc_gather(__global const float4 *segments, int n_paths, int max_de
     int nb = 0;
     int p1 = min(n_paths, p0 + paths_per_item);
     for (int p = p0; p < p1; ++p) {
-        for (int b = count_emitted ? 0 : 1; b < max_depth; ++b) {
+        for (int b = segment_first(count_emitted); b < max_depth; ++b) {
             int slot = p * max_depth + b;
-            float4 f0 = segments[3 * (size_t)slot], f1 = segments[3 * (size_t)slot + 1];
-            if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) {
-                if (as_int(f1.w) == SEGMENT_HOLE) continue; /* a hole in an update's store */
-                break; /* end of the path */
-            }
-            float tmax = f0.w + ext; /* as detp.cl */
-            float4 a = (float4)(f0.x, f0.y, f0.z, tmax);
-            float4 w = (float4)(f1.x, f1.y, f1.z, 1.0f / (f1.x * f1.x + f1.y * f1.y + f1.z * f1.z));
+            SegmentView s;
+            int status = segment_read(segments + (size_t)slot, &s);
+            if (status == SEGMENT_END) break;
+            if (status == SEGMENT_SKIP) continue;
+            float tmax = s.t_end + ext; /* as detp.cl */
+            float4 a = (float4)(s.o, tmax);
+            float4 w = (float4)(s.w, 1.0f / (s.w.x * s.w.x + s.w.y * s.w.y + s.w.z * s.w.z));
             WORK_T(1);
             if (sc_meets(c0.x, c0.y, c0.z, r0, a, w)) {
                 buf[2 * nb] = a;
@@ -183,7 +183,7 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
                       __global const int *perm, int n_points, int run_length,
                       __global const int *runs, int run_base, int n_launch, __global int *run_done,
                       __global const float4 *rec0, __global const int *slot0, int first, int n0,
-                      __global const float4 *segments, __global const float *radii, int levels,
+                      __global const Segment *segments, __global const float *radii, int levels,
                       float radius, float radius2, float scale, __global float4 *srec, __global int *sslot,
                       int cap, __global long *acc, volatile __global int *status, __global ulong *work)
 {
@@ -267,7 +267,7 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
             int hit;
             DETP_TEST(float, hit, x.x, x.y, x.z, n.x, n.y, n.z, a.x, a.y, a.z, b.x, b.y, b.z, a.w, radius2);
             if (hit) {
-                long3 p = convert_long3_rte(segments[3 * (size_t)is[j] + 2].xyz * scale); /* as detp.cl */
+                long3 p = segment_fixed_power(segments + is[j], scale); /* as detp.cl */
                 sr += p.x;
                 sg += p.y;
                 sb += p.z;

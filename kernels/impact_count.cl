@@ -1,8 +1,8 @@
 /* impact_count.cl: Impact Count (Arvo 1986) with vertex averaging.
  *
- * impact_count_accumulate   one work-item per segment slot: a segment that
- *                           ends on triangle t adds its fixed-point power to
- *                           t's three accumulators (64-bit atomics).
+ * impact_count_accumulate   one work-item per segment slot: an impact
+ *                           (segment.h) on triangle t adds its fixed-point
+ *                           power to t's three accumulators (64-bit atomics).
  * impact_count_triangles    one work-item per triangle: E = acc / (scale A).
  * impact_count_vertices     one work-item per vertex: the mean of its
  *                           triangles' irradiance (CSR vertex -> triangles).
@@ -11,7 +11,7 @@
  *                           vertex values.
  */
 #include "oclgi_types.h"
-#include "detp.h"
+#include "segment.h"
 
 __kernel void impact_count_accumulate(__global const Segment *segments, int n_slots,
                                       int max_depth, int count_emitted, float scale,
@@ -19,10 +19,12 @@ __kernel void impact_count_accumulate(__global const Segment *segments, int n_sl
 {
     int s = get_global_id(0);
     if (s >= n_slots) return;
-    __global const Segment *sg = &segments[s];
-    int t = sg->tri;
-    if (t < 0 || (!count_emitted && s % max_depth == 0)) return;
-    long3 q = fixed_power(sg->power, scale);
+    __global const Segment *slot = &segments[s];
+    SegmentView v;
+    if (!segment_counted(s % max_depth, count_emitted)) return;
+    if (!segment_impact(segment_read(slot, &v), &v)) return;
+    int t = v.tri;
+    long3 q = segment_fixed_power(slot, scale);
     atom_add(&acc[3 * t + 0], q.x);
     atom_add(&acc[3 * t + 1], q.y);
     atom_add(&acc[3 * t + 2], q.z);

@@ -41,11 +41,7 @@ typedef struct {
     int pad2;
 } Tri;
 
-/* A slot with a zero direction ends its path, unless its tri is
- * SEGMENT_HOLE: then it is a hole (a slot left out of an update's scratch
- * store) and the path goes on after it. */
-#define SEGMENT_HOLE (-2)
-
+/* A stored segment; segment.h reads and writes them (ends of paths, holes). */
 typedef struct {
     float org[3];
     float t_end; /* distance to the hit; INFINITY when the segment escapes */

@@ -2,12 +2,13 @@
  * estimate from the k nearest (the search itself: point_index.cl).
  *
  * pm_count     one work-item per path of a batch: how many impacts it has
- *              (segments with tri >= 0; bounce 0 skipped unless
- *              count_emitted). The host turns the counts into offsets.
+ *              (segment_impact, segment.h: segments that end on a surface;
+ *              bounce 0 skipped unless count_emitted). The host turns the
+ *              counts into offsets.
  * pm_gather    one work-item per path: writes its impacts at its offset, in
  *              bounce order (so a run's impacts come out in (path, bounce)
  *              order, the canonical order whatever the batch size):
- *              position org + t_end dir, arriving direction, power, as
+ *              position (segment_end), arriving direction, power, as
  *              packed float3 arrays.
  * pm_resolve   one work-item per point: E = acc / (scale pi r_K^2), 0 when
  *              fewer than K impacts were found.
@@ -21,7 +22,12 @@ __kernel void pm_count(__global const Segment *segments, int n_paths, int max_de
     if (p >= n_paths) return;
     __global const Segment *path = segments + (size_t)p * max_depth;
     int c = 0;
-    for (int b = 0; b < max_depth && path[b].tri >= 0; ++b) c += (b > 0 || count_emitted);
+    for (int b = segment_first(count_emitted); b < max_depth; ++b) {
+        SegmentView s;
+        int status = segment_read(path + b, &s);
+        if (status == SEGMENT_END) break;
+        c += segment_impact(status, &s);
+    }
     counts[p] = c;
 }
 
@@ -33,11 +39,14 @@ __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_d
     if (p >= n_paths) return;
     __global const Segment *path = segments + (size_t)p * max_depth;
     int o = offsets[p];
-    for (int b = count_emitted ? 0 : 1; b < max_depth && path[b].tri >= 0; ++b) {
-        __global const Segment *s = &path[b];
-        vstore3(pm_impact_position(s), o, pos);
-        vstore3(vload3(0, s->dir), o, dir);
-        vstore3(vload3(0, s->power), o, power);
+    for (int b = segment_first(count_emitted); b < max_depth; ++b) {
+        SegmentView s;
+        int status = segment_read(path + b, &s);
+        if (status == SEGMENT_END) break;
+        if (!segment_impact(status, &s)) continue;
+        vstore3(segment_end(&s), o, pos);
+        vstore3(s.w, o, dir);
+        vstore3(segment_power(path + b), o, power);
         ++o;
     }
 }

@@ -5,10 +5,10 @@
  * of its last k-nearest search. The host builds a BVH over the balls' boxes
  * (oclgi/accel/bvh_build.py; leaves index `balls`, the point ids in leaf
  * order). The changed impacts are read straight from the session's segment
- * store: the impacts of each affected path's suffix, from its first affected
- * bounce on, exactly those pm_gather would gather (bounce 0 only with
- * count_emitted). Called once before the re-trace (the old impacts) and once
- * after it (the new ones).
+ * store (segment.h): the impacts of each affected path's suffix, from its
+ * first affected bounce on, exactly those pm_gather would gather (bounce 0
+ * only with count_emitted). Called once before the re-trace (the old
+ * impacts) and once after it (the new ones).
  *
  * pm_update_balls  one work-item per affected path; each impact of its
  *     suffix walks the BVH (box_bvh.h, the impact as a point box) and meets
@@ -44,9 +44,12 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
     int k = get_global_id(0);
     if (k >= n_list) return;
     __global const Segment *path = segments + (size_t)paths[k] * max_depth;
-    for (int b = max(starts[k], count_emitted ? 0 : 1); b < max_depth && path[b].tri >= 0; ++b) {
-        __global const Segment *s = &path[b];
-        float3 p = pm_impact_position(s), w = vload3(0, s->dir);
+    for (int b = max(starts[k], segment_first(count_emitted)); b < max_depth; ++b) {
+        SegmentView s;
+        int status = segment_read(path + b, &s);
+        if (status == SEGMENT_END) break;
+        if (!segment_impact(status, &s)) continue;
+        float3 p = segment_end(&s), w = s.w;
         long3 q = (long3)(0);
         int have_q = 0;
         BoxBvhWalk walk;
@@ -64,7 +67,7 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
                 }
                 if (r == INFINITY || !(d2 < r || (include_kth && d2 == r))) continue;
                 if (!have_q) { /* quantised once per impact, as pm_finish does */
-                    q = convert_long3_rte(vload3(0, s->power) * scale);
+                    q = segment_fixed_power(path + b, scale);
                     if (sign < 0.0f) q = -q;
                     have_q = 1;
                 }

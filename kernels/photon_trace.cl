@@ -2,8 +2,8 @@
  *
  * photon_trace    one work-item per path. Path p (global id path_offset + i)
  *                 writes its segments to slots i * max_depth + b of the
- *                 store (path-major, DESIGN.md section 2), zero-fills the
- *                 slots past its end and records its length.
+ *                 store (path-major, DESIGN.md section 2; segment.h),
+ *                 zero-fills the slots past its end and records its length.
  * photon_retrace  one work-item per listed path: re-traces path p from its
  *                 bounce b on (the suffix), overwriting its own slots b.. and
  *                 nothing else. Used after a move: the segments before b are
@@ -23,6 +23,7 @@
  */
 #include "bvh.h"
 #include "rng.h"
+#include "segment.h"
 
 #define TRACE_ARGS __global const float4 *tri_normals, __global const int *tri_material,     \
                    __global const Material *materials, __global const Emitter *emitters,   \
@@ -83,16 +84,6 @@ inline int path_scatter(TRACE_ARGS, uint path, int b, float3 o, float3 d, float 
     return 1;
 }
 
-inline void segment_store(__global Segment *sg, float3 o, float t, float3 d, int tri, float3 power, uint path)
-{
-    vstore3(o, 0, sg->org);
-    sg->t_end = t;
-    vstore3(d, 0, sg->dir);
-    sg->tri = tri;
-    vstore3(power, 0, sg->power);
-    sg->path = (int)path;
-}
-
 /* Trace from event b in state s to the path's end: slots b.. of `out`
  * (the path's own slots) are written, the rest zero-filled. Returns the
  * path's length in segments. */
@@ -103,15 +94,14 @@ inline int path_trace_from(SCENE_ARGS, TRACE_ARGS, uint path, int b, PathState s
         Hit h;
         scene_closest_hit(SCENE_PASS, s.o, s.d, INFINITY, &h);
         float t = h.tri >= 0 ? h.t : INFINITY;
-        segment_store(&out[b], s.o, t, s.d, h.tri, s.power, path);
+        segment_write(&out[b], s.o, t, s.d, h.tri, s.power, (int)path);
         len = b + 1;
         PathState next;
         if (!path_scatter(TRACE_PASS, path, b + 1, s.o, s.d, h.t, h.tri, s.power, &next)) break;
         s = next;
         ++b;
     }
-    for (int k = len; k < max_depth; ++k)
-        segment_store(&out[k], (float3)(0.0f), 0.0f, (float3)(0.0f), -1, (float3)(0.0f), path);
+    for (int k = len; k < max_depth; ++k) segment_write_empty(&out[k], (int)path);
     return len;
 }
 
@@ -140,11 +130,11 @@ __kernel void photon_retrace(SCENE_ARGS, TRACE_ARGS, int path_offset,
     if (b == 0) {
         s = path_emit(TRACE_PASS, path);
     } else {
-        __global const Segment *prev = &out[b - 1];
-        if (!path_scatter(TRACE_PASS, path, b, vload3(0, prev->org), vload3(0, prev->dir), prev->t_end,
-                          prev->tri, vload3(0, prev->power), &s)) {
-            for (int j = b; j < max_depth; ++j)
-                segment_store(&out[j], (float3)(0.0f), 0.0f, (float3)(0.0f), -1, (float3)(0.0f), path);
+        SegmentView prev;
+        segment_load(&out[b - 1], &prev);
+        if (!path_scatter(TRACE_PASS, path, b, prev.o, prev.w, prev.t_end, prev.tri, segment_power(&out[b - 1]),
+                          &s)) {
+            for (int j = b; j < max_depth; ++j) segment_write_empty(&out[j], (int)path);
             path_len[i] = b;
             return;
         }

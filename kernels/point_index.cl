@@ -15,7 +15,7 @@
  *
  * Both searches end in pm_finish: acc = the fixed-point sum of the K-1
  * nearest impacts' powers (the K nearest with include_kth), each quantised
- * once as convert_long3_rte(power * scale) like every estimator, r2 =
+ * once by segment_quantise (segment.h) like every estimator, r2 =
  * the K-th nearest's d2; with write_ids, the K neighbours' ids and d2 in
  * ascending (d2, id) order (for tests and studies).
  * Work counters (work.h): u = impact distance tests, nodes = BVH nodes or
@@ -37,7 +37,7 @@ inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int includ
         r = h->d2[0];
         /* heap slot 0 is the K-th nearest: the K-1 estimator leaves it out */
         for (int j = include_kth ? 0 : 1; j < PM_K; ++j)
-            s += convert_long3_rte(power[h->id[j]].xyz * scale);
+            s += segment_quantise(power[h->id[j]].xyz, scale);
     }
     acc[3 * i + 0] = s.x;
     acc[3 * i + 1] = s.y;

@@ -29,6 +29,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "oclgi_types.h"
+#include "segment.h"
 #include "work.h"
 
 #ifndef OCLGI_KNN_K
@@ -51,14 +52,6 @@ inline float pm_dist2(float3 p, float3 q)
 {
     float dx = p.x - q.x, dy = p.y - q.y, dz = p.z - q.z;
     return dx * dx + dy * dy + dz * dz;
-}
-
-/* An impact: the end of a segment that hit a surface. One expression for
- * every kernel that makes impacts (pm_gather, photon_map_update.cl), so
- * their positions agree bit for bit. */
-inline float3 pm_impact_position(__global const Segment *s)
-{
-    return vload3(0, s->org) + s->t_end * vload3(0, s->dir);
 }
 
 /* Does direction w arrive on normal n's front side? Products summed in the

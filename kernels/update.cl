@@ -32,9 +32,10 @@
  *     contribution away: round-to-nearest-even is symmetric, so the
  *     fixed-point sums lose exactly what they gained), into a path-major
  *     scratch store that every estimator accumulates like a batch. Slots
- *     before b become holes (zero, tri = SEGMENT_HOLE): skipped, not ends.
+ *     before b become holes (segment.h): skipped, not ends.
  */
 #include "bvh.h"
+#include "segment.h"
 #include "detp_disc_index.h"
 #include "work.h"
 
@@ -65,14 +66,15 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
     int3 top = dims.xyz - 1;
     float3 g0 = grid_lo.xyz + pad, g1 = grid_lo.xyz + convert_float3(dims.xyz) * cell.xyz - pad; /* shrunk */
     for (int b = 0; b < path_len[p]; ++b) {
-        __global const Segment *sg = &segments[(size_t)p * max_depth + b];
-        float3 o = vload3(0, sg->org), d = vload3(0, sg->dir);
-        float t_end = sg->t_end;
+        SegmentView s;
+        segment_load(&segments[(size_t)p * max_depth + b], &s);
+        float3 o = s.o, d = s.w;
+        float t_end = s.t_end;
         /* the cells the segment's box reaches (all, for an escaping one) */
         int3 c0 = (int3)(0), c1 = top;
         int out = 1;
         if (t_end != INFINITY) {
-            float3 e = o + t_end * d;
+            float3 e = segment_end(&s);
             float3 lo = fmin(o, e), hi = fmax(o, e);
             c0 = clamp(convert_int3_rtn((lo - pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
             c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
@@ -119,19 +121,21 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
-    __global const float4 *path = (__global const float4 *)segments + (size_t)p * max_depth * 3;
+    __global const Segment *path = segments + (size_t)p * max_depth;
     for (int b = 0; b < max_depth; ++b) {
-        __global const float4 *seg = path + 3 * b;
-        float4 f0 = seg[0], f1 = seg[1];
-        if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) break; /* the path's end (a store has no holes) */
-        if (found < 0 && update_touches(nodes, tris, in, lo, hi, f0.xyz, f1.xyz, f0.w, as_int(f1.w)))
+        /* Every bounce may be the first affected one: all are read (count_emitted
+         * only selects what the disc sums count), up to the path's end (a
+         * store has no holes). */
+        SegmentView s;
+        if (segment_read(path + b, &s) != SEGMENT_OK) break;
+        if (found < 0 && update_touches(nodes, tris, in, lo, hi, s.o, s.w, s.t_end, s.tri))
             found = b;
         if (!disc_nodes) { /* no dynamic points: the first affected bounce is all we need */
             if (found >= 0) break;
             continue;
         }
-        if (b > 0 || count_emitted)
-            disc_index_segment(disc_nodes, discs, seg, f0, f1, radius2, ext, scale, acc, &visited, &tests);
+        if (segment_counted(b, count_emitted))
+            disc_index_segment(disc_nodes, discs, path + b, &s, radius2, ext, scale, acc, &visited, &tests);
     }
     first[i] = found;
     WORK_U(tests);
@@ -151,7 +155,7 @@ __kernel void update_gather(__global const Segment *segments, int max_depth,
     for (int b = 0; b < max_depth; ++b) {
         Segment s = src[b];
         if (b < b0) {
-            s = (Segment){{0.0f, 0.0f, 0.0f}, 0.0f, {0.0f, 0.0f, 0.0f}, SEGMENT_HOLE, {0.0f, 0.0f, 0.0f}, s.path};
+            s = segment_hole(s.path);
         } else {
             s.power[0] *= sign;
             s.power[1] *= sign;
