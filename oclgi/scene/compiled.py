@@ -14,13 +14,11 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
+from ..cl.constants import BVH_STACK_SIZE, FIXED_BITS
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .scene import Scene
-
-FIXED_BITS = 24  # see kernels/oclgi_types.h: one photon's power = 2^24 units
-BVH_STACK_SIZE = 64
 
 
 def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
@@ -157,5 +155,6 @@ class CompiledScene:
         launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, np.int32(obj), self.tri_normals)
 
     def fixed_scale(self, n_paths: int) -> float:
-        """Fixed-point units per watt for a run of n_paths (oclgi_types.h)."""
+        """Fixed-point units per watt for a run of n_paths: 2^FIXED_BITS per
+        photon's largest power (oclgi/cl/constants.py, oclgi_types.h)."""
         return float(2.0**FIXED_BITS / (self.photon_power_max / n_paths))
