@@ -29,10 +29,6 @@
 #include "oclgi_types.h"
 #include "box.h"
 
-#ifndef OCLGI_BOX_BVH_STACK
-#define OCLGI_BOX_BVH_STACK 64
-#endif
-
 typedef struct {
     int stack[OCLGI_BOX_BVH_STACK];
     int sp;

@@ -1,6 +1,6 @@
 /* detp.cl: plain DETP, the oracle for every accelerated variant.
  *
- * detp_plain    one work-item per DETP_LANES (8) consecutive query points,
+ * detp_plain    one work-item per OCLGI_LANES (8) consecutive query points,
  *               held in float8 lanes: every segment slot of a batch
  *               (n_slots = paths * max_depth, read by segment.h) is
  *               tested against the 8 discs at once with DETP_TEST (detp.h),
@@ -20,19 +20,17 @@
 #include "detp.h"
 #include "work.h"
 
-#define DETP_LANES 8
-
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
                          int n_points, __global const Segment *segments, int n_paths,
                          int max_depth, int count_emitted, float radius2, float ext,
                          float scale, __global long *acc, __global ulong *work)
 {
-    int base = get_global_id(0) * DETP_LANES;
+    int base = get_global_id(0) * OCLGI_LANES;
     if (base >= n_points) return;
     WORK_DECL;
-    int lanes = min(DETP_LANES, n_points - base); /* real points in this work-item */
-    float px[DETP_LANES], py[DETP_LANES], pz[DETP_LANES], qx[DETP_LANES], qy[DETP_LANES], qz[DETP_LANES];
-    for (int k = 0; k < DETP_LANES; ++k) {
+    int lanes = min(OCLGI_LANES, n_points - base); /* real points in this work-item */
+    float px[OCLGI_LANES], py[OCLGI_LANES], pz[OCLGI_LANES], qx[OCLGI_LANES], qy[OCLGI_LANES], qz[OCLGI_LANES];
+    for (int k = 0; k < OCLGI_LANES; ++k) {
         int i = min(base + k, n_points - 1);
         float4 p = positions[i], n = normals[i];
         if (base + k >= n_points) n = (float4)(0.0f); /* padding lane: never crosses */
@@ -44,8 +42,8 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
      * builtin changes the calling convention without AVX-512 (a compiler
      * warning on AVX2), and crossings are rare, so the lane loop below costs
      * nothing measurable. */
-    long r[DETP_LANES], g[DETP_LANES], bl[DETP_LANES];
-    for (int k = 0; k < DETP_LANES; ++k) r[k] = g[k] = bl[k] = 0;
+    long r[OCLGI_LANES], g[OCLGI_LANES], bl[OCLGI_LANES];
+    for (int k = 0; k < OCLGI_LANES; ++k) r[k] = g[k] = bl[k] = 0;
     for (int p = 0; p < n_paths; ++p) {
         __global const Segment *path = segments + (size_t)p * max_depth;
         for (int b = segment_first(count_emitted); b < max_depth; ++b) {
@@ -59,9 +57,9 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, radius2);
             if (any(hit)) {
                 long3 q = segment_fixed_power(path + b, scale);
-                int h[DETP_LANES];
+                int h[OCLGI_LANES];
                 vstore8(hit, 0, h);
-                for (int k = 0; k < DETP_LANES; ++k) {
+                for (int k = 0; k < OCLGI_LANES; ++k) {
                     if (!h[k]) continue;
                     r[k] += q.x;
                     g[k] += q.y;
@@ -70,7 +68,7 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             }
         }
     }
-    for (int k = 0; k < DETP_LANES && base + k < n_points; ++k) {
+    for (int k = 0; k < OCLGI_LANES && base + k < n_points; ++k) {
         int i = base + k;
         acc[3 * i + 0] += r[k];
         acc[3 * i + 1] += g[k];

@@ -2,7 +2,7 @@
  *
  * Disc of radius d centred on x, tangent to the surface (unit normal n).
  * A segment (o, w, t_end) counts when
- *   1. it arrives on the front side:   wn = w.n < -OCLGI_DETP_COS_EPS
+ *   1. it arrives on the front side:   wn = w.n < -OCLGI_FRONT_COS_EPS
  *   2. it crosses the plane in range:  0 < t* <= t_end + ext, t* = num / wn,
  *                                       num = (x - o).n
  *   3. the crossing is in the disc:     |o + t* w - x|^2 <= d^2
@@ -20,9 +20,7 @@
 
 #pragma OPENCL FP_CONTRACT OFF
 
-#ifndef OCLGI_DETP_COS_EPS
-#define OCLGI_DETP_COS_EPS 1e-6f
-#endif
+#include "constants.h"
 
 /* res = the test's truth value (1 for scalars, -1 lanes for vectors).
  * p*: disc centre, n*: disc normal, o*: segment origin, w*: direction,
@@ -35,7 +33,7 @@
         T cx_ = num_ * (wx) - wn_ * ax_;                                            \
         T cy_ = num_ * (wy) - wn_ * ay_;                                            \
         T cz_ = num_ * (wz) - wn_ * az_;                                            \
-        res = (wn_ < -OCLGI_DETP_COS_EPS) & (num_ < 0.0f) & (num_ >= (tmax) * wn_) \
+        res = (wn_ < -OCLGI_FRONT_COS_EPS) & (num_ < 0.0f) & (num_ >= (tmax) * wn_) \
             & (cx_ * cx_ + cy_ * cy_ + cz_ * cz_ <= (r2) * (wn_ * wn_));             \
     } while (0)
 

@@ -30,7 +30,7 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const flo
         int count = nodes[leaf].count;
         int first = nodes[leaf].first;
         *tests += (ulong)count;
-        for (int blk = first; blk < first + (count + 7) / 8; ++blk) {
+        for (int blk = first; blk < first + (count + OCLGI_LANES - 1) / OCLGI_LANES; ++blk) {
             __global const float8 *b = discs + (size_t)blk * DISC_BLOCK;
             int8 hit;
             DETP_TEST(float8, hit, b[0], b[1], b[2], b[3], b[4], b[5], o.x, o.y, o.z, w.x, w.y, w.z,
@@ -40,10 +40,10 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const flo
                 q = segment_fixed_power(slot, scale);
                 have_q = 1;
             }
-            int ids[8], h[8];
+            int ids[OCLGI_LANES], h[OCLGI_LANES];
             vstore8(as_int8(b[6]), 0, ids);
             vstore8(hit, 0, h);
-            for (int k = 0; k < 8; ++k) {
+            for (int k = 0; k < OCLGI_LANES; ++k) {
                 if (!h[k]) continue;
                 __global long *a = acc + 3 * (size_t)ids[k];
                 atom_add(a + 0, q.x);

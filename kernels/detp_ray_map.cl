@@ -51,7 +51,7 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 
         int count = nodes[leaf].count;
         int first = nodes[leaf].first;
         WORK_U(count);
-        for (int blk = first; blk < first + (count + 7) / 8; ++blk) {
+        for (int blk = first; blk < first + (count + OCLGI_LANES - 1) / OCLGI_LANES; ++blk) {
             __global const float8 *b = blocks + (size_t)blk * SEG_BLOCK;
             float8 tmax = b[6] + ext; /* per lane, exactly as detp_plain's f0.w + ext */
             int8 hit;
@@ -68,10 +68,10 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 
             float8 t = num / wn;
             hit &= (t >= b[8]) & (t < b[9]);
             if (!any(hit)) continue;
-            int slots[8], h[8];
+            int slots[OCLGI_LANES], h[OCLGI_LANES];
             vstore8(as_int8(b[7]), 0, slots);
             vstore8(hit, 0, h);
-            for (int k = 0; k < 8; ++k)
+            for (int k = 0; k < OCLGI_LANES; ++k)
                 if (h[k]) sum += segment_fixed_power(segments + slots[k], scale);
         }
     }

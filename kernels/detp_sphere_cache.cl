@@ -52,13 +52,7 @@
 #include "detp.h"
 #include "work.h"
 
-/* Both set by the host (estimators/detp_sphere_cache.py: MAX_LEVELS, MU). */
-#ifndef OCLGI_SC_MAX_LEVELS
-#define OCLGI_SC_MAX_LEVELS 64
-#endif
-#ifndef OCLGI_SC_MU
-#define OCLGI_SC_MU 1e-4
-#endif
+/* OCLGI_SC_MAX_LEVELS and OCLGI_SC_MU: oclgi/cl/constants.py. */
 #define SC_MU ((float)OCLGI_SC_MU)
 #define SC_GATHER_BUF 32 /* list0 records a gather work-item buffers per atomic */
 

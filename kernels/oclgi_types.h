@@ -5,10 +5,11 @@
  * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3.
  *
  * Fixed-point sums (DESIGN.md section 2): every contribution is a power
- * (watts, per channel) quantised once as convert_long_rte(power * scale),
- * then added with 64-bit integer atomics, so sums are order-independent.
- * The host picks scale = 2^OCLGI_FIXED_BITS / phi_max, phi_max the largest
- * per-photon power of any channel. Russian roulette survives with the max
+ * (watts, per channel) quantised once as convert_long_rte(power * scale)
+ * (segment_quantise, segment.h), then added with 64-bit integer atomics, so
+ * sums are order-independent. The host picks scale = 2^OCLGI_FIXED_BITS /
+ * phi_max (OCLGI_FIXED_BITS = 24), phi_max the largest per-photon power of
+ * any channel. Russian roulette survives with the max
  * albedo, so no segment carries more than phi_max: one contribution is at
  * most 2^24, and a sum over n_paths * max_depth contributions stays below
  * 2^(24 + 30 + 8) = 2^62 < 2^63 for 10^9 photons and max_depth <= 256 (the
@@ -19,9 +20,7 @@
 
 #pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
 
-#ifndef OCLGI_BVH_STACK_SIZE
-#define OCLGI_BVH_STACK_SIZE 64
-#endif
+#include "constants.h"
 
 #define OCLGI_PI 3.14159265358979323846f
 
@@ -70,12 +69,9 @@ typedef struct {
     int pad;
 } Material;
 
-#define EMITTER_TRIANGLE 0
-#define EMITTER_POINT 1
-
 typedef struct {
     float p[3];
-    int kind;
+    int kind;        /* OCLGI_EMITTER_TRIANGLE or OCLGI_EMITTER_POINT */
     float e1[3];
     int tri;
     float e2[3];

@@ -1,8 +1,9 @@
 /* ordering.cl: space-filling-curve keys of points and a stable device sort.
  *
  * Entry points (one work-item each unless said):
- *   order_keys      one per KEY_LANES (8) points: quantise each point in a
- *                   cube of 2^bits cells per axis and write its Hilbert
+ *   order_keys      one per OCLGI_LANES (8) points, in uint8 lanes:
+ *                   quantise each point in a cube of 2^bits cells per
+ *                   axis and write its Hilbert
  *                   (method 1) or Morton (method 2) key, 3*bits bits
  *                   (bits <= 10: 30-bit keys).
  *   radix_histogram one per block: digit counts of the block's contiguous
@@ -25,15 +26,12 @@
  * keys are face-adjacent cells (tests/test_ordering.py checks a whole grid).
  */
 
-#ifndef OCLGI_RADIX_BITS
-#define OCLGI_RADIX_BITS 8
-#endif
+#include "constants.h"
+
 #define RADIX_BUCKETS (1 << OCLGI_RADIX_BITS)
 
 #define ORDER_HILBERT 1
 #define ORDER_MORTON 2
-
-#define KEY_LANES 8 /* points per work-item in order_keys, in uint8 lanes */
 
 /* Spread the low 10 bits of every lane so bit i lands on bit 3i. */
 inline uint8 spread3(uint8 v)
@@ -92,16 +90,16 @@ inline uint8 hilbert3(uint8 x, uint8 y, uint8 z)
     return morton3(x ^ t, y ^ t, z ^ t);
 }
 
-/* One work-item per KEY_LANES points. lo: the cube's lowest corner;
+/* One work-item per OCLGI_LANES points. lo: the cube's lowest corner;
    inv = 2^bits / cube side (0 for a single point); cells are clamped to
    [0, 2^bits - 1]. */
 __kernel void order_keys(__global const float4 *positions, int n, float4 lo, float inv, int bits,
                          int method, __global uint *keys)
 {
-    int base = get_global_id(0) * KEY_LANES;
+    int base = get_global_id(0) * OCLGI_LANES;
     if (base >= n) return;
-    float px[KEY_LANES], py[KEY_LANES], pz[KEY_LANES];
-    for (int k = 0; k < KEY_LANES; ++k) {
+    float px[OCLGI_LANES], py[OCLGI_LANES], pz[OCLGI_LANES];
+    for (int k = 0; k < OCLGI_LANES; ++k) {
         float4 p = positions[min(base + k, n - 1)]; /* padding lanes repeat the last point */
         px[k] = p.x; py[k] = p.y; pz[k] = p.z;
     }
@@ -111,9 +109,9 @@ __kernel void order_keys(__global const float4 *positions, int n, float4 lo, flo
     uint8 y = as_uint8(clamp(convert_int8_sat_rtn((vload8(0, py) - lo.y) * inv), 0, top)) << s;
     uint8 z = as_uint8(clamp(convert_int8_sat_rtn((vload8(0, pz) - lo.z) * inv), 0, top)) << s;
     uint8 key = (method == ORDER_HILBERT ? hilbert3(x, y, z) : morton3(x, y, z)) >> (uint)(3 * s);
-    uint out[KEY_LANES];
+    uint out[OCLGI_LANES];
     vstore8(key, 0, out);
-    for (int k = 0; k < KEY_LANES && base + k < n; ++k) keys[base + k] = out[k];
+    for (int k = 0; k < OCLGI_LANES && base + k < n; ++k) keys[base + k] = out[k];
 }
 
 /* Counts of the digit (key >> shift) & mask over block b's chunk. */

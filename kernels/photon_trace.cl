@@ -53,7 +53,7 @@ inline PathState path_emit(TRACE_ARGS, uint path)
     float4 r1 = rng_uniform4(seed_lo, seed_hi, path, 0, 1);
     __global const Emitter *em = &emitters[emitter_pick(emitter_cdf, n_emitters, r0.x)];
     PathState s;
-    if (em->kind == EMITTER_TRIANGLE) {
+    if (em->kind == OCLGI_EMITTER_TRIANGLE) {
         float3 e1 = vload3(0, em->e1), e2 = vload3(0, em->e2);
         float3 n = normalize(cross(e1, e2));
         float su = sqrt(r0.y);

@@ -23,10 +23,6 @@
  */
 #include "point_index.h"
 
-/* 63-bit Morton codes can make the impact BVH deeper than the scene's: the
- * host checks its depth against this. */
-#define PM_STACK_SIZE 96
-
 inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int include_kth, float scale,
                       __global long *acc, __global float *r2, int write_ids,
                       __global int *ids, __global float *d2s)
@@ -82,8 +78,8 @@ __kernel void pm_knn_bvh(__global const BvhNode *nodes, __global const float *so
     PmHeap h;
     h.n = 0;
     if (pm_has_normal(n)) {
-        int stack[PM_STACK_SIZE];
-        float stack_d[PM_STACK_SIZE];
+        int stack[OCLGI_POINT_BVH_STACK];
+        float stack_d[OCLGI_POINT_BVH_STACK];
         int sp = 0, node = 0;
         for (;;) {
             __global const BvhNode *nd = &nodes[node];
@@ -116,22 +112,20 @@ __kernel void pm_knn_bvh(__global const BvhNode *nodes, __global const float *so
     WORK_FLUSH(work);
 }
 
-/* Hashed grid: cell (x, y, z) has key x | y << 21 | z << 42; the table
- * (2^bits slots, linear probing, EMPTY free) maps it to the cell's run
- * (start, count) of impacts, which are stored sorted by cell. */
-#define PM_EMPTY 0xFFFFFFFFFFFFFFFFUL
-#define PM_HASH_MUL 0x9E3779B97F4A7C15UL
-
+/* Hashed grid: cell (x, y, z) has key x | y << G | z << 2G (G =
+ * OCLGI_GRID_KEY_BITS); the table (2^bits slots, linear probing,
+ * OCLGI_GRID_EMPTY free) maps it to the cell's run (start, count) of
+ * impacts, which are stored sorted by cell. */
 inline int2 pm_grid_cell(__global const ulong *keys, __global const int2 *cells, int bits, int x,
                          int y, int z)
 {
-    ulong key = (ulong)x | ((ulong)y << 21) | ((ulong)z << 42);
+    ulong key = (ulong)x | ((ulong)y << OCLGI_GRID_KEY_BITS) | ((ulong)z << (2 * OCLGI_GRID_KEY_BITS));
     uint mask = (1u << bits) - 1u;
-    uint s = (uint)((key * PM_HASH_MUL) >> (64 - bits));
+    uint s = (uint)((key * OCLGI_GRID_HASH_MUL) >> (64 - bits));
     for (;;) {
         ulong k = keys[s];
         if (k == key) return cells[s];
-        if (k == PM_EMPTY) return (int2)(0, 0);
+        if (k == OCLGI_GRID_EMPTY) return (int2)(0, 0);
         s = (s + 1u) & mask;
     }
 }

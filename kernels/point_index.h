@@ -17,11 +17,14 @@
  * still visited.
  *
  * Front side: with front_only, an impact counts only when its direction w
- * arrives on the query normal's side, w.n < -PM_COS_EPS (the same rule as
- * DETP's): light on the other side of a thin wall is not this surface's.
+ * arrives on the query normal's side, w.n < -OCLGI_FRONT_COS_EPS (the same
+ * rule as DETP's): light on the other side of a thin wall is not this surface's.
  * A zero normal (a camera ray that missed) finds nothing.
  *
- * OCLGI_KNN_K (build define) is K; the host builds one program per K.
+ * OCLGI_KNN_K (build define) is K; the host builds one program per K
+ * (oclgi/accel/point_index.py). The default below only serves a build of
+ * the file on its own; tests/test_constants.py keeps it equal to
+ * oclgi/estimators/photon_map.py's DEFAULT_K.
  */
 #ifndef OCLGI_POINT_INDEX_H
 #define OCLGI_POINT_INDEX_H
@@ -36,8 +39,6 @@
 #define OCLGI_KNN_K 50
 #endif
 #define PM_K OCLGI_KNN_K
-
-#define PM_COS_EPS 1e-6f
 
 /* (da, ia) < (db, ib) in the neighbour order */
 #define PM_LESS(da, ia, db, ib) ((da) < (db) || ((da) == (db) && (ia) < (ib)))
@@ -58,7 +59,7 @@ inline float pm_dist2(float3 p, float3 q)
  * order pm_scan's lanes sum them, so the answers agree. */
 inline int pm_arrives_front(float3 w, float3 n)
 {
-    return w.x * n.x + w.y * n.y + w.z * n.z < -PM_COS_EPS;
+    return w.x * n.x + w.y * n.y + w.z * n.z < -OCLGI_FRONT_COS_EPS;
 }
 
 /* Squared distance from q to a box; never larger than pm_dist2 of a point in
@@ -107,12 +108,10 @@ inline void pm_offer(PmHeap *h, float d, int id)
 }
 
 /* Impacts are stored as structure-of-arrays (px, py, pz, wx, wy, wz, id,
- * each padded with PM_LANES entries past the end) so that a run of them is
- * tested PM_LANES at a time in vector lanes: PoCL does not vectorise loops
- * across work-items, so explicit lanes are where the speed is. Lane
+ * each padded with OCLGI_LANES entries past the end) so that a run of them
+ * is tested OCLGI_LANES at a time in vector lanes: PoCL does not vectorise
+ * loops across work-items, so explicit lanes are where the speed is. Lane
  * arithmetic is IEEE per lane, bit for bit the scalar pm_dist2. */
-#define PM_LANES 8
-
 typedef struct {
     __global const float *px, *py, *pz; /* position */
     __global const float *wx, *wy, *wz; /* arriving direction */
@@ -124,7 +123,7 @@ inline void pm_scan(PmHeap *h, const PmImpacts *im, int start, int count, float3
                     int front_only)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    for (int j = start; j < start + count; j += PM_LANES) {
+    for (int j = start; j < start + count; j += OCLGI_LANES) {
         float8 dx = vload8(0, im->px + j) - q.x;
         float8 dy = vload8(0, im->py + j) - q.y;
         float8 dz = vload8(0, im->pz + j) - q.z;
@@ -133,14 +132,14 @@ inline void pm_scan(PmHeap *h, const PmImpacts *im, int start, int count, float3
         if (front_only) {
             float8 wn = vload8(0, im->wx + j) * n.x + vload8(0, im->wy + j) * n.y
                       + vload8(0, im->wz + j) * n.z;
-            ok &= wn < (float8)(-PM_COS_EPS);
+            ok &= wn < (float8)(-OCLGI_FRONT_COS_EPS);
         }
         if (!any(ok)) continue;
-        float d[PM_LANES];
-        int m[PM_LANES];
+        float d[OCLGI_LANES];
+        int m[OCLGI_LANES];
         vstore8(d2, 0, d);
         vstore8(ok, 0, m);
-        for (int l = 0; l < PM_LANES; ++l)
+        for (int l = 0; l < OCLGI_LANES; ++l)
             if (m[l]) pm_offer(h, d[l], im->id[j + l]);
     }
 }

@@ -4,7 +4,8 @@
  *     cells of a grid over the scene (at most 127 cells, about cubic: 5 x 5
  *     x 5 for the Cornell box, 7 x 4 x 4 for Sponza) that the path's segments
  *     meet (each segment against each padded cell its box can reach, the
- *     same slab test as below), and bit 127 when a segment leaves the grid.
+ *     same slab test as below), and bit OCLGI_CELL_OUTSIDE_BIT (127) when a
+ *     segment leaves the grid.
  *     A move need only look at the paths whose mask meets the cells of the
  *     object's old and new boxes (and of the dynamic points' discs), plus
  *     bit 127 when a box reaches out of the grid: a segment meeting a box
@@ -53,8 +54,6 @@ inline int update_touches(__global const BvhNode *nodes, __global const Tri *tri
                         xform_vector(in->object_from_world, d), 1, &h) >= 0;
 }
 
-#define OUTSIDE_BIT 127 /* the path leaves the grid; cells take bits 0..126 */
-
 __kernel void update_path_cells(__global const Segment *segments, __global const int *path_len, int max_depth,
                                 __global const int *list, int n_list, float4 grid_lo, float4 cell, int4 dims,
                                 float pad, __global ulong2 *cells)
@@ -80,7 +79,7 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
             c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
             out = any(lo < g0) || any(hi > g1); /* a segment leaves the (convex) grid at an end */
         }
-        if (out) m[1] |= (ulong)1 << (OUTSIDE_BIT - 64);
+        if (out) m[1] |= (ulong)1 << (OCLGI_CELL_OUTSIDE_BIT - 64);
         float3 inv = 1.0f / d;
         for (int z = c0.z; z <= c1.z; ++z)
             for (int y = c0.y; y <= c1.y; ++y)

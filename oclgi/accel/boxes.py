@@ -8,13 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cl.constants import BOX_BVH_STACK, LANES
 from ..errors import OclgiError
 
 # Box pad, relative to the scene's coordinate scale (why: estimators/detp_disc_index.py).
 PAD = 2e-5
-# Depth limit of the device walk (OCLGI_BOX_BVH_STACK in kernels/box_bvh.h).
-STACK = 64
-LANES = 8  # discs (or segments) per float8 block
 
 
 def coordinate_scale(compiled, positions: np.ndarray) -> float:
@@ -49,7 +47,7 @@ def disc_boxes(positions: np.ndarray, normals: np.ndarray, radius: float, pad: f
 
 
 def leaf_blocks(nodes: np.ndarray, n_prims: int):
-    """Blocks of LANES primitives per leaf: rewrites each leaf's ``first`` to
+    """Blocks of LANES (float8 lanes) primitives per leaf: rewrites each leaf's ``first`` to
     its first block; returns (nodes, block of each primitive, lane of each
     primitive, number of blocks), primitives numbered in leaf order."""
     nodes = nodes.copy()
@@ -67,5 +65,6 @@ def leaf_blocks(nodes: np.ndarray, n_prims: int):
 
 
 def check_depth(depth: int, what: str):
-    if depth + 1 > STACK:
-        raise OclgiError(f"the BVH over the {what} is {depth} levels deep; the device walk holds {STACK - 1}")
+    """The device walk (kernels/box_bvh.h) holds depth + 1 entries."""
+    if depth + 1 > BOX_BVH_STACK:
+        raise OclgiError(f"the BVH over the {what} is {depth} levels deep; the device walk holds {BOX_BVH_STACK - 1}")

@@ -38,19 +38,18 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..cl.constants import LANES, RADIX_BITS
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 
 METHODS = ("hilbert", "morton", "none")
 _METHOD_ID = {"hilbert": 1, "morton": 2}
 MAX_BITS = 10  # keys fit 30 bits: a short sort (DESIGN.md 6: keep sort keys short)
-RADIX_BITS = 8  # digit width of the device sort (4 passes for 30-bit keys)
-KEY_LANES = 8  # points per work-item of order_keys
 SORT_BLOCKS = 64  # sequential blocks per pass: plenty for a few CPU cores
 
 
 def _program(ctx):
-    return programs(ctx).get("ordering", radix_bits=RADIX_BITS)
+    return programs(ctx).get("ordering")
 
 
 def check_method(method) -> str:
@@ -105,7 +104,7 @@ def point_keys(queue, positions, method: str = "hilbert", bits: int = MAX_BITS, 
     inv = (1 << bits) / (side * (1 + 1e-6)) if side > 0 else 0.0
     keys = cl.Buffer(queue.context, cl.mem_flags.READ_WRITE, max(n, 1) * 4)
     k = _program(queue.context).order_keys
-    launch(queue, k, -(-n // KEY_LANES), buf, np.int32(n), np.array([*lo, 0.0], np.float32), np.float32(inv),
+    launch(queue, k, -(-n // LANES), buf, np.int32(n), np.array([*lo, 0.0], np.float32), np.float32(inv),
            np.int32(bits), np.int32(_METHOD_ID[method]), keys)
     if device:
         return keys, n

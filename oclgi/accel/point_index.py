@@ -11,16 +11,20 @@ import math
 import numpy as np
 import pyopencl as cl
 
+from ..cl.constants import (
+    GRID_EMPTY,
+    GRID_HASH_MUL,
+    GRID_KEY_BITS,
+    LANES,
+    POINT_BVH_STACK,
+)
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .bvh_build import build_from_codes
 
-LANES = 8  # impacts tested at once (PM_LANES)
-STACK_SIZE = 96  # PM_STACK_SIZE (point_index.h): levels of the impact BVH
 DEFAULT_LOCAL = 64  # work-group size of the search when the engine sets none (measured)
-GRID_KEY_BITS = 21  # cells per axis < 2^21 (three packed in a 64-bit key)
-EMPTY = np.uint64(0xFFFFFFFFFFFFFFFF)
-HASH_MUL = np.uint64(0x9E3779B97F4A7C15)
+EMPTY = np.uint64(GRID_EMPTY)
+HASH_MUL = np.uint64(GRID_HASH_MUL)
 INDEX_KINDS = ("bvh", "grid")
 # PoCL keeps a work-group's private arrays on a thread's stack (8 MiB): k =
 # 2048 crashed at 1024 work-items per group. The search caps its group so
@@ -53,7 +57,7 @@ def _grid_cell_size(pos: np.ndarray, target: float) -> float:
 
     def occupancy(h):
         c = np.floor((pos - lo) / h).astype(np.int64)
-        key = c[:, 0] | (c[:, 1] << 21) | (c[:, 2] << 42)
+        key = c[:, 0] | (c[:, 1] << GRID_KEY_BITS) | (c[:, 2] << 2 * GRID_KEY_BITS)
         return len(pos) / len(np.unique(key))
 
     h1, h2 = extent / 32, extent / 64
@@ -61,7 +65,7 @@ def _grid_cell_size(pos: np.ndarray, target: float) -> float:
     d = float(np.clip(math.log2(o1 / o2) if o2 > 0 and o1 > o2 else 3.0, 1.0, 3.0))
     h = h2 * (target / o2) ** (1.0 / d)
     h = h * (target / occupancy(h)) ** (1.0 / d)
-    # keys hold 21 bits per axis
+    # keys hold GRID_KEY_BITS bits per axis
     return float(max(h, extent / (2**GRID_KEY_BITS - 2), 1e-30))
 
 
@@ -91,16 +95,16 @@ class KnnIndex:
         pw = np.zeros_like(pos) if powers is None else np.ascontiguousarray(powers, np.float32)
         if index == "bvh":
             nodes, order, depth = _point_bvh(pos, int(leaf_size))
-            if depth > STACK_SIZE:
+            if depth > POINT_BVH_STACK:
                 raise OclgiError(f"photon_map: the impact BVH is {depth} levels deep; the search "
-                                 f"stack holds {STACK_SIZE}")
+                                 f"stack holds {POINT_BVH_STACK}")
             self.nodes = self._upload(nodes)
         else:
             h = _grid_cell_size(pos, float(grid_occupancy))
             lo = pos.min(axis=0).astype(np.float64)
             c = np.floor((pos - lo) / h).astype(np.int64)
             dims = c.max(axis=0) + 1
-            keys = (c[:, 0] | (c[:, 1] << 21) | (c[:, 2] << 42)).astype(np.uint64)
+            keys = (c[:, 0] | (c[:, 1] << GRID_KEY_BITS) | (c[:, 2] << 2 * GRID_KEY_BITS)).astype(np.uint64)
             order = np.argsort(keys, kind="stable")  # canonical order within a cell
             ukeys, starts, counts = np.unique(keys[order], return_index=True, return_counts=True)
             bits = max(1, int(math.ceil(math.log2(2 * len(ukeys)))))
@@ -226,7 +230,7 @@ def _point_bvh(pos: np.ndarray, leaf_size: int):
 def knn_local_size(k: int, requested: int | None = None) -> int:
     """Work-group size of the search: the requested one (or DEFAULT_LOCAL)
     capped so that the group's private heaps fit PRIVATE_BUDGET."""
-    cap = max(1, PRIVATE_BUDGET // (8 * int(k) + 8 * STACK_SIZE))
+    cap = max(1, PRIVATE_BUDGET // (8 * int(k) + 8 * POINT_BVH_STACK))
     return int(min(requested or DEFAULT_LOCAL, cap))
 
 

@@ -9,6 +9,8 @@ bytes) so that every layout is plain and 16-byte aligned.
 
 import numpy as np
 
+from .constants import EMITTER_POINT, EMITTER_TRIANGLE  # noqa: F401  (Emitter.kind's values)
+
 f4, i4 = np.float32, np.int32
 
 # BVH node, 32 bytes. Inner node: count == 0, children at first and first+1
@@ -55,5 +57,3 @@ Emitter = np.dtype(
 
 STRUCTS = {"BvhNode": BvhNode, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter}
 
-EMITTER_TRIANGLE = 0
-EMITTER_POINT = 1

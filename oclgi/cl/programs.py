@@ -39,6 +39,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..errors import OclgiError
+from .constants import build_defines
 
 COMPILER_OUTPUT_ENV = "OCLGI_COMPILER_OUTPUT"
 
@@ -186,7 +187,7 @@ class ProgramCache:
         # for bit across kernels; no quantity oclgi computes is near 1e-38.
         # Argument info lets the cache declare each kernel's scalar types.
         options = ["-I", str(self.dir), "-cl-denorms-are-zero", "-cl-kernel-arg-info"]
-        for name, value in defines:
+        for name, value in build_defines(dict(defines)):  # the shared constants, then the program's own
             options.append(f"-DOCLGI_{name.upper()}={int(value) if isinstance(value, bool) else value}")
         return options
 

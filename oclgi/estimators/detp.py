@@ -11,10 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..cl.constants import LANES  # points per work-item in detp_plain (kernels/detp.cl)
 from ..cl.programs import launch
 from .base import DetpEstimator
-
-LANES = 8  # points per work-item in detp_plain (kernels/detp.cl)
 
 
 class Detp(DetpEstimator):

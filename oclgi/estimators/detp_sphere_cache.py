@@ -91,13 +91,13 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel import ordering
+from ..cl.constants import SC_MAX_LEVELS as MAX_LEVELS
+from ..cl.constants import SC_MU as MU  # noqa: F401  (the slack of the kernel's sphere test, for host checks)
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import DetpEstimator
 
-MAX_LEVELS = 64  # most inner spheres (private arrays in the kernel)
 ENTRY_BYTES = 36  # a list entry: a segment record (2 float4) and its slot (int)
-MU = 1e-4  # relative slack of the conservative segment-sphere test (see the kernel)
 PATHS_PER_ITEM = 64  # paths per sc_gather work-item
 SCRATCH_BYTES = 512 << 20  # scratch for the lists of the runs in flight
 RUNS_PER_UNIT = 4  # default runs per compute unit: enough to balance uneven runs (measured: 4 per unit best)
@@ -132,7 +132,7 @@ class DetpSphereCache(DetpEstimator):
         super().__init__(queue, compiled, points, radius, **kw)
         self.q = float(q)
         self.order = order
-        prog = programs(self.ctx).get("detp_sphere_cache", **self.defines, sc_max_levels=MAX_LEVELS, sc_mu=MU)
+        prog = programs(self.ctx).get("detp_sphere_cache", **self.defines)
         self.k_gather = prog.sc_gather
         self.k_runs = prog.sc_runs
 

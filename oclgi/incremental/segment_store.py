@@ -29,13 +29,13 @@ import numpy as np
 import pyopencl as cl
 from pyopencl import cltypes
 
+from ..cl.constants import CELL_OUTSIDE_BIT as OUTSIDE_BIT
 from ..cl.layout import Segment
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from ..tracing.photon_trace import PathBatch, PhotonTracer
 
-MAX_CELLS = 127  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
-OUTSIDE_BIT = 127  # a path's segment leaves the grid
+MAX_CELLS = OUTSIDE_BIT  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
 
 
 def grid_dims(extent) -> np.ndarray:

@@ -14,13 +14,12 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
+from ..cl.constants import BVH_STACK_SIZE, FIXED_BITS
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .scene import Scene
 
-FIXED_BITS = 24  # see kernels/oclgi_types.h: one photon's power = 2^24 units
-BVH_STACK_SIZE = 64
 F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -161,7 +160,8 @@ class CompiledScene:
         launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, np.int32(obj), self.tri_normals)
 
     def fixed_scale(self, n_paths: int) -> float:
-        """Fixed-point units per watt for a run of n_paths (oclgi_types.h)."""
+        """Fixed-point units per watt for a run of n_paths: 2^FIXED_BITS per
+        photon's largest power (oclgi/cl/constants.py, oclgi_types.h)."""
         scale = float(2.0**FIXED_BITS / (self.photon_power_max / n_paths))
         if not scale < F32_MAX:  # the kernels take it as a float32
             raise OclgiError(f"{self.scene.name}: the emitters' power ({self.photon_power_max:.3g} W per photon "

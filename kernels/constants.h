@@ -1,0 +1,24 @@
+/* constants.h: the constants host and kernels share.
+ *
+ * The host defines each one for every build (oclgi/cl/constants.py: the
+ * values and why; oclgi/cl/programs.py passes them as -DOCLGI_<NAME>).
+ * There are no defaults here: a build without them stops at the #error
+ * below instead of using a copy of a value that could drift from the host's.
+ */
+#ifndef OCLGI_CONSTANTS_H
+#define OCLGI_CONSTANTS_H
+
+#if !defined(OCLGI_LANES) || !defined(OCLGI_BVH_STACK_SIZE) || !defined(OCLGI_BOX_BVH_STACK) ||        \
+    !defined(OCLGI_POINT_BVH_STACK) || !defined(OCLGI_FIXED_BITS) || !defined(OCLGI_FRONT_COS_EPS) ||  \
+    !defined(OCLGI_SC_MAX_LEVELS) || !defined(OCLGI_SC_MU) || !defined(OCLGI_RADIX_BITS) ||            \
+    !defined(OCLGI_GRID_KEY_BITS) || !defined(OCLGI_GRID_EMPTY) || !defined(OCLGI_GRID_HASH_MUL) ||    \
+    !defined(OCLGI_CELL_OUTSIDE_BIT) || !defined(OCLGI_EMITTER_TRIANGLE) || !defined(OCLGI_EMITTER_POINT)
+#error "oclgi's shared constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
+#endif
+
+/* The lanes are float8, int8 and uint8 vectors. */
+#if OCLGI_LANES != 8
+#error "OCLGI_LANES must be 8"
+#endif
+
+#endif

@@ -1,0 +1,103 @@
+"""Constants that host and kernels share, each defined once, here.
+
+Every program is built with ``DEFINES`` (``oclgi/cl/programs.py``): one
+``-DOCLGI_<NAME>=<value>`` per entry. The kernels keep no copy and no
+default: ``kernels/constants.h`` stops a build that lacks one, so the two
+sides cannot drift apart. Python modules import the values from here.
+
+Defines that change from one program to another (``count_work``, the
+Photon Map's ``knn_k``) are passed per program by their drivers instead.
+Struct layouts shared with the kernels are in ``oclgi/cl/layout.py``.
+"""
+
+from __future__ import annotations
+
+# Vector lanes of the kernels' explicit SIMD: float8 / int8 / uint8, one
+# AVX2 register (256 bits). PoCL does not vectorise loops across
+# work-items on a CPU, so lanes are written out: detp_plain holds 8 query
+# points, the disc index and ray map tests leaves in blocks of 8 discs or
+# pieces, the k-nearest search scans 8 impacts at a time, order_keys makes
+# 8 keys. The vector types fix it at 8 (kernels/constants.h checks).
+LANES = 8
+
+# Stacks of the device's tree walks; the host refuses a deeper tree. The
+# builder (oclgi/accel/bvh_build.py) splits on the highest differing bit of
+# b-bit Morton codes, then halves runs of equal codes, so its trees have at
+# most 1 + b + 31 levels for fewer than 2^31 primitives.
+# The scene's BVHs (kernels/bvh.h), 30-bit codes: 62 levels at most.
+BVH_STACK_SIZE = 64
+# The overlap walks over the disc, piece and ball trees (kernels/box_bvh.h),
+# 30-bit codes: a node pushes at most its two children, so depth + 1 entries.
+BOX_BVH_STACK = 64
+# The k-nearest search's best-first descent (kernels/point_index.cl) over a
+# tree on 63-bit codes: 95 levels at most.
+POINT_BVH_STACK = 96
+
+# Fixed-point sums: the host's scale gives one photon's largest power 2^24
+# units (kernels/oclgi_types.h has the overflow bound): resolution 2^-24 of
+# a photon, and 64-bit sums with room for every photon of a run.
+FIXED_BITS = 24
+
+# A direction w arrives on a surface's front side (normal n) when
+# w.n < -FRONT_COS_EPS, for DETP's discs and the Photon Map's impacts alike:
+# a segment grazing the plane (|w.n| within float rounding of 0) counts for
+# neither side. Passed as a float literal: the kernels compare in float32.
+FRONT_COS_EPS = 1e-6
+
+# Sphere cache (kernels/detp_sphere_cache.cl): most inner spheres (private
+# arrays of SC_MAX_LEVELS + 1 per work-item), and the relative slack of the
+# conservative segment-sphere test, at least 100 times the rounding of
+# either test (the kernel's header says why).
+SC_MAX_LEVELS = 64
+SC_MU = 1e-4
+
+# Digit width of the device's LSD radix sort (kernels/ordering.cl): 256
+# counters per block fit private memory, and 30-bit keys take 4 passes.
+RADIX_BITS = 8
+
+# The k-nearest search's hashed grid (kernels/point_index.cl): a cell (x, y,
+# z) has the 64-bit key x | y << 21 | z << 42, so fewer than 2^21 cells per
+# axis; the table's free slots hold GRID_EMPTY (no cell has that key);
+# slots are found by Fibonacci hashing (2^64 / golden ratio, odd).
+GRID_KEY_BITS = 21
+GRID_EMPTY = 0xFFFFFFFFFFFFFFFF
+GRID_HASH_MUL = 0x9E3779B97F4A7C15
+
+# A session's path masks (kernels/update.cl) are 128 bits: one per cell of
+# the grid over the scene, and the last for "leaves the grid", so grids
+# have at most CELL_OUTSIDE_BIT cells.
+CELL_OUTSIDE_BIT = 127
+
+# Emitter.kind (oclgi/cl/layout.py Emitter).
+EMITTER_TRIANGLE = 0
+EMITTER_POINT = 1
+
+# name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
+# 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
+# the kernel rounds to float (as it always has).
+DEFINES = {
+    "lanes": LANES,
+    "bvh_stack_size": BVH_STACK_SIZE,
+    "box_bvh_stack": BOX_BVH_STACK,
+    "point_bvh_stack": POINT_BVH_STACK,
+    "fixed_bits": FIXED_BITS,
+    "front_cos_eps": f"{FRONT_COS_EPS!r}f",
+    "sc_max_levels": SC_MAX_LEVELS,
+    "sc_mu": repr(SC_MU),
+    "radix_bits": RADIX_BITS,
+    "grid_key_bits": GRID_KEY_BITS,
+    "grid_empty": f"{GRID_EMPTY:#x}UL",
+    "grid_hash_mul": f"{GRID_HASH_MUL:#x}UL",
+    "cell_outside_bit": CELL_OUTSIDE_BIT,
+    "emitter_triangle": EMITTER_TRIANGLE,
+    "emitter_point": EMITTER_POINT,
+}
+
+
+def build_defines(per_program: dict) -> list[tuple]:
+    """DEFINES and a program's own defines, as (name, value) pairs; a program
+    may not set a shared constant to a value of its own."""
+    clash = sorted(DEFINES.keys() & per_program.keys())
+    if clash:
+        raise ValueError(f"{', '.join(clash)} are shared constants (oclgi/cl/constants.py), not per-program defines")
+    return [*DEFINES.items(), *per_program.items()]
