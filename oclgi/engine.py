@@ -149,14 +149,14 @@ class Engine:
         pos, nrm, bary = (cl.Buffer(self.ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8))
         k = self._programs.get("camera").camera_visible_points
         c = self.compiled
-        scene_args = c.scene_args if instances is None else (c.nodes, c.tris, instances[0], np.int32(instances[1]))
+        scene_args = c.scene_args if instances is None else (c.nodes, c.tris, instances[0], int(instances[1]))
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
         out = queries.QueryPoints(np.empty((n, 4), np.float32), np.empty((n, 4), np.float32),
                                   np.empty((n, 2), np.float32), kind="camera", shape=(rh, rw))
         if n == 0:
             return out
         launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
-               np.int32(cam.width), np.int32(cam.height), np.int32(x0), np.int32(y0), np.int32(rw), np.int32(rh),
+               cam.width, cam.height, x0, y0, rw, rh,
                pos, nrm, bary, local_size=self.local_size)
         for host, dev in ((out.positions, pos), (out.normals, nrm), (out.barys, bary)):
             cl.enqueue_copy(self.queue, host, dev)
@@ -276,8 +276,8 @@ class Engine:
         nrm = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.normals)
         rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
         pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
-        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, np.int32(n), rad)
-        launch(self.queue, prog.image_tonemap, n, rad, np.int32(n), np.float32(exposure), pix)
+        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, n, rad)
+        launch(self.queue, prog.image_tonemap, n, rad, n, exposure, pix)
         radiance = np.empty((h, w, 4), np.float32)
         pixels = np.empty((h, w, 4), np.uint8)
         cl.enqueue_copy(self.queue, radiance, rad)

@@ -32,7 +32,7 @@ def closest_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
     out = np.empty((n, 4), np.float32)
     hb = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, max(out.nbytes, 16))
     k = programs(ctx).get("bvh_query").bvh_query_closest
-    launch(queue, k, n, *compiled.scene_args, ob, db, np.int32(n), hb, local_size=local_size)
+    launch(queue, k, n, *compiled.scene_args, ob, db, n, hb, local_size=local_size)
     cl.enqueue_copy(queue, out, hb)
     return out[:, 0], out[:, 1], out[:, 2], out[:, 3].view(np.int32)
 
@@ -45,6 +45,6 @@ def any_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
     out = np.empty(n, np.int32)
     hb = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, max(out.nbytes, 4))
     k = programs(ctx).get("bvh_query").bvh_query_any
-    launch(queue, k, n, *compiled.scene_args, ob, db, np.int32(n), hb, local_size=local_size)
+    launch(queue, k, n, *compiled.scene_args, ob, db, n, hb, local_size=local_size)
     cl.enqueue_copy(queue, out, hb)
     return out

@@ -104,8 +104,8 @@ def point_keys(queue, positions, method: str = "hilbert", bits: int = MAX_BITS, 
     inv = (1 << bits) / (side * (1 + 1e-6)) if side > 0 else 0.0
     keys = cl.Buffer(queue.context, cl.mem_flags.READ_WRITE, max(n, 1) * 4)
     k = _program(queue.context).order_keys
-    launch(queue, k, -(-n // LANES), buf, np.int32(n), np.array([*lo, 0.0], np.float32), np.float32(inv),
-           np.int32(bits), np.int32(_METHOD_ID[method]), keys)
+    launch(queue, k, -(-n // LANES), buf, n, np.array([*lo, 0.0], np.float32), inv,
+           bits, _METHOD_ID[method], keys)
     if device:
         return keys, n
     out = np.empty(n, np.uint32)
@@ -145,11 +145,11 @@ def sort_keys(queue, keys, n: int | None = None, key_bits: int = 3 * MAX_BITS, d
     for p in range(passes):
         shift = p * RADIX_BITS
         k_out, v_out = k_bufs[p % 2], v_bufs[p % 2]
-        launch(queue, prog.radix_histogram, blocks, k_in, np.int32(n), np.int32(shift), np.int32(chunk),
-               np.int32(blocks), hist, local_size=ls)
-        launch(queue, prog.radix_scan, 1, hist, np.int32((1 << RADIX_BITS) * blocks))
-        launch(queue, prog.radix_scatter, blocks, k_in, v_in, np.int32(n), np.int32(shift), np.int32(chunk),
-               np.int32(blocks), hist, np.int32(p == 0), k_out, v_out, local_size=ls)
+        launch(queue, prog.radix_histogram, blocks, k_in, n, shift, chunk,
+               blocks, hist, local_size=ls)
+        launch(queue, prog.radix_scan, 1, hist, (1 << RADIX_BITS) * blocks)
+        launch(queue, prog.radix_scatter, blocks, k_in, v_in, n, shift, chunk,
+               blocks, hist, p == 0, k_out, v_out, local_size=ls)
         k_in, v_in = k_out, v_out
     if device:
         return v_in

@@ -145,14 +145,14 @@ class KnnIndex:
         """Run the search: acc (n, 3) int64 sums, r2 (n,) float32; ids/d2 (n, k) when given."""
         write = ids is not None
         dummy = ids if write else acc
-        common = (self.soa, np.int32(self.stride), self.ids, self.ipower, qpos, qnrm, order, np.int32(n_points),
-                  np.int32(bool(front_only)), np.int32(bool(include_kth)), np.float32(scale), acc, r2,
-                  np.int32(write), dummy, d2 if write else dummy, self.work_buf)
+        common = (self.soa, self.stride, self.ids, self.ipower, qpos, qnrm, order, n_points,
+                  int(bool(front_only)), int(bool(include_kth)), scale, acc, r2,
+                  int(write), dummy, d2 if write else dummy, self.work_buf)
         if self.index == "bvh":
             args = (self.nodes, *common)
         else:
             g = self.grid
-            args = (self.keys, self.cells, np.int32(g["bits"]),
+            args = (self.keys, self.cells, g["bits"],
                     np.array([*g["origin"], g["h"]], np.float32),
                     np.array([*g["dims"], 0], np.int32), self.slack, *common)
         launch(self.queue, self.kernel(k), n_points, *args, local_size=knn_local_size(k, local_size))

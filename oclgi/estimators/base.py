@@ -119,7 +119,7 @@ class DetpEstimator(Estimator):
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
         inv = 1.0 / (scale * math.pi * self.radius**2)
-        launch(self.queue, self.k_resolve, self.n, self.acc, np.int32(self.n), np.float32(inv), self.irr)
+        launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
         return self.irr
 
     def accumulators(self) -> np.ndarray:

@@ -9,7 +9,6 @@ Parameters: see :class:`oclgi.estimators.base.DetpEstimator`.
 
 from __future__ import annotations
 
-import numpy as np
 
 from ..cl.constants import LANES  # points per work-item in detp_plain (kernels/detp.cl)
 from ..cl.programs import launch
@@ -26,8 +25,8 @@ class Detp(DetpEstimator):
     def accumulate(self, batch, scale: float):
         launch(
             self.queue, self.k_plain, (self.n + LANES - 1) // LANES,
-            self.positions, self.normals, np.int32(self.n), batch.segments, np.int32(batch.n_paths),
-            np.int32(batch.max_depth), np.int32(self.count_emitted), np.float32(self.radius**2),
-            np.float32(self.ext), np.float32(scale), self.acc, self.work_buf,
+            self.positions, self.normals, self.n, batch.segments, batch.n_paths,
+            batch.max_depth, self.count_emitted, self.radius**2,
+            self.ext, scale, self.acc, self.work_buf,
             local_size=self.local_size,
         )

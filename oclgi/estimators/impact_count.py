@@ -70,17 +70,17 @@ class ImpactCount(Estimator):
         cl.enqueue_copy(self.queue, self.barys, self.points.barys)
 
     def accumulate(self, batch, scale: float):
-        launch(self.queue, self.k_acc, batch.n_slots, batch.segments, np.int32(batch.n_slots),
-               np.int32(batch.max_depth), np.int32(self.count_emitted), np.float32(scale), self.acc,
+        launch(self.queue, self.k_acc, batch.n_slots, batch.segments, batch.n_slots,
+               batch.max_depth, self.count_emitted, scale, self.acc,
                local_size=self.local_size)
 
     def resolve(self, scale: float) -> cl.Buffer:
         c = self.compiled
-        launch(self.queue, self.k_tri, self.n_tris, self.acc, c.tri_areas, np.int32(self.n_tris),
-               np.float32(1.0 / scale), self.tri_irr)
+        launch(self.queue, self.k_tri, self.n_tris, self.acc, c.tri_areas, self.n_tris,
+               1.0 / scale, self.tri_irr)
         launch(self.queue, self.k_vert, self.n_vertices, self.tri_irr, self.starts, self.lists,
-               np.int32(self.n_vertices), self.vert_irr)
-        launch(self.queue, self.k_interp, self.n, self.positions, self.barys, np.int32(self.n), c.faces,
+               self.n_vertices, self.vert_irr)
+        launch(self.queue, self.k_interp, self.n, self.positions, self.barys, self.n, c.faces,
                self.vert_irr, self.irr)
         return self.irr
 
@@ -108,8 +108,8 @@ def locate(queue, compiled, points):
     bary = np.empty((len(points), 2), np.float32)
     bary_buf = cl.Buffer(ctx, mf.WRITE_ONLY, bary.nbytes)
     delta = 1e-4 * compiled.scene.diagonal
-    launch(queue, k, len(points), *compiled.scene_args, pos_buf, nrm_buf, np.int32(len(points)),
-           np.float32(delta), bary_buf)
+    launch(queue, k, len(points), *compiled.scene_args, pos_buf, nrm_buf, len(points),
+           delta, bary_buf)
     cl.enqueue_copy(queue, pos, pos_buf)
     cl.enqueue_copy(queue, bary, bary_buf)
     tri = pos[:, 3].view(np.int32)

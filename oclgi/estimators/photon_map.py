@@ -163,7 +163,7 @@ class PhotonMap(Estimator):
     def accumulate(self, batch, scale: float):
         n_paths = batch.n_paths
         counts_buf = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, n_paths * 4)
-        args = (batch.segments, np.int32(n_paths), np.int32(batch.max_depth), np.int32(self.count_emitted))
+        args = (batch.segments, n_paths, batch.max_depth, int(self.count_emitted))
         launch(self.queue, self.k_count, n_paths, *args, counts_buf, local_size=self.local_size)
         counts = np.empty(n_paths, np.int32)
         cl.enqueue_copy(self.queue, counts, counts_buf)
@@ -228,8 +228,8 @@ class PhotonMap(Estimator):
 
     def irradiance_buffer(self, scale: float) -> cl.Buffer:
         """E = acc / (scale pi r_k^2) from the current sums and radii (float4 per point, on the device)."""
-        launch(self.queue, self.k_resolve, self.n, self.acc, self.r2, np.int32(self.n),
-               np.float32(1.0 / (scale * math.pi)), self.irr)
+        launch(self.queue, self.k_resolve, self.n, self.acc, self.r2, self.n,
+               1.0 / (scale * math.pi), self.irr)
         return self.irr
 
     def resolve(self, scale: float) -> cl.Buffer:

@@ -270,9 +270,9 @@ class PhotonMapSession:
         if b.nodes is None:
             return
         launch(self.queue, self.k_update, len(affected), b.nodes, b.balls, m.positions, m.normals, m.r2,
-               s.batch.segments, np.int32(s.max_depth), affected.paths_buf, affected.starts_buf,
-               np.int32(len(affected)), np.int32(m.count_emitted), np.int32(m.front_only), np.int32(mark),
-               np.int32(m.estimator == "k"), np.float32(sign), np.float32(self.scale), m.acc, self.marks,
+               s.batch.segments, s.max_depth, affected.paths_buf, affected.starts_buf,
+               len(affected), m.count_emitted, m.front_only, mark,
+               m.estimator == "k", sign, self.scale, m.acc, self.marks,
                self.listed, self.n_listed, local_size=self.engine.local_size)
 
     def _listed(self) -> np.ndarray:
@@ -282,5 +282,5 @@ class PhotonMapSession:
         ids = np.empty(int(n[0]), np.int32)
         if len(ids):
             cl.enqueue_copy(self.queue, ids, self.listed)
-            launch(self.queue, self.k_unmark, len(ids), self.listed, np.int32(len(ids)), self.marks)
+            launch(self.queue, self.k_unmark, len(ids), self.listed, len(ids), self.marks)
         return ids

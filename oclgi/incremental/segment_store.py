@@ -122,9 +122,9 @@ class SegmentStore:
     # -- updating -----------------------------------------------------------
     def _mark_cells(self, paths: cl.Buffer, n: int):
         f4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
-        launch(self.queue, self.k_cells, n, self.batch.segments, self.batch.path_len, np.int32(self.max_depth),
-               paths, np.int32(n), f4(self.grid_lo), f4(self.cell), cltypes.make_int4(*(int(d) for d in self.dims), 0),
-               np.float32(self.pad), self.cells)
+        launch(self.queue, self.k_cells, n, self.batch.segments, self.batch.path_len, self.max_depth,
+               paths, n, f4(self.grid_lo), f4(self.cell), cltypes.make_int4(*(int(d) for d in self.dims), 0),
+               self.pad, self.cells)
 
     def _region(self, boxes) -> np.ndarray | None:
         """The 128-bit mask (two uint64) of the cells the boxes meet, padded,
@@ -167,7 +167,7 @@ class SegmentStore:
         else:
             count = np.zeros(1, np.int32)
             cl.enqueue_copy(q, self.count, count)
-            launch(q, self.k_candidates, self.photons, self.cells, np.int32(self.photons),
+            launch(q, self.k_candidates, self.photons, self.cells, self.photons,
                    cltypes.make_ulong2(*(int(w) for w in region)), self.count, self.candidates)
             cl.enqueue_copy(q, count, self.count)
             n = int(count[0])
@@ -179,15 +179,14 @@ class SegmentStore:
                                hostbuf=candidates if n else np.zeros(1, np.int32))
         self.examined = n
         if n:
-            args = (*engine.compiled.scene_args, np.int32(obj), self.batch.segments, listed, np.int32(n),
-                    np.int32(self.max_depth), self.first)
+            args = (*engine.compiled.scene_args, obj, self.batch.segments, listed, n, self.max_depth, self.first)
             if not fused:
-                launch(q, self.k_first, n, *args, None, None, np.int32(0), np.float32(0), np.float32(0),
-                       np.float32(0), None, None, local_size=engine.local_size)
+                launch(q, self.k_first, n, *args, None, None, 0, 0, 0,
+                       0, None, None, local_size=engine.local_size)
             else:
                 k = programs(engine.ctx).get("update", **discs.defines).update_first_affected
-                launch(q, k, n, *args, discs.nodes, discs.blocks, np.int32(discs.count_emitted),
-                       np.float32(discs.radius ** 2), np.float32(discs.ext), np.float32(self.scale), discs.acc,
+                launch(q, k, n, *args, discs.nodes, discs.blocks, discs.count_emitted,
+                       discs.radius ** 2, discs.ext, self.scale, discs.acc,
                        discs.work_buf, local_size=engine.local_size)
             cl.enqueue_copy(q, self.first_host[:n], self.first)
         hit = np.nonzero(self.first_host[:n] >= 0)[0]
@@ -214,8 +213,8 @@ class SegmentStore:
             # grow geometrically, never past the store itself
             size = max(nbytes, min(2 * (self.scratch.size if self.scratch else 0), self.nbytes))
             self.scratch = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_WRITE, size)
-        launch(self.queue, self.k_gather, n, self.batch.segments, np.int32(self.max_depth), affected.paths_buf,
-               affected.starts_buf, np.int32(n), np.float32(sign), self.scratch)
+        launch(self.queue, self.k_gather, n, self.batch.segments, self.max_depth, affected.paths_buf,
+               affected.starts_buf, n, sign, self.scratch)
         # Path ids stay in the gathered slots; the scratch is a batch like any other.
         return PathBatch(self.scratch, self.batch.path_len, 0, n, self.max_depth)
 

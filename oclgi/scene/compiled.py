@@ -98,7 +98,7 @@ class CompiledScene:
     @property
     def scene_args(self) -> tuple:
         """The kernels' SCENE_ARGS (kernels/bvh.h): nodes, triangles, instances, count."""
-        return (self.nodes, self.tris, self.instances, np.int32(len(self.instances_host)))
+        return (self.nodes, self.tris, self.instances, len(self.instances_host))
 
     def _build_objects(self, v):
         """One BVH per object, in one node array and one triangle array; one
@@ -157,7 +157,7 @@ class CompiledScene:
         cl.enqueue_copy(queue, self.instances, self.instances_host[obj:obj + 1], dst_offset=obj * item)
         inst = self.instances_host[obj]
         k = programs(self.ctx).get("instances").instances_normals
-        launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, np.int32(obj), self.tri_normals)
+        launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, obj, self.tri_normals)
 
     def fixed_scale(self, n_paths: int) -> float:
         """Fixed-point units per watt for a run of n_paths: 2^FIXED_BITS per

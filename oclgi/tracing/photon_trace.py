@@ -59,14 +59,13 @@ class PhotonTracer:
     def _trace_args(self, n_total: int) -> tuple:
         """TRACE_ARGS of kernels/photon_trace.cl."""
         c = self.compiled
-        return (c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf, np.int32(c.n_emitters),
-                np.uint32(self.seed & 0xFFFFFFFF), np.uint32(self.seed >> 32), np.float32(1.0 / n_total),
-                np.int32(self.max_depth), np.float32(c.eps))
+        return (c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf, c.n_emitters,
+                self.seed & 0xFFFFFFFF, self.seed >> 32, 1.0 / n_total, self.max_depth, c.eps)
 
     def trace(self, path_offset: int, n_paths: int, n_total: int) -> PathBatch:
         assert 0 < n_paths <= self.batch_paths
         launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(n_total),
-               np.int32(path_offset), np.int32(n_paths), self.segments, self.path_len,
+               path_offset, n_paths, self.segments, self.path_len,
                local_size=self.local_size)
         return PathBatch(self.segments, self.path_len, path_offset, n_paths, self.max_depth)
 
@@ -74,5 +73,5 @@ class PhotonTracer:
         """Re-trace the suffixes of listed paths of ``batch`` in place: path
         ``paths[k]`` (an index into the batch) from bounce ``starts[k]`` on."""
         launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(n_total),
-               np.int32(batch.path_offset), paths, starts, np.int32(n_list), batch.segments, batch.path_len,
+               batch.path_offset, paths, starts, n_list, batch.segments, batch.path_len,
                local_size=self.local_size)
