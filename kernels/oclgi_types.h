@@ -1,8 +1,10 @@
-/* oclgi_types.h: structs shared with the host, constants and defaults.
+/* oclgi_types.h: structs shared with the host (and, through constants.h,
+ * the constants the host defines for every build).
  *
  * Mirrors oclgi/cl/layout.py field for field; tests/test_layout.py checks
  * sizes and offsets through layout_probe.cl. No float3 in these structs
- * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3.
+ * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3;
+ * the device's blocks (at the end) are whole vectors.
  *
  * Fixed-point sums (DESIGN.md section 2): every contribution is a power
  * (watts, per channel) quantised once as convert_long_rte(power * scale)
