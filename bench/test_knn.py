@@ -54,6 +54,7 @@ from scipy.spatial import cKDTree
 
 from oclgi import queries
 from oclgi.accel.point_index import KnnIndex, query_order
+from oclgi.cl.constants import FRONT_COS_EPS
 from oclgi.tracing.photon_trace import PhotonTracer
 from oclgi.scene.scene import Camera
 
@@ -64,7 +65,7 @@ MAX_DEPTH = 16
 SEED = 1
 ROUNDS = 7
 SAMPLE = 2_000
-COS_EPS = np.float32(1e-6)  # PM_COS_EPS (kernels/photon_map.h)
+COS_EPS = np.float32(FRONT_COS_EPS)  # the kernels' front-side rule
 SCENES = ["cornell", "bunny_in_box"]
 # Inside the 3 x 3 x 3 box, above the front wall's middle, looking down at the bunny.
 BUNNY_CAMERA = Camera((0.0, 1.3, 1.45), (0.0, 0.6, 0.0), (0.0, 1.0, 0.0), 75.0)

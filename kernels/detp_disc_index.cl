@@ -14,10 +14,10 @@
  *                  discs of each leaf met) and BVH nodes visited (work.h).
  *
  * Disc blocks (host: oclgi/estimators/detp_disc_index.py): the discs of a
- * leaf are stored as ceil(count / 8) blocks of 7 float8 (x, y, z, nx, ny,
- * nz, point id as int bits); padding lanes have a zero normal, which never
- * passes DETP_TEST (w.n = 0). A leaf node's `first` is its first block and
- * `count` its number of real discs.
+ * leaf are stored as ceil(count / 8) DiscBlocks (oclgi_types.h: x, y, z,
+ * nx, ny, nz, point id, a float8 or int8 each); padding lanes have a zero
+ * normal, which never passes DETP_TEST (w.n = 0). A leaf node's `first` is
+ * its first block and `count` its number of real discs.
  *
  * count_emitted = 0 skips segments leaving the light (bounce 0), as detp.cl.
  */
@@ -27,7 +27,7 @@
 #include "work.h"
 #include "detp_disc_index.h"
 
-__kernel void detp_disc_index(__global const BvhNode *nodes, __global const float8 *discs,
+__kernel void detp_disc_index(__global const BvhNode *nodes, __global const DiscBlock *discs,
                               __global const Segment *segments, int n_paths, int max_depth,
                               int count_emitted, float radius2, float ext, float scale,
                               __global long *acc, __global ulong *work)

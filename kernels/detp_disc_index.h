@@ -10,11 +10,9 @@
 #include "detp.h"
 #include "box_bvh.h"
 
-#define DISC_BLOCK 7 /* float8 per block of 8 discs */
-
 /* One segment (s, read from `slot`) against the tree: every leaf it meets,
  * 8 discs at a time. */
-inline void disc_index_segment(__global const BvhNode *nodes, __global const float8 *discs,
+inline void disc_index_segment(__global const BvhNode *nodes, __global const DiscBlock *discs,
                                __global const Segment *slot, const SegmentView *s, float radius2, float ext,
                                float scale, __global long *acc, uint *visited, ulong *tests)
 {
@@ -31,9 +29,9 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const flo
         int first = nodes[leaf].first;
         *tests += (ulong)count;
         for (int blk = first; blk < first + (count + OCLGI_LANES - 1) / OCLGI_LANES; ++blk) {
-            __global const float8 *b = discs + (size_t)blk * DISC_BLOCK;
+            __global const DiscBlock *b = discs + blk;
             int8 hit;
-            DETP_TEST(float8, hit, b[0], b[1], b[2], b[3], b[4], b[5], o.x, o.y, o.z, w.x, w.y, w.z,
+            DETP_TEST(float8, hit, b->x, b->y, b->z, b->nx, b->ny, b->nz, o.x, o.y, o.z, w.x, w.y, w.z,
                       tmax, radius2);
             if (!any(hit)) continue;
             if (!have_q) { /* quantised once per segment, as detp_plain does */
@@ -41,7 +39,7 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const flo
                 have_q = 1;
             }
             int ids[OCLGI_LANES], h[OCLGI_LANES];
-            vstore8(as_int8(b[6]), 0, ids);
+            vstore8(b->id, 0, ids);
             vstore8(hit, 0, h);
             for (int k = 0; k < OCLGI_LANES; ++k) {
                 if (!h[k]) continue;

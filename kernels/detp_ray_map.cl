@@ -14,15 +14,15 @@
  *               and BVH nodes visited (work.h).
  *
  * Piece blocks (host: oclgi/estimators/detp_ray_map.py): the pieces of a
- * leaf are stored as ceil(count / 8) blocks of 10 float8: ox, oy, oz, wx,
- * wy, wz, t_end (of the whole segment), slot (int bits), claim_lo,
- * claim_hi. Padding lanes have w = 0, which never passes DETP_TEST
- * (w.n = 0). A leaf node's `first` is its first block, `count` its number
- * of real pieces. The power is read from the batch's segment store by slot,
- * only for crossing segments.
+ * leaf are stored as ceil(count / 8) PieceBlocks (oclgi_types.h: ox, oy,
+ * oz, wx, wy, wz, t_end of the whole segment, slot, claim_lo, claim_hi, a
+ * float8 or int8 each). Padding lanes have w = 0, which never passes
+ * DETP_TEST (w.n = 0). A leaf node's `first` is its first block, `count`
+ * its number of real pieces. The power is read from the batch's segment
+ * store by slot, only for crossing segments.
  *
- * Discs: 4 float4 each: centre (w = point id as int bits), normal, padded
- * box lo, box hi.
+ * Discs: a RayMapDisc each (oclgi_types.h): centre, point id, normal,
+ * padded box.
  */
 #include "oclgi_types.h"
 #include "segment.h"
@@ -30,19 +30,17 @@
 #include "work.h"
 #include "box_bvh.h"
 
-#define SEG_BLOCK 10 /* float8 per block of 8 segment pieces */
-
-__kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 *blocks,
-                           __global const float4 *discs, int n_discs, __global const Segment *segments,
+__kernel void detp_ray_map(__global const BvhNode *nodes, __global const PieceBlock *blocks,
+                           __global const RayMapDisc *discs, int n_discs, __global const Segment *segments,
                            float radius2, float ext, float scale, __global long *acc,
                            __global ulong *work)
 {
     int i = get_global_id(0);
     if (i >= n_discs) return;
     WORK_DECL;
-    __global const float4 *disc = discs + 4 * (size_t)i;
-    float4 x = disc[0], n = disc[1];
-    float3 lo = disc[2].xyz, hi = disc[3].xyz;
+    __global const RayMapDisc *disc = discs + i;
+    float3 x = vload3(0, disc->x), n = vload3(0, disc->n);
+    float3 lo = vload3(0, disc->lo), hi = vload3(0, disc->hi);
     long3 sum = 0;
     BoxBvhWalk walk;
     box_bvh_start(&walk);
@@ -52,10 +50,10 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 
         int first = nodes[leaf].first;
         WORK_U(count);
         for (int blk = first; blk < first + (count + OCLGI_LANES - 1) / OCLGI_LANES; ++blk) {
-            __global const float8 *b = blocks + (size_t)blk * SEG_BLOCK;
-            float8 tmax = b[6] + ext; /* per lane, exactly as detp_plain's f0.w + ext */
+            __global const PieceBlock *b = blocks + blk;
+            float8 tmax = b->t_end + ext; /* per lane, exactly as detp_plain's t_end + ext */
             int8 hit;
-            DETP_TEST(float8, hit, x.x, x.y, x.z, n.x, n.y, n.z, b[0], b[1], b[2], b[3], b[4], b[5],
+            DETP_TEST(float8, hit, x.x, x.y, x.z, n.x, n.y, n.z, b->ox, b->oy, b->oz, b->wx, b->wy, b->wz,
                       tmax, radius2);
             if (!any(hit)) continue;
             /* A segment cut into pieces is in the map once per piece; only
@@ -63,19 +61,19 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const float8 
              * counts it. Every piece keeps the whole segment's o and w, so
              * all compute the same t, and the ranges partition the line:
              * exactly one piece counts a crossing. */
-            float8 wn = b[3] * n.x + b[4] * n.y + b[5] * n.z;
-            float8 num = (x.x - b[0]) * n.x + (x.y - b[1]) * n.y + (x.z - b[2]) * n.z;
+            float8 wn = b->wx * n.x + b->wy * n.y + b->wz * n.z;
+            float8 num = (x.x - b->ox) * n.x + (x.y - b->oy) * n.y + (x.z - b->oz) * n.z;
             float8 t = num / wn;
-            hit &= (t >= b[8]) & (t < b[9]);
+            hit &= (t >= b->claim_lo) & (t < b->claim_hi);
             if (!any(hit)) continue;
             int slots[OCLGI_LANES], h[OCLGI_LANES];
-            vstore8(as_int8(b[7]), 0, slots);
+            vstore8(b->slot, 0, slots);
             vstore8(hit, 0, h);
             for (int k = 0; k < OCLGI_LANES; ++k)
                 if (h[k]) sum += segment_fixed_power(segments + slots[k], scale);
         }
     }
-    int id = as_int(x.w);
+    int id = disc->id;
     acc[3 * (size_t)id + 0] += sum.x;
     acc[3 * (size_t)id + 1] += sum.y;
     acc[3 * (size_t)id + 2] += sum.z;

@@ -56,10 +56,10 @@
 #define SC_MU ((float)OCLGI_SC_MU)
 #define SC_GATHER_BUF 32 /* list0 records a gather work-item buffers per atomic */
 
-/* A segment record, 2 float4: (o, tmax) and (w, 1 / |w|^2), tmax = t_end +
-   ext computed as detp.cl does (INFINITY when the segment escapes), o and w
-   the stored floats: DETP_TEST reads the record and sees exactly what
-   detp.cl sees. The segment's slot in the batch (for its power, read only
+/* A segment record (ScRecord, oclgi_types.h), 2 float4: (o, tmax) and
+   (w, 1 / |w|^2), tmax = t_end + ext computed as detp.cl does (INFINITY
+   when the segment escapes), o and w the stored floats: DETP_TEST reads the
+   record and sees exactly what detp.cl sees. The segment's slot in the batch (for its power, read only
    on a hit) is kept in a parallel int array, not in a float lane: small
    integers read as floats are denormals, the compiler does this arithmetic
    on whole float4s, and denormal operands made every test ~20 times slower
@@ -77,23 +77,23 @@ inline int sc_meets(float cx, float cy, float cz, float r, float4 a, float4 b)
     return ex * ex + ey * ey + ez * ez <= lim * lim;
 }
 
-inline void sc_flush(__global float4 *rec0, __global int *slot0, volatile __global int *n0,
-                     const float4 *buf, const int *slots, int nb)
+inline void sc_flush(__global ScRecord *rec0, __global int *slot0, volatile __global int *n0,
+                     const ScRecord *buf, const int *slots, int nb)
 {
     int at = atomic_add(n0, nb);
-    for (int k = 0; k < 2 * nb; ++k) rec0[2 * (size_t)at + k] = buf[k];
+    for (int k = 0; k < nb; ++k) rec0[(size_t)at + k] = buf[k];
     for (int k = 0; k < nb; ++k) slot0[at + k] = slots[k];
 }
 
 __kernel void sc_gather(__global const Segment *segments, int n_paths, int max_depth, int count_emitted,
                         int paths_per_item, float4 c0, float r0, float ext,
-                        __global float4 *rec0, __global int *slot0, volatile __global int *n0,
+                        __global ScRecord *rec0, __global int *slot0, volatile __global int *n0,
                         __global ulong *work)
 {
     int p0 = get_global_id(0) * paths_per_item;
     if (p0 >= n_paths) return;
     WORK_DECL;
-    float4 buf[2 * SC_GATHER_BUF];
+    ScRecord buf[SC_GATHER_BUF];
     int slots[SC_GATHER_BUF];
     int nb = 0;
     int p1 = min(n_paths, p0 + paths_per_item);
@@ -109,8 +109,8 @@ __kernel void sc_gather(__global const Segment *segments, int n_paths, int max_d
             float4 w = (float4)(s.w, 1.0f / (s.w.x * s.w.x + s.w.y * s.w.y + s.w.z * s.w.z));
             WORK_T(1);
             if (sc_meets(c0.x, c0.y, c0.z, r0, a, w)) {
-                buf[2 * nb] = a;
-                buf[2 * nb + 1] = w;
+                buf[nb].org_tmax = a;
+                buf[nb].dir_inv2 = w;
                 slots[nb] = slot;
                 if (++nb == SC_GATHER_BUF) {
                     sc_flush(rec0, slot0, n0, buf, slots, nb);
@@ -134,21 +134,20 @@ __kernel void sc_gather(__global const Segment *segments, int n_paths, int max_d
    then only the hits are stored: no data-dependent branch per test and no
    chain through `top` while testing (faster than both a branch per test
    and an unconditional store). Past cap, stores go to the spare entry. */
-inline int sc_rebuild(float cx, float cy, float cz, float r, __global const float4 *prec,
-                      __global const int *pslot, int beg, int end, __global float4 *rec, __global int *slot,
+inline int sc_rebuild(float cx, float cy, float cz, float r, __global const ScRecord *prec,
+                      __global const int *pslot, int beg, int end, __global ScRecord *rec, __global int *slot,
                       int top, int cap)
 {
     for (int i0 = beg; i0 < end; i0 += 32) {
         int n = min(32, end - i0);
         uint m = 0u;
         for (int l = 0; l < n; ++l)
-            m |= (uint)sc_meets(cx, cy, cz, r, prec[2 * (i0 + l)], prec[2 * (i0 + l) + 1]) << l;
+            m |= (uint)sc_meets(cx, cy, cz, r, prec[i0 + l].org_tmax, prec[i0 + l].dir_inv2) << l;
         while (m) {
             int i = i0 + 31 - clz(m & (0u - m)); /* lowest set bit */
             m &= m - 1u;
             int j = min(top++, cap);
-            rec[2 * j] = prec[2 * i];
-            rec[2 * j + 1] = prec[2 * i + 1];
+            rec[j] = prec[i];
             slot[j] = pslot[i];
         }
     }
@@ -176,9 +175,9 @@ inline int sc_prefix(float x, float y, float z, float d, int nv, const float4 *c
 __kernel void sc_runs(__global const float4 *positions, __global const float4 *normals,
                       __global const int *perm, int n_points, int run_length,
                       __global const int *runs, int run_base, int n_launch, __global int *run_done,
-                      __global const float4 *rec0, __global const int *slot0, int first, int n0,
+                      __global const ScRecord *rec0, __global const int *slot0, int first, int n0,
                       __global const Segment *segments, __global const float *radii, int levels,
-                      float radius, float radius2, float scale, __global float4 *srec, __global int *sslot,
+                      float radius, float radius2, float scale, __global ScRecord *srec, __global int *sslot,
                       int cap, __global long *acc, volatile __global int *status, __global ulong *work)
 {
     int g = get_global_id(0);
@@ -188,10 +187,10 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
     int end = min(n_points, start + run_length);
     int resume = start + run_done[run];
     if (resume >= end) return;
-    rec0 += 2 * (size_t)first; /* this launch's piece of list 0: [first, first + n0) */
+    rec0 += first; /* this launch's piece of list 0: [first, first + n0) */
     slot0 += first;
     /* this run's stack: cap entries + the spare one */
-    __global float4 *rec = srec + (size_t)g * (cap + 1) * 2;
+    __global ScRecord *rec = srec + (size_t)g * (cap + 1);
     __global int *slot = sslot + (size_t)g * (cap + 1);
     WORK_DECL;
 
@@ -251,13 +250,13 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
         peak = max(peak, lend[L]);
 
         /* DETP on the innermost list (list0 itself when there is no inner sphere). */
-        __global const float4 *ir = L > 0 ? rec : rec0;
+        __global const ScRecord *ir = L > 0 ? rec : rec0;
         __global const int *is = L > 0 ? slot : slot0;
         int beg = L > 1 ? lend[L - 1] : 0, stop = L > 0 ? lend[L] : n0;
         pu = (ulong)(stop - beg);
         long sr = 0, sg = 0, sb = 0;
         for (int j = beg; j < stop; ++j) {
-            float4 a = ir[2 * j], b = ir[2 * j + 1];
+            float4 a = ir[j].org_tmax, b = ir[j].dir_inv2;
             int hit;
             DETP_TEST(float, hit, x.x, x.y, x.z, n.x, n.y, n.z, a.x, a.y, a.z, b.x, b.y, b.z, a.w, radius2);
             if (hit) {

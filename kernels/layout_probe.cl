@@ -20,5 +20,13 @@ __kernel void layout_probe(__global int *out)
     SIZE(Material); OFF(Material, albedo); OFF(Material, survive); OFF(Material, emission); OFF(Material, pad);
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
     OFF(Emitter, e2); OFF(Emitter, pad1); OFF(Emitter, power); OFF(Emitter, pad2);
+    SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);
+    OFF(DiscBlock, ny); OFF(DiscBlock, nz); OFF(DiscBlock, id);
+    SIZE(PieceBlock); OFF(PieceBlock, ox); OFF(PieceBlock, oy); OFF(PieceBlock, oz); OFF(PieceBlock, wx);
+    OFF(PieceBlock, wy); OFF(PieceBlock, wz); OFF(PieceBlock, t_end); OFF(PieceBlock, slot);
+    OFF(PieceBlock, claim_lo); OFF(PieceBlock, claim_hi);
+    SIZE(RayMapDisc); OFF(RayMapDisc, x); OFF(RayMapDisc, id); OFF(RayMapDisc, n); OFF(RayMapDisc, pad1);
+    OFF(RayMapDisc, lo); OFF(RayMapDisc, pad2); OFF(RayMapDisc, hi); OFF(RayMapDisc, pad3);
+    SIZE(ScRecord); OFF(ScRecord, org_tmax); OFF(ScRecord, dir_inv2);
     out[i++] = -1; /* end marker */
 }

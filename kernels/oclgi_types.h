@@ -1,8 +1,10 @@
-/* oclgi_types.h: structs shared with the host, constants and defaults.
+/* oclgi_types.h: structs shared with the host (and, through constants.h,
+ * the constants the host defines for every build).
  *
  * Mirrors oclgi/cl/layout.py field for field; tests/test_layout.py checks
  * sizes and offsets through layout_probe.cl. No float3 in these structs
- * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3.
+ * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3;
+ * the device's blocks (at the end) are whole vectors.
  *
  * Fixed-point sums (DESIGN.md section 2): every contribution is a power
  * (watts, per channel) quantised once as convert_long_rte(power * scale)
@@ -79,5 +81,56 @@ typedef struct {
     float power[3]; /* emitter power / selection probability */
     int pad2;
 } Emitter;
+
+/* The device's blocks: the accelerated DETP variants' leaves, tested
+ * OCLGI_LANES (8) primitives at a time, one per lane of each float8 field
+ * (PoCL does not vectorise across work-items: explicit lanes). */
+
+/* 8 discs of a disc-index leaf (detp_disc_index.h); padding lanes have a
+ * zero normal, which never passes DETP_TEST (w.n = 0). */
+typedef struct {
+    float8 x;
+    float8 y;
+    float8 z;
+    float8 nx;
+    float8 ny;
+    float8 nz;
+    int8 id; /* query point */
+} DiscBlock;
+
+/* 8 segment pieces of a ray-map leaf (detp_ray_map.cl); padding lanes have
+ * w = 0, which never passes DETP_TEST. */
+typedef struct {
+    float8 ox;
+    float8 oy;
+    float8 oz;
+    float8 wx;
+    float8 wy;
+    float8 wz;
+    float8 t_end; /* of the whole segment */
+    int8 slot;    /* the segment's slot in its batch (for its power) */
+    float8 claim_lo;
+    float8 claim_hi;
+} PieceBlock;
+
+/* A disc the ray map queries with (detp_ray_map.cl): centre, normal and
+ * padded box. */
+typedef struct {
+    float x[3];
+    int id; /* query point */
+    float n[3];
+    int pad1;
+    float lo[3];
+    int pad2;
+    float hi[3];
+    int pad3;
+} RayMapDisc;
+
+/* A segment in a sphere-cache list (detp_sphere_cache.cl): (o, tmax) and
+ * (w, 1 / |w|^2) as whole float4s; its slot lies in a parallel int array. */
+typedef struct {
+    float4 org_tmax;
+    float4 dir_inv2;
+} ScRecord;
 
 #endif

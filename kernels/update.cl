@@ -107,7 +107,7 @@ __kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,
                                     int n_list, int max_depth, __global int *first,
-                                    __global const BvhNode *disc_nodes, __global const float8 *discs,
+                                    __global const BvhNode *disc_nodes, __global const DiscBlock *discs,
                                     int count_emitted, float radius2, float ext, float scale,
                                     __global long *acc, __global ulong *work)
 {

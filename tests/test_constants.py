@@ -22,7 +22,7 @@ KERNEL_ONLY = {"OCLGI_PI"}
 
 
 def _sources():
-    return {p.name: re.sub(r"/\*.*?\*/", "", p.read_text(), flags=re.S)
+    return {p.name: re.sub(r"/\*.*?\*/", "", p.read_text(), flags=re.DOTALL)
             for p in sorted(kernel_dir().iterdir()) if p.suffix in (".cl", ".h")}
 
 

@@ -27,6 +27,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import oclgi
+from oclgi.cl.constants import FRONT_COS_EPS
 from oclgi.errors import OclgiError
 from oclgi.estimators import photon_map as pm
 from oclgi.accel.point_index import KnnIndex
@@ -35,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from exactness import surface_points  # noqa: E402
 from analytic_scenes import box, exact, plane_scene  # noqa: E402
 
-EPS = np.float32(1e-6)  # PM_COS_EPS in kernels/photon_map.h
+EPS = np.float32(FRONT_COS_EPS)  # the kernels' front-side rule
 
 
 def brute_knn(pos, dirs, qp, qn, k, front_only=True):

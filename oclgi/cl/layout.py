@@ -4,12 +4,13 @@ The C side is ``kernels/oclgi_types.h``; ``tests/test_layout.py`` builds
 ``kernels/layout_probe.cl`` and checks that sizes and field offsets agree, so
 a change on one side without the other fails the tests. Structs use
 ``float[3]`` + a 4-byte field rather than ``float3`` (which OpenCL pads to 16
-bytes) so that every layout is plain and 16-byte aligned.
+bytes) so that every layout is plain and 16-byte aligned; the device's
+blocks are whole float8 / int8 (or float4) vectors, which have no padding.
 """
 
 import numpy as np
 
-from .constants import EMITTER_POINT, EMITTER_TRIANGLE  # noqa: F401  (Emitter.kind's values)
+from .constants import EMITTER_POINT, EMITTER_TRIANGLE, LANES  # noqa: F401  (Emitter.kind's values, kept here)
 
 f4, i4 = np.float32, np.int32
 
@@ -55,5 +56,37 @@ Emitter = np.dtype(
     ]
 )
 
-STRUCTS = {"BvhNode": BvhNode, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter}
+# The device's blocks (kernels/oclgi_types.h): leaves of the accelerated
+# DETP variants, LANES primitives each, one per lane of every field.
+L = LANES
+
+# 8 discs of a disc-index leaf, 224 bytes (estimators/detp_disc_index.py);
+# padding lanes have a zero normal.
+DiscBlock = np.dtype([("x", f4, L), ("y", f4, L), ("z", f4, L), ("nx", f4, L), ("ny", f4, L), ("nz", f4, L),
+                      ("id", i4, L)])
+
+# 8 segment pieces of a ray-map leaf, 320 bytes (estimators/detp_ray_map.py):
+# the whole segment's o, w and t_end, its slot in the batch, and the piece's
+# claim range; padding lanes have w = 0.
+PieceBlock = np.dtype(
+    [
+        ("ox", f4, L), ("oy", f4, L), ("oz", f4, L), ("wx", f4, L), ("wy", f4, L), ("wz", f4, L),
+        ("t_end", f4, L), ("slot", i4, L), ("claim_lo", f4, L), ("claim_hi", f4, L),
+    ]
+)
+
+# A disc the ray map queries with, 64 bytes: centre, query point id, unit
+# normal, padded box.
+RayMapDisc = np.dtype(
+    [("x", f4, 3), ("id", i4), ("n", f4, 3), ("pad1", i4), ("lo", f4, 3), ("pad2", i4), ("hi", f4, 3), ("pad3", i4)]
+)
+
+# A segment in a sphere-cache list, 32 bytes, made on the device
+# (kernels/detp_sphere_cache.cl): (o, t_end + ext) and (w, 1 / |w|^2).
+ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
+
+STRUCTS = {
+    "BvhNode": BvhNode, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter,
+    "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
+}
 

@@ -16,8 +16,8 @@ Algorithm:
    normal (camera rays that missed) can never be crossed and are left out.
 2. ``build_bvh`` (oclgi/accel/bvh_build.py, host numpy, Morton order) over
    the boxes; each leaf's discs are stored as blocks of 8 float8 lanes
-   (kernels/detp_disc_index.cl), so a leaf is tested the way ``detp_plain``
-   tests 8 points.
+   (``oclgi.cl.layout.DiscBlock``, kernels/detp_disc_index.cl), so a leaf is
+   tested the way ``detp_plain`` tests 8 points.
 3. Per batch, one work-item per path walks the tree with each segment
    (kernels/box_bvh.h), applies DETP_TEST (kernels/detp.h, the one
    definition shared with plain DETP) to the discs of each leaf met, and
@@ -64,8 +64,9 @@ import time
 
 import numpy as np
 
-from ..accel.boxes import LANES, PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
+from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
 from ..accel.bvh_build import build_bvh
+from ..cl.layout import DiscBlock
 from ..cl.programs import launch
 from ..errors import OclgiError
 from .base import DetpEstimator
@@ -95,12 +96,12 @@ class DetpDiscIndex(DetpEstimator):
             bvh = build_bvh(lo, hi, self.leaf_size)
             check_depth(bvh.depth, "discs")
             nodes, blk, lane, n_blocks = leaf_blocks(bvh.nodes, self.n_active)
-            blocks = np.zeros((n_blocks, 7, LANES), np.float32)  # padding lanes: zero normal
+            blocks = np.zeros(n_blocks, DiscBlock)  # padding lanes: zero normal
             o = bvh.order
-            for c in range(3):
-                blocks[blk, c, lane] = pos[o, c]
-                blocks[blk, 3 + c, lane] = nrm[o, c]
-            blocks[blk, 6, lane] = ids[o].astype(np.int32).view(np.float32)
+            for c, (x, n) in enumerate((("x", "nx"), ("y", "ny"), ("z", "nz"))):
+                blocks[x][blk, lane] = pos[o, c]
+                blocks[n][blk, lane] = nrm[o, c]
+            blocks["id"][blk, lane] = ids[o]
             self.nodes = self.upload(nodes)
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
             self.blocks = self.upload(blocks)

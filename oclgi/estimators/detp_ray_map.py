@@ -23,7 +23,7 @@ The other transposition of plain DETP's O(n_R n_P) loop: index the
 3. ``build_bvh`` (host numpy, Morton order) over the pieces' boxes, padded
    like the disc boxes (:mod:`oclgi.estimators.detp_disc_index`), leaves of
    at most ``leaf_size`` (<= 32) pieces stored as blocks of 8 float8 lanes
-   (kernels/detp_ray_map.cl).
+   (``oclgi.cl.layout.PieceBlock``, kernels/detp_ray_map.cl).
 4. One work-item per disc walks the tree with the disc's padded box
    (kernels/box_bvh.h), applies DETP_TEST (kernels/detp.h, shared with plain
    DETP) and the claim to the pieces of each leaf met, and adds the crossing
@@ -59,11 +59,13 @@ import time
 
 import numpy as np
 
+from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
 from ..accel.bvh_build import build_bvh, morton_codes
+from ..cl.constants import LANES
+from ..cl.layout import PieceBlock, RayMapDisc
 from ..cl.programs import launch
 from ..errors import OclgiError
 from .base import DetpEstimator
-from ..accel.boxes import LANES, PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
 
 MAX_LEAF = 32
 MAX_PIECES = 64  # pieces per segment, at most
@@ -119,12 +121,9 @@ class DetpRayMap(DetpEstimator):
         # Discs in Morton order: neighbouring work-items walk the same nodes.
         c = 0.5 * (lo.astype(np.float64) + hi)
         o = np.argsort(morton_codes(c, c.min(axis=0), c.max(axis=0)), kind="stable")
-        discs = np.zeros((self.n_active, 4, 4), np.float32)
-        discs[:, 0, :3] = pos[o]
-        discs[:, 0, 3] = ids[o].astype(np.int32).view(np.float32)
-        discs[:, 1, :3] = nrm[o]
-        discs[:, 2, :3] = lo[o]
-        discs[:, 3, :3] = hi[o]
+        discs = np.zeros(self.n_active, RayMapDisc)
+        discs["x"], discs["id"], discs["n"] = pos[o], ids[o], nrm[o]
+        discs["lo"], discs["hi"] = lo[o], hi[o]
         self.discs = self.upload(discs)
 
     def points_changed(self) -> None:
@@ -187,18 +186,23 @@ class DetpRayMap(DetpEstimator):
         check_depth(bvh.depth, "segments")
         n = len(seg)
         nodes, blk, lane, n_blocks = leaf_blocks(bvh.nodes, n)
-        # Piece records (ox oy oz wx wy wz t_end slot claim_lo claim_hi) in
-        # leaf order, scattered to their lanes, then turned into float8 blocks.
-        rec = np.empty((n, 10), np.float32)
-        rec[:, 0:3], rec[:, 3:6] = o_s, w_s
-        rec[:, 6] = s["t_end"][seg]
-        rec[:, 7] = slots[seg].view(np.float32)
-        rec[:, 8], rec[:, 9] = claim_lo, claim_hi
-        lanes = np.zeros((n_blocks * LANES, 10), np.float32)  # padding lanes: w = 0
-        row = np.dtype((np.void, rec.itemsize * 10))  # whole records: much faster to move
+        # Piece records (a row of PieceBlock's fields, the slot's int bits as
+        # a float) in leaf order, scattered to their lanes, then turned into
+        # PieceBlocks (each field a lane vector).
+        nf = len(PieceBlock.names)
+        col = {name: k for k, name in enumerate(PieceBlock.names)}
+        rec = np.empty((n, nf), np.float32)
+        for a, axis in enumerate("xyz"):
+            rec[:, col["o" + axis]], rec[:, col["w" + axis]] = o_s[:, a], w_s[:, a]
+        rec[:, col["t_end"]] = s["t_end"][seg]
+        rec[:, col["slot"]] = slots[seg].view(np.float32)
+        rec[:, col["claim_lo"]], rec[:, col["claim_hi"]] = claim_lo, claim_hi
+        lanes = np.zeros((n_blocks * LANES, nf), np.float32)  # padding lanes: w = 0
+        row = np.dtype((np.void, rec.itemsize * nf))  # whole records: much faster to move
         lanes.view(row).ravel()[blk * LANES + lane] = rec.view(row).ravel()[bvh.order]
         del rec
-        blocks = np.ascontiguousarray(lanes.reshape(n_blocks, LANES, 10).transpose(0, 2, 1))
+        blocks = np.empty(n_blocks, PieceBlock)
+        blocks.view(np.float32).reshape(n_blocks, nf, LANES)[:] = lanes.reshape(n_blocks, LANES, nf).transpose(0, 2, 1)
         return self.upload(nodes), self.upload(blocks), n
 
     def accumulate(self, batch, scale: float):

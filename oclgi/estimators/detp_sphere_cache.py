@@ -93,11 +93,12 @@ import pyopencl as cl
 from ..accel import ordering
 from ..cl.constants import SC_MAX_LEVELS as MAX_LEVELS
 from ..cl.constants import SC_MU as MU  # noqa: F401  (the slack of the kernel's sphere test, for host checks)
+from ..cl.layout import ScRecord
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import DetpEstimator
 
-ENTRY_BYTES = 36  # a list entry: a segment record (2 float4) and its slot (int)
+ENTRY_BYTES = ScRecord.itemsize + 4  # a list entry: a segment record and its slot (int)
 PATHS_PER_ITEM = 64  # paths per sc_gather work-item
 SCRATCH_BYTES = 512 << 20  # scratch for the lists of the runs in flight
 RUNS_PER_UNIT = 4  # default runs per compute unit: enough to balance uneven runs (measured: 4 per unit best)
@@ -205,7 +206,7 @@ class DetpSphereCache(DetpEstimator):
     # -- the estimator ------------------------------------------------------------
     def accumulate(self, batch, scale: float):
         q = self.queue
-        rec0 = self._buffer("_rec0", batch.n_slots * 32)
+        rec0 = self._buffer("_rec0", batch.n_slots * ScRecord.itemsize)
         slot0 = self._buffer("_slot0", batch.n_slots * 4)
         cl.enqueue_copy(q, self._n0, np.zeros(1, np.int32))  # a fill costs ~0.4 ms on PoCL
         launch(q, self.k_gather, -(-batch.n_paths // PATHS_PER_ITEM), batch.segments, np.int32(batch.n_paths),
@@ -239,7 +240,7 @@ class DetpSphereCache(DetpEstimator):
             while n_pending:
                 cl.enqueue_copy(q, self.status, np.zeros(3, np.int32))
                 wave = max(1, min(n_pending, self.scratch_bytes // ((cap + 1) * ENTRY_BYTES)))
-                srec = self._buffer("_srec", wave * (cap + 1) * 32)
+                srec = self._buffer("_srec", wave * (cap + 1) * ScRecord.itemsize)
                 sslot = self._buffer("_sslot", wave * (cap + 1) * 4)
                 for base in range(0, n_pending, wave):
                     launch(q, self.k_runs, min(wave, n_pending - base), self.positions, self.normals, self.perm,
