@@ -118,8 +118,8 @@ class DetpDiscIndex(DetpEstimator):
             return
         launch(
             self.queue, self.k_walk, batch.n_paths,
-            self.nodes, self.blocks, batch.segments, np.int32(batch.n_paths), np.int32(batch.max_depth),
-            np.int32(self.count_emitted), np.float32(self.radius**2), np.float32(self.ext),
-            np.float32(scale), self.acc, self.work_buf,
+            self.nodes, self.blocks, batch.segments, batch.n_paths, batch.max_depth,
+            self.count_emitted, self.radius**2, self.ext,
+            scale, self.acc, self.work_buf,
             local_size=self.local_size,
         )

@@ -217,8 +217,8 @@ class DetpRayMap(DetpEstimator):
         nodes, blocks, _ = built
         launch(
             self.queue, self.k_query, self.n_active,
-            nodes, blocks, self.discs, np.int32(self.n_active), batch.segments, np.float32(self.radius**2),
-            np.float32(self.ext), np.float32(scale), self.acc, self.work_buf,
+            nodes, blocks, self.discs, self.n_active, batch.segments, self.radius**2,
+            self.ext, scale, self.acc, self.work_buf,
             local_size=self.local_size,
         )
         self.queue.finish()  # the tree's buffers are released when this returns

@@ -209,9 +209,9 @@ class DetpSphereCache(DetpEstimator):
         rec0 = self._buffer("_rec0", batch.n_slots * ScRecord.itemsize)
         slot0 = self._buffer("_slot0", batch.n_slots * 4)
         cl.enqueue_copy(q, self._n0, np.zeros(1, np.int32))  # a fill costs ~0.4 ms on PoCL
-        launch(q, self.k_gather, -(-batch.n_paths // PATHS_PER_ITEM), batch.segments, np.int32(batch.n_paths),
-               np.int32(batch.max_depth), np.int32(self.count_emitted), np.int32(PATHS_PER_ITEM), self.c0,
-               np.float32(self.radii[0]), np.float32(self.ext), rec0, slot0, self._n0, self.work_buf,
+        launch(q, self.k_gather, -(-batch.n_paths // PATHS_PER_ITEM), batch.segments, batch.n_paths,
+               batch.max_depth, self.count_emitted, PATHS_PER_ITEM, self.c0,
+               self.radii[0], self.ext, rec0, slot0, self._n0, self.work_buf,
                local_size=self.local_size)
         n0 = np.empty(1, np.int32)
         cl.enqueue_copy(q, n0, self._n0)
@@ -244,11 +244,11 @@ class DetpSphereCache(DetpEstimator):
                 sslot = self._buffer("_sslot", wave * (cap + 1) * 4)
                 for base in range(0, n_pending, wave):
                     launch(q, self.k_runs, min(wave, n_pending - base), self.positions, self.normals, self.perm,
-                           np.int32(self.n), np.int32(self.run_length), runs, np.int32(base),
-                           np.int32(min(wave, n_pending - base)), self.run_done, rec0, slot0, np.int32(first),
-                           np.int32(count), batch.segments, self.radii_buf, np.int32(self.levels),
-                           np.float32(self.radius), np.float32(self.radius**2), np.float32(scale), srec, sslot,
-                           np.int32(cap), self.acc, self.status, self.work_buf, local_size=self.run_local_size)
+                           self.n, self.run_length, runs, base,
+                           min(wave, n_pending - base), self.run_done, rec0, slot0, first,
+                           count, batch.segments, self.radii_buf, self.levels,
+                           self.radius, self.radius**2, scale, srec, sslot,
+                           cap, self.acc, self.status, self.work_buf, local_size=self.run_local_size)
                 st = self._read_status()
                 peak = max(peak, st[2] / count)
                 if st[0] == 0:
