@@ -10,7 +10,7 @@
  *               order. (PoCL does not vectorise loops across work-items, so
  *               the lanes are explicit.)
  *               Counts u = segment-disc tests (work.h).
- * detp_resolve  one work-item per point: E = acc / (scale * pi d^2).
+ * detp_resolve  (detp_resolve.h) one work-item per point: E = acc / (scale * pi d^2).
  *
  * count_emitted = 0 skips segments leaving the light (bounce 0, segment.h),
  * i.e. the estimate is of indirect light only.
@@ -19,6 +19,7 @@
 #include "segment.h"
 #include "detp.h"
 #include "work.h"
+#include "detp_resolve.h"
 
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
                          int n_points, __global const Segment *segments, int n_paths,
@@ -75,13 +76,4 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
         acc[3 * i + 2] += bl[k];
     }
     WORK_FLUSH(work);
-}
-
-__kernel void detp_resolve(__global const long *acc, int n_points, float inv_norm,
-                           __global float4 *irradiance)
-{
-    int i = get_global_id(0);
-    if (i >= n_points) return;
-    irradiance[i] = (float4)((float)acc[3 * i], (float)acc[3 * i + 1], (float)acc[3 * i + 2], 0.0f)
-                    * inv_norm;
 }

@@ -25,6 +25,7 @@
 #include "segment.h"
 #include "detp.h"
 #include "work.h"
+#include "detp_resolve.h"
 #include "detp_disc_index.h"
 
 __kernel void detp_disc_index(__global const BvhNode *nodes, __global const DiscBlock *discs,

@@ -28,6 +28,7 @@
 #include "segment.h"
 #include "detp.h"
 #include "work.h"
+#include "detp_resolve.h"
 #include "box_bvh.h"
 
 __kernel void detp_ray_map(__global const BvhNode *nodes, __global const PieceBlock *blocks,

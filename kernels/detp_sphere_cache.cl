@@ -51,6 +51,7 @@
 #include "segment.h"
 #include "detp.h"
 #include "work.h"
+#include "detp_resolve.h"
 
 /* OCLGI_SC_MAX_LEVELS and OCLGI_SC_MU: oclgi/cl/constants.py. */
 #define SC_MU ((float)OCLGI_SC_MU)

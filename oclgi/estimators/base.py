@@ -103,7 +103,8 @@ class DetpEstimator(Estimator):
         self.normals = self.upload(points.normals)
         self.acc = self.zeros(self.n * 3 * 8)
         self.irr = self.zeros(self.n * 16)
-        self.k_resolve = programs(self.ctx).get("detp").detp_resolve
+        # every DETP program carries the resolve kernel (kernels/detp_resolve.h)
+        self.k_resolve = self.program(self.name).detp_resolve
 
     def replace_points(self, index: np.ndarray, new) -> None:
         self.points.positions[index] = new.positions
