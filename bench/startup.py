@@ -54,7 +54,9 @@ def _env(tree: Path | None, cache: Path) -> dict:
 
 def _oclgi(env, *args) -> float:
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-m", "oclgi", *args], env=env, capture_output=True, text=True)
+    # from a neutral folder: `python -m` puts the working folder first on the path
+    res = subprocess.run([sys.executable, "-m", "oclgi", *args], env=env, capture_output=True, text=True,
+                         cwd=tempfile.gettempdir())
     if res.returncode != 0:
         raise SystemExit(f"oclgi {' '.join(args)} failed:\n{res.stderr}")
     return time.perf_counter() - t0
@@ -83,12 +85,10 @@ def measure(tree: Path | None, rounds: int, has_warm: bool) -> dict:
 
 
 def _device() -> str:
-    import pyopencl as cl
-
     from oclgi.cl.device import choose_device
 
     dev = choose_device()
-    return f"{dev.name.strip()} ({dev.max_compute_units} units, {cl.get_cl_header_version()}, {dev.platform.version})"
+    return f"{dev.name.strip()} ({dev.max_compute_units} units, {dev.platform.version.split(' ')[2]})"
 
 
 def markdown(results: dict, meta: dict) -> str:
@@ -97,11 +97,13 @@ def markdown(results: dict, meta: dict) -> str:
              f"{meta['rounds']} rounds, median wall time of the whole process.", "",
              "| workload | cold | warm | cold - warm | `oclgi warm` | after warm | after warm - warm |",
              "|---|---|---|---|---|---|---|"]
+    def s(v):
+        return "-" if v != v else f"{v:.2f} s"  # NaN: a case the timed code has no command for
+
     for name, cases in results.items():
         med = {k: statistics.median(v) if v else float("nan") for k, v in cases.items()}
-        lines.append(f"| {name} | {med['cold']:.2f} s | {med['warm']:.2f} s | **{med['cold'] - med['warm']:.2f} s** "
-                     f"| {med['warm-up']:.2f} s | {med['after warm']:.2f} s | "
-                     f"**{med['after warm'] - med['warm']:.2f} s** |")
+        lines.append(f"| {name} | {s(med['cold'])} | {s(med['warm'])} | **{s(med['cold'] - med['warm'])}** "
+                     f"| {s(med['warm-up'])} | {s(med['after warm'])} | **{s(med['after warm'] - med['warm'])}** |")
     return "\n".join(lines) + "\n"
 
 
