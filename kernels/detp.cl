@@ -39,36 +39,36 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
     }
     float8 x = vload8(0, px), y = vload8(0, py), z = vload8(0, pz);
     float8 nx = vload8(0, qx), ny = vload8(0, qy), nz = vload8(0, qz);
-    /* The sums stay scalar per lane: a long8 (512 bits) passed through a
-     * builtin changes the calling convention without AVX-512 (a compiler
-     * warning on AVX2), and crossings are rare, so the lane loop below costs
-     * nothing measurable. */
-    long r[OCLGI_LANES], g[OCLGI_LANES], bl[OCLGI_LANES];
-    for (int k = 0; k < OCLGI_LANES; ++k) r[k] = g[k] = bl[k] = 0;
+    /* Per-lane sums in long4 halves: a long8 (512 bits) through a builtin
+     * (convert_long8, vstore8) changes the calling convention without
+     * AVX-512, a compiler warning on AVX2; 256-bit vectors do not, and the
+     * halves compile to the same loop as the long8 did. */
+    long4 sr0 = 0, sr1 = 0, sg0 = 0, sg1 = 0, sb0 = 0, sb1 = 0;
     for (int p = 0; p < n_paths; ++p) {
         __global const Segment *path = segments + (size_t)p * max_depth;
         for (int b = segment_first(count_emitted); b < max_depth; ++b) {
             SegmentView s;
-            int status = segment_read(path + b, &s);
-            if (status == SEGMENT_END) break;
-            if (status == SEGMENT_SKIP) continue;
+            if (!segment_read(path + b, &s)) {
+                if (segment_is_hole(path + b)) continue;
+                break; /* the path's end */
+            }
             float tmax = s.t_end + ext;
             WORK_U(lanes);
             int8 hit;
             DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, radius2);
             if (any(hit)) {
                 long3 q = segment_fixed_power(path + b, scale);
-                int h[OCLGI_LANES];
-                vstore8(hit, 0, h);
-                for (int k = 0; k < OCLGI_LANES; ++k) {
-                    if (!h[k]) continue;
-                    r[k] += q.x;
-                    g[k] += q.y;
-                    bl[k] += q.z;
-                }
+                long4 m0 = convert_long4(hit.lo) & 1, m1 = convert_long4(hit.hi) & 1;
+                sr0 += m0 * q.x; sr1 += m1 * q.x;
+                sg0 += m0 * q.y; sg1 += m1 * q.y;
+                sb0 += m0 * q.z; sb1 += m1 * q.z;
             }
         }
     }
+    long r[OCLGI_LANES], g[OCLGI_LANES], bl[OCLGI_LANES];
+    vstore4(sr0, 0, r); vstore4(sr1, 1, r);
+    vstore4(sg0, 0, g); vstore4(sg1, 1, g);
+    vstore4(sb0, 0, bl); vstore4(sb1, 1, bl);
     for (int k = 0; k < OCLGI_LANES && base + k < n_points; ++k) {
         int i = base + k;
         acc[3 * i + 0] += r[k];

@@ -41,9 +41,10 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const Disc
     __global const Segment *path = segments + (size_t)p * max_depth;
     for (int b = segment_first(count_emitted); b < max_depth; ++b) {
         SegmentView s;
-        int status = segment_read(path + b, &s);
-        if (status == SEGMENT_END) break;
-        if (status == SEGMENT_SKIP) continue;
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
         disc_index_segment(nodes, discs, path + b, &s, radius2, ext, scale, acc, &visited, &tests);
     }
     WORK_U(tests);

@@ -102,9 +102,10 @@ __kernel void sc_gather(__global const Segment *segments, int n_paths, int max_d
         for (int b = segment_first(count_emitted); b < max_depth; ++b) {
             int slot = p * max_depth + b;
             SegmentView s;
-            int status = segment_read(segments + (size_t)slot, &s);
-            if (status == SEGMENT_END) break;
-            if (status == SEGMENT_SKIP) continue;
+            if (!segment_read(segments + (size_t)slot, &s)) {
+                if (segment_is_hole(segments + (size_t)slot)) continue;
+                break; /* the path's end */
+            }
             float tmax = s.t_end + ext; /* as detp.cl */
             float4 a = (float4)(s.o, tmax);
             float4 w = (float4)(s.w, 1.0f / (s.w.x * s.w.x + s.w.y * s.w.y + s.w.z * s.w.z));

@@ -22,7 +22,7 @@ __kernel void impact_count_accumulate(__global const Segment *segments, int n_sl
     __global const Segment *slot = &segments[s];
     SegmentView v;
     if (!segment_counted(s % max_depth, count_emitted)) return;
-    if (!segment_impact(segment_read(slot, &v), &v)) return;
+    if (!segment_read(slot, &v) || !segment_impact(&v)) return; /* an empty slot, a hole, or no impact */
     int t = v.tri;
     long3 q = segment_fixed_power(slot, scale);
     atom_add(&acc[3 * t + 0], q.x);

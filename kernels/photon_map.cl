@@ -24,9 +24,11 @@ __kernel void pm_count(__global const Segment *segments, int n_paths, int max_de
     int c = 0;
     for (int b = segment_first(count_emitted); b < max_depth; ++b) {
         SegmentView s;
-        int status = segment_read(path + b, &s);
-        if (status == SEGMENT_END) break;
-        c += segment_impact(status, &s);
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
+        c += segment_impact(&s);
     }
     counts[p] = c;
 }
@@ -41,9 +43,11 @@ __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_d
     int o = offsets[p];
     for (int b = segment_first(count_emitted); b < max_depth; ++b) {
         SegmentView s;
-        int status = segment_read(path + b, &s);
-        if (status == SEGMENT_END) break;
-        if (!segment_impact(status, &s)) continue;
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
+        if (!segment_impact(&s)) continue;
         vstore3(segment_end(&s), o, pos);
         vstore3(s.w, o, dir);
         vstore3(segment_power(path + b), o, power);

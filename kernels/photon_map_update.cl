@@ -46,9 +46,11 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
     __global const Segment *path = segments + (size_t)paths[k] * max_depth;
     for (int b = max(starts[k], segment_first(count_emitted)); b < max_depth; ++b) {
         SegmentView s;
-        int status = segment_read(path + b, &s);
-        if (status == SEGMENT_END) break;
-        if (!segment_impact(status, &s)) continue;
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
+        if (!segment_impact(&s)) continue;
         float3 p = segment_end(&s), w = s.w;
         long3 q = (long3)(0);
         int have_q = 0;

@@ -122,11 +122,13 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
     ulong tests = 0;
     __global const Segment *path = segments + (size_t)p * max_depth;
     for (int b = 0; b < max_depth; ++b) {
-        /* Every bounce may be the first affected one: all are read (count_emitted
-         * only selects what the disc sums count), up to the path's end (a
-         * store has no holes). */
+        /* Every bounce may be the first affected one: all are read
+         * (count_emitted only selects what the disc sums count). */
         SegmentView s;
-        if (segment_read(path + b, &s) != SEGMENT_OK) break;
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
         if (found < 0 && update_touches(nodes, tris, in, lo, hi, s.o, s.w, s.t_end, s.tri))
             found = b;
         if (!disc_nodes) { /* no dynamic points: the first affected bounce is all we need */
