@@ -227,7 +227,7 @@ class Engine:
 
     def estimator(self, points, params: RunParams, count_work: bool = False, **options):
         """A fresh estimator of ``params.method`` over ``points``; ``options``
-        are the method's own (oclgi/params.py checks their names)."""
+        are the method's own (estimators.check_options checks their names)."""
         cls = ESTIMATORS[params.method]
         check_options(params.method, options)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,

@@ -117,11 +117,24 @@ def method(value, name: str = "method") -> str:
     return value
 
 
-def photons(value, name: str = "photons") -> int:
+def _integer_in(value, name: str, lo: int, hi: int, wanted: str) -> int:
+    """``value`` as an int in lo..hi, else ParamError "expected WANTED"."""
     n = integral(value)
-    if n is None or not 0 < n <= MAX_PHOTONS:
-        raise ParamError(name, f"expected a positive integer up to 2^31, got {_show(value)}")
+    if n is None or not lo <= n <= hi:
+        raise ParamError(name, f"expected {wanted}, got {_show(value)}")
     return n
+
+
+def _real_in(value, name: str, lo: float, hi: float, wanted: str) -> float:
+    """``value`` as a finite float in lo..hi, else ParamError "expected WANTED"."""
+    r = _real(value)
+    if r is None or not lo <= r <= hi:
+        raise ParamError(name, f"expected {wanted}, got {_show(value)}")
+    return r
+
+
+def photons(value, name: str = "photons") -> int:
+    return _integer_in(value, name, 1, MAX_PHOTONS, "a positive integer up to 2^31")
 
 
 def photon_counts(values, name: str = "photons") -> list:
@@ -140,32 +153,20 @@ def photon_counts(values, name: str = "photons") -> list:
 
 
 def seed(value, name: str = "seed") -> int:
-    s = integral(value)
-    if s is None or not 0 <= s < 2**64:
-        raise ParamError(name, f"expected an integer in 0..2^64-1, got {_show(value)}")
-    return s
+    return _integer_in(value, name, 0, 2**64 - 1, "an integer in 0..2^64-1")
 
 
 def max_depth(value, name: str = "max_depth") -> int:
-    d = integral(value)
-    if d is None or not 1 <= d <= MAX_DEPTH_LIMIT:
-        raise ParamError(name, f"expected an integer in 1..{MAX_DEPTH_LIMIT}, got {_show(value)}")
-    return d
+    return _integer_in(value, name, 1, MAX_DEPTH_LIMIT, f"an integer in 1..{MAX_DEPTH_LIMIT}")
 
 
 def radius(value, name: str = "radius") -> float:
-    r = _real(value)
-    if r is None or not MIN_RADIUS <= r <= MAX_LENGTH:
-        raise ParamError(name, f"expected a number from {_number(MIN_RADIUS)} to {_number(MAX_LENGTH)} "
-                               f"(the device squares it in float32), got {_show(value)}")
-    return r
+    return _real_in(value, name, MIN_RADIUS, MAX_LENGTH, f"a number from {_number(MIN_RADIUS)} to "
+                    f"{_number(MAX_LENGTH)} (the device squares it in float32)")
 
 
 def extension(value, name: str = "extension") -> float:
-    e = _real(value)
-    if e is None or not 0 <= e <= MAX_LENGTH:
-        raise ParamError(name, f"expected a number from 0 to {_number(MAX_LENGTH)}, got {_show(value)}")
-    return e
+    return _real_in(value, name, 0.0, MAX_LENGTH, f"a number from 0 to {_number(MAX_LENGTH)}")
 
 
 def count_emitted(value, name: str = "count_emitted") -> bool:

@@ -63,8 +63,9 @@ def warm(device: str | None = None, report=None) -> dict:
     say("every kernel of every program")
     cache = programs(engine.ctx)
     n_kernels = 0
-    for prog in list(cache.built()):
+    built = cache.built()
+    for prog in built:
         prog.program.get_info(cl.program_info.BINARIES)  # PoCL compiles all kernels for its binary
         n_kernels += len(prog.kernels)
     engine.queue.finish()
-    return {"programs": len(cache.built()), "kernels": n_kernels, "seconds": time.perf_counter() - t0}
+    return {"programs": len(built), "kernels": n_kernels, "seconds": time.perf_counter() - t0}

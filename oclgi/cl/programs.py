@@ -14,7 +14,7 @@ a header rebuilds what includes it.
 
 Compiler output (warnings, PoCL's "N warnings generated.") never reaches
 the terminal unless ``OCLGI_COMPILER_OUTPUT=1`` (the command line's
-``--verbose`` sets it): it is kept in ``ProgramCache.logs``. A failed build
+``--verbose`` sets it): it is kept as the program's ``log``. A failed build
 raises an :class:`OclgiError` whose first line names the file and the first
 compiler error; the whole log follows on the next lines.
 
@@ -164,7 +164,6 @@ class ProgramCache:
         self.ctx = ctx
         self.dir = kernel_dir()
         self._programs: dict[tuple, Program] = {}
-        self.logs: dict[tuple, str] = {}  # (stem, defines) -> what the compiler said
 
     def get(self, stem: str, **defines) -> Program:
         key = (stem, tuple(sorted(defines.items())))
@@ -211,14 +210,18 @@ class ProgramCache:
         if failure is not None:
             log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (str(failure), compiler_text) if t.strip()))
             if compiler_output_wanted():
-                print(f"oclgi: compiler output for {path.name} ({' '.join(o for o in options if o.startswith('-D')) or 'no defines'}):\n{log}", file=sys.stderr)
+                _show_log(path.name, options, log)
             raise KernelBuildError(f"kernel {path.name} does not build: {_first_error(log)} "
                                    f"({COMPILER_OUTPUT_ENV}=1 shows the compiler's log)", log) from None
         log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (_program_log(program), compiler_text) if t.strip()))
-        self.logs[(stem, defines)] = log
         if log and compiler_output_wanted():
-            print(f"oclgi: compiler output for {path.name} ({' '.join(o for o in options if o.startswith('-D')) or 'no defines'}):\n{log}", file=sys.stderr)
+            _show_log(path.name, options, log)
         return Program(program, stem, tuple(options), log)
+
+
+def _show_log(name: str, options, log: str) -> None:
+    defines = " ".join(o for o in options if o.startswith("-D")) or "no defines"
+    print(f"oclgi: compiler output for {name} ({defines}):\n{log}", file=sys.stderr)
 
 
 def _program_log(program: cl.Program) -> str:
