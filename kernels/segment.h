@@ -89,10 +89,12 @@ inline int segment_is_hole(__global const Segment *slot)
     return slot->tri == SEGMENT_HOLE;
 }
 
-/* An impact (Impact Count, Photon Maps): a segment that ends on a surface. */
-inline int segment_impact(const SegmentView *s)
+/* Does the slot hold an impact (Impact Count, Photon Maps), a segment that
+ * ends on a surface? Empty slots and holes have tri < 0: the tri alone
+ * tells, without the path rules. */
+inline int segment_impact(__global const Segment *slot)
 {
-    return s->tri >= 0;
+    return slot->tri >= 0;
 }
 
 /* Where the segment ends: an impact's position. One expression for every
