@@ -74,13 +74,9 @@ inline void segment_load(__global const Segment *slot, SegmentView *s)
  * at a hole or at the path's end (segment_is_hole tells which). */
 inline int segment_read(__global const Segment *slot, SegmentView *s)
 {
-    __global const float4 *f = (__global const float4 *)slot;
-    float4 f0 = f[0], f1 = f[1];
-    if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) return 0;
-    s->o = f0.xyz;
-    s->t_end = f0.w;
-    s->w = f1.xyz;
-    s->tri = as_int(f1.w);
+    float4 d = ((__global const float4 *)slot)[1];
+    if (d.x == 0.0f && d.y == 0.0f && d.z == 0.0f) return 0;
+    segment_load(slot, s);
     return 1;
 }
 
