@@ -20,10 +20,8 @@ __kernel void impact_count_accumulate(__global const Segment *segments, int n_sl
     int s = get_global_id(0);
     if (s >= n_slots) return;
     __global const Segment *slot = &segments[s];
-    SegmentView v;
-    if (!segment_counted(s % max_depth, count_emitted)) return;
-    if (!segment_read(slot, &v) || !segment_impact(&v)) return; /* an empty slot, a hole, or no impact */
-    int t = v.tri;
+    if (!segment_impact(slot) || !segment_counted(s % max_depth, count_emitted)) return;
+    int t = slot->tri;
     long3 q = segment_fixed_power(slot, scale);
     atom_add(&acc[3 * t + 0], q.x);
     atom_add(&acc[3 * t + 1], q.y);

@@ -28,7 +28,7 @@ __kernel void pm_count(__global const Segment *segments, int n_paths, int max_de
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        c += segment_impact(&s);
+        c += segment_impact(path + b);
     }
     counts[p] = c;
 }
@@ -47,7 +47,7 @@ __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_d
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        if (!segment_impact(&s)) continue;
+        if (!segment_impact(path + b)) continue;
         vstore3(segment_end(&s), o, pos);
         vstore3(s.w, o, dir);
         vstore3(segment_power(path + b), o, power);

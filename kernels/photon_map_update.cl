@@ -50,7 +50,7 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        if (!segment_impact(&s)) continue;
+        if (!segment_impact(path + b)) continue;
         float3 p = segment_end(&s), w = s.w;
         long3 q = (long3)(0);
         int have_q = 0;

@@ -74,13 +74,9 @@ inline void segment_load(__global const Segment *slot, SegmentView *s)
  * at a hole or at the path's end (segment_is_hole tells which). */
 inline int segment_read(__global const Segment *slot, SegmentView *s)
 {
-    __global const float4 *f = (__global const float4 *)slot;
-    float4 f0 = f[0], f1 = f[1];
-    if (f1.x == 0.0f && f1.y == 0.0f && f1.z == 0.0f) return 0;
-    s->o = f0.xyz;
-    s->t_end = f0.w;
-    s->w = f1.xyz;
-    s->tri = as_int(f1.w);
+    float4 d = ((__global const float4 *)slot)[1];
+    if (d.x == 0.0f && d.y == 0.0f && d.z == 0.0f) return 0;
+    segment_load(slot, s);
     return 1;
 }
 
@@ -89,10 +85,12 @@ inline int segment_is_hole(__global const Segment *slot)
     return slot->tri == SEGMENT_HOLE;
 }
 
-/* An impact (Impact Count, Photon Maps): a segment that ends on a surface. */
-inline int segment_impact(const SegmentView *s)
+/* Does the slot hold an impact (Impact Count, Photon Maps), a segment that
+ * ends on a surface? Empty slots and holes have tri < 0: the tri alone
+ * tells, without the path rules. */
+inline int segment_impact(__global const Segment *slot)
 {
-    return s->tri >= 0;
+    return slot->tri >= 0;
 }
 
 /* Where the segment ends: an impact's position. One expression for every
