@@ -17,6 +17,11 @@ Two ray sets of 10^6 rays each:
   normal of a random side, directions cosine-distributed about that normal,
   as the rays of diffuse photon bounces are.
 
+Each runs on both scene trees, the binned SAH tree (the default) and the
+Morton LBVH, with the traversal work of each counted exactly (nodes visited
+and triangles tested per ray, ``oclgi.accel.bvh.traversal_work``): the
+count is what a tree changes, the time what it costs on this machine.
+
 Both must agree on hit or miss for more than 99% of the rays (float
 intersectors may differ on grazing rays); nothing is asserted about time.
 The rays where Embree finds a nearer hit than oclgi are counted
@@ -31,7 +36,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from oclgi.accel.bvh import closest_hits
+from oclgi.accel.bvh import closest_hits, traversal_work
+from oclgi.accel.bvh_build import QUALITIES
+from oclgi.scene.compiled import CompiledScene
 
 RAYS = 1_000_000
 ROUNDS = 5
@@ -85,10 +92,25 @@ class Embree:
         return np.concatenate([r["tfar"] for r in runs]), np.concatenate([r["primID"] for r in runs])
 
 
+_TREES = {}
+
+
+def _tree(engine, quality):
+    """The engine's scene compiled with the given tree (the engine's own for its default)."""
+    if engine.compiled.bvh_quality == quality:
+        return engine.compiled
+    key = (id(engine), quality)
+    if key not in _TREES:
+        _TREES[key] = CompiledScene(engine.ctx, engine.scene, bvh_quality=quality)
+    return _TREES[key]
+
+
+@pytest.mark.parametrize("tree", QUALITIES)
 @pytest.mark.parametrize("rays", list(RAY_SETS))
 @pytest.mark.parametrize("scene", ["bunny", "sponza"])
-def test_closest_hit(benchmark, request, scale, cores_used, scene, rays):
+def test_closest_hit(benchmark, request, scale, cores_used, scene, rays, tree):
     engine = request.getfixturevalue(scene)
+    compiled = _tree(engine, tree)
     n = scale(RAYS)
     origins, dirs = RAY_SETS[rays](engine.scene, n, np.random.default_rng(7))
     origins, dirs = origins.astype(np.float32), dirs.astype(np.float32)
@@ -105,7 +127,7 @@ def test_closest_hit(benchmark, request, scale, cores_used, scene, rays):
 
     benchmark.group = f"closest hit: {scene}"
     with cores_used():
-        t, _u, _v, tri = benchmark.pedantic(closest_hits, args=(engine.queue, engine.compiled, origins, dirs),
+        t, _u, _v, tri = benchmark.pedantic(closest_hits, args=(engine.queue, compiled, origins, dirs),
                                             setup=run_embree, rounds=ROUNDS, warmup_rounds=1)
     t_embree, prim = embree_hits[0]
 
@@ -116,7 +138,10 @@ def test_closest_hit(benchmark, request, scale, cores_used, scene, rays):
     # The tolerance absorbs float noise in t (both hit the same triangle).
     missed = (prim >= 0) & ~(t <= t_embree * (1 + 1e-4) + 1e-6 * engine.scene.diagonal)
     info = benchmark.extra_info
-    info.update(scene=scene, rays=rays, n_rays=n, triangles=engine.scene.n_triangles,
+    nodes, tests = traversal_work(engine.queue, compiled, origins, dirs)
+    info.update(scene=scene, rays=rays, tree=tree, n_rays=n, triangles=engine.scene.n_triangles,
+                tree_nodes=compiled.n_nodes, tree_depth=compiled.bvh_depth,
+                nodes_per_ray=round(float(nodes.mean()), 2), tests_per_ray=round(float(tests.mean()), 2),
                 hit_fraction=round(float(np.mean(tri >= 0)), 4), hit_agreement=round(agree, 6),
                 same_triangle=round(float(np.mean(tri == prim)), 6), nearer_hit_missed=int(missed.sum()),
                 embree_threads=embree.threads)

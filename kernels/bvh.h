@@ -30,7 +30,19 @@
 typedef struct {
     float t, u, v;
     int tri; /* scene-order triangle id, -1 for a miss */
+#if OCLGI_BVH_COUNT
+    int nodes, tests; /* traversal work: nodes visited, triangles tested */
+#endif
 } Hit;
+
+/* Work counters, compiled in only where a program asks (bvh_query.cl's
+ * bvh_query_count, for the BVH benchmarks): every other program's
+ * traversal is the same code with or without them. */
+#if OCLGI_BVH_COUNT
+#define BVH_COUNT(hit, field, k) ((hit)->field += (k))
+#else
+#define BVH_COUNT(hit, field, k)
+#endif
 
 /* Entry distance of the ray into a box (box.h), INFINITY when it misses the
  * box before tmax. */
@@ -76,8 +88,10 @@ inline int bvh_traverse(__global const BvhNode *nodes, __global const Tri *tris,
     int node = root;
     for (;;) {
         __global const BvhNode *n = &nodes[node];
+        BVH_COUNT(hit, nodes, 1);
         if (n->count > 0) {
             int end = n->first + n->count;
+            BVH_COUNT(hit, tests, n->count);
             for (int i = n->first; i < end; ++i) {
                 __global const Tri *tr = &tris[i];
                 float t, u, v;

@@ -4,8 +4,11 @@ import numpy as np
 import pytest
 
 import oclgi
-from oclgi.accel.bvh import any_hits, closest_hits
-from oclgi.accel.bvh_build import build_bvh
+from oclgi.accel.bvh import any_hits, closest_hits, traversal_work
+from oclgi.accel.bvh_build import QUALITIES, build_bvh
+from oclgi.accel.bvh_sah import MEDIAN_DEPTH
+from oclgi.cl.constants import BVH_STACK_SIZE
+from oclgi.scene.compiled import CompiledScene
 from reference import ray_triangle_brute
 
 
@@ -42,10 +45,10 @@ def _random_rays(scene, rng, n):
     return origins, dirs
 
 
-def _check_against_brute_force(engine, rng, n_rays):
+def _check_against_brute_force(engine, rng, n_rays, compiled=None):
     scene = engine.scene
     origins, dirs = _random_rays(scene, rng, n_rays)
-    t, _u, _v, tri = closest_hits(engine.queue, engine.compiled, origins, dirs)
+    t, _u, _v, tri = closest_hits(engine.queue, compiled or engine.compiled, origins, dirs)
     t_ref, tri_ref = ray_triangle_brute(origins, dirs, scene.vertices[scene.faces])
     hit, hit_ref = tri >= 0, tri_ref >= 0
     assert hit_ref.sum() > 0.4 * n_rays  # the test exercises hits and misses
@@ -74,6 +77,31 @@ def test_closest_hit_equals_brute_force_bunny(bunny, rng):
     _check_against_brute_force(bunny, rng, 2_000)
 
 
+def test_scene_trees_are_sah_by_default(bunny):
+    assert bunny.compiled.bvh_quality == "sah"
+
+
+def test_closest_hit_equals_brute_force_lbvh(cornell_spheres, rng):
+    """The Morton tree (the builder the overlap trees use) traverses to the
+    same hits as brute force too."""
+    lbvh = CompiledScene(cornell_spheres.ctx, cornell_spheres.scene, bvh_quality="lbvh")
+    _check_against_brute_force(cornell_spheres, rng, 10_000, lbvh)
+
+
+def test_sah_tree_does_less_traversal_work_than_lbvh(bunny, rng):
+    """The point of SAH: fewer nodes visited per ray, for the same hits
+    (counted by the counting build of the closest-hit kernel)."""
+    origins, dirs = _random_rays(bunny.scene, rng, 20_000)
+    lbvh = CompiledScene(bunny.ctx, bunny.scene, bvh_quality="lbvh")
+    nodes_sah, tests_sah = traversal_work(bunny.queue, bunny.compiled, origins, dirs)
+    nodes_lbvh, tests_lbvh = traversal_work(bunny.queue, lbvh, origins, dirs)
+    assert nodes_sah.min() >= 1 and tests_sah.sum() > 0
+    assert nodes_sah.sum() < 0.95 * nodes_lbvh.sum()
+    a = closest_hits(bunny.queue, bunny.compiled, origins, dirs)
+    b = closest_hits(bunny.queue, lbvh, origins, dirs)
+    assert (a[3] == b[3]).mean() > 0.999
+
+
 def test_any_hit_agrees_with_closest_hit(bunny, rng):
     origins, dirs = _random_rays(bunny.scene, rng, 5_000)
     t, _u, _v, tri = closest_hits(bunny.queue, bunny.compiled, origins, dirs)
@@ -83,16 +111,16 @@ def test_any_hit_agrees_with_closest_hit(bunny, rng):
     assert (any_hits(bunny.queue, bunny.compiled, origins, dirs, full).astype(bool) == (tri >= 0)).all()
 
 
-def test_bvh_structure_invariants(rng):
-    c = rng.random((5000, 3))
-    lo, hi = c - 0.01, c + 0.02
-    bvh = build_bvh(lo, hi, leaf_size=4)
+def _check_structure(bvh, lo, hi, leaf_size=4):
+    n = len(lo)
     nodes = bvh.nodes
     leaf = nodes["count"] > 0
     # every primitive in exactly one leaf
     covered = np.concatenate([bvh.order[f:f + k] for f, k in zip(nodes["first"][leaf], nodes["count"][leaf])])
-    assert np.array_equal(np.sort(covered), np.arange(5000))
-    assert nodes["count"][leaf].max() <= 4
+    assert np.array_equal(np.sort(covered), np.arange(n))
+    assert nodes["count"][leaf].max() <= leaf_size
+    # children adjacent, numbered after their parent; root 0
+    assert (nodes["first"][~leaf] > np.nonzero(~leaf)[0]).all()
     # every node's box holds its children's (inner) or primitives' (leaf) boxes
     for i in np.nonzero(~leaf)[0]:
         for c_ in (nodes["first"][i], nodes["first"][i] + 1):
@@ -101,6 +129,82 @@ def test_bvh_structure_invariants(rng):
         ids = bvh.order[nodes["first"][i]:nodes["first"][i] + nodes["count"][i]]
         assert (nodes["lo"][i] <= lo[ids].astype(np.float32)).all()
         assert (nodes["hi"][i] >= hi[ids].astype(np.float32)).all()
+
+
+@pytest.mark.parametrize("quality", QUALITIES)
+def test_bvh_structure_invariants(rng, quality):
+    c = rng.random((5000, 3))
+    lo, hi = c - 0.01, c + 0.02
+    _check_structure(build_bvh(lo, hi, leaf_size=4, quality=quality), lo, hi)
+
+
+def test_sah_tree_is_the_same_on_every_run(scenes_dir):
+    """Deterministic: the tree depends on the boxes only (run twice, and in
+    a fresh process, the bytes are equal)."""
+    import subprocess
+    import sys
+
+    rng = np.random.default_rng(3)
+    c = rng.random((20_000, 3)) ** 3  # clustered: uneven splits
+    lo, hi = c, c + rng.random((20_000, 3)) * 0.01
+    a, b = build_bvh(lo, hi, quality="sah"), build_bvh(lo, hi, quality="sah")
+    assert a.nodes.tobytes() == b.nodes.tobytes() and np.array_equal(a.order, b.order)
+    code = ("import numpy as np, hashlib, sys; from oclgi.accel.bvh_build import build_bvh; "
+            "rng = np.random.default_rng(3); c = rng.random((20_000, 3)) ** 3; "
+            "t = build_bvh(c, c + rng.random((20_000, 3)) * 0.01, quality='sah'); "
+            "print(hashlib.sha256(t.nodes.tobytes() + t.order.tobytes()).hexdigest())")
+    import hashlib
+
+    other = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                           env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+    assert other.stdout.strip() == hashlib.sha256(a.nodes.tobytes() + a.order.tobytes()).hexdigest()
+
+
+def test_sah_fallbacks_keep_depth_bounded(monkeypatch):
+    """Boxes SAH splits a few at a time (exponentially spaced: 35 levels)
+    end, from MEDIAN_DEPTH on, in median splits, which bound the depth by
+    log2 of what is left (MEDIAN_DEPTH is lowered here to see it; at its
+    real value the bound keeps any tree within the traversal stack). Boxes
+    whose centroids coincide are halved."""
+    import oclgi.accel.bvh_sah as bvh_sah
+
+    assert MEDIAN_DEPTH + 32 <= BVH_STACK_SIZE  # 2^31 primitives fit below it
+    x = 2.0 ** -np.arange(120.0)  # each box half the size and distance of the last
+    lo = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1).astype(np.float32)
+    hi = lo + np.stack([x * 0.1] * 3, axis=1).astype(np.float32)
+    assert build_bvh(lo, hi, quality="sah").depth > 20
+    monkeypatch.setattr(bvh_sah, "MEDIAN_DEPTH", 2)
+    bvh = build_bvh(lo, hi, quality="sah")
+    _check_structure(bvh, lo, hi)
+    assert bvh.depth <= 2 + int(np.ceil(np.log2(120 / 4))) + 1
+    same = np.zeros((1000, 3), np.float32)
+    bvh = build_bvh(same, same + 1, quality="sah")
+    _check_structure(bvh, same, same + 1)
+    assert bvh.depth <= 10  # halving: ceil(log2(1000 / 4)) + 1 levels
+
+
+def test_sah_beats_lbvh_on_the_surface_area_cost(scenes_dir):
+    """The tree's SAH cost (inner areas + leaf areas x primitives, over the
+    root's area) on the bunny: lower than the Morton tree's."""
+    import trimesh
+
+    m = trimesh.load(scenes_dir / "stanford-bunny" / "bun_zipper.ply")
+    v = m.vertices[m.faces].astype(np.float32)
+
+    def cost(t):
+        e = np.maximum(t.nodes["hi"] - t.nodes["lo"], 0)
+        a = e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
+        leaf = t.nodes["count"] > 0
+        return (a[~leaf].sum() + (a[leaf] * t.nodes["count"][leaf]).sum()) / a[0]
+
+    sah, lbvh = build_bvh(v.min(1), v.max(1), quality="sah"), build_bvh(v.min(1), v.max(1))
+    _check_structure(sah, v.min(1), v.max(1))
+    assert cost(sah) < 0.9 * cost(lbvh)
+
+
+def test_unknown_quality_is_refused():
+    with pytest.raises(ValueError, match="quality"):
+        build_bvh(np.zeros((2, 3)), np.ones((2, 3)), quality="best")
 
 
 def test_watertight_shared_edges(rng):

@@ -48,3 +48,18 @@ def any_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
     launch(queue, k, n, *compiled.scene_args, ob, db, n, hb, local_size=local_size)
     cl.enqueue_copy(queue, out, hb)
     return out
+
+
+def traversal_work(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
+    """(nodes visited, triangles tested) by each ray's closest-hit query: the
+    exact work count behind rays/s, for comparing trees (the counting build
+    of ``bvh_query.cl``; every other kernel traverses without counters)."""
+    ctx = queue.context
+    n = len(origins)
+    ob, db = _rays(ctx, origins, dirs, tmax)
+    out = np.empty((n, 2), np.int32)
+    wb = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, max(out.nbytes, 8))
+    k = programs(ctx).get("bvh_query", bvh_count=1).bvh_query_count
+    launch(queue, k, n, *compiled.scene_args, ob, db, n, wb, local_size=local_size)
+    cl.enqueue_copy(queue, out, wb)
+    return out[:, 0], out[:, 1]

@@ -15,18 +15,10 @@ adjacent, nodes are numbered level by level, root 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ..cl.layout import BvhNode
-
-
-@dataclass
-class BvhData:
-    nodes: np.ndarray  # BvhNode records
-    order: np.ndarray  # primitive ids in leaf order
-    depth: int  # number of levels (root = 1)
+from .bvh_sah import build_sah
+from .bvh_tree import BvhData, flatten
 
 
 def _spread_bits(x: np.ndarray) -> np.ndarray:
@@ -52,8 +44,18 @@ def bit_length(x: np.ndarray) -> np.ndarray:
     return np.where(hi > 0, 32 + np.frexp(hi)[1], np.frexp(lo)[1]).astype(np.int64)
 
 
-def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> BvhData:
-    """LBVH over primitive boxes, on the 30-bit Morton codes of their centres."""
+QUALITIES = ("lbvh", "sah")
+
+
+def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh") -> BvhData:
+    """A BVH over primitive boxes: ``quality="lbvh"`` splits on the 30-bit
+    Morton codes of their centres (fast; the overlap trees use it), ``"sah"``
+    by the binned surface area heuristic (``bvh_sah.py``; better trees for
+    ray traversal)."""
+    if quality == "sah":
+        return build_sah(box_lo, box_hi, leaf_size)
+    if quality != "lbvh":
+        raise ValueError(f"BVH quality must be one of {QUALITIES}, got {quality!r}")
     box_lo = np.asarray(box_lo, dtype=np.float32)
     box_hi = np.asarray(box_hi, dtype=np.float32)
     if len(box_lo) == 0:
@@ -105,30 +107,4 @@ def build_from_codes(codes: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, 
         first.append(None)
         count.append(None)
 
-    first_all = np.concatenate(first)
-    count_all = np.concatenate(count)
-    n_nodes = len(first_all)
-    lo = np.empty((n_nodes, 3), np.float32)
-    hi = np.empty((n_nodes, 3), np.float32)
-    # leaves: reduce the sorted primitive boxes over their ranges (leaves tile [0, n))
-    leaf = count_all > 0
-    leaf_ids = np.nonzero(leaf)[0]
-    leaf_ids = leaf_ids[np.argsort(first_all[leaf_ids], kind="stable")]
-    slo, shi = box_lo[order], box_hi[order]
-    lo[leaf_ids] = np.minimum.reduceat(slo, first_all[leaf_ids], axis=0)
-    hi[leaf_ids] = np.maximum.reduceat(shi, first_all[leaf_ids], axis=0)
-    # inner nodes, deepest level first
-    level_start = np.cumsum([0] + [len(x) for x in first])
-    for lvl in range(len(first) - 1, -1, -1):
-        ids = np.arange(level_start[lvl], level_start[lvl + 1])
-        ids = ids[count_all[ids] == 0]
-        if len(ids) == 0:
-            continue
-        c0 = first_all[ids]
-        lo[ids] = np.minimum(lo[c0], lo[c0 + 1])
-        hi[ids] = np.maximum(hi[c0], hi[c0 + 1])
-
-    nodes = np.zeros(n_nodes, dtype=BvhNode)
-    nodes["lo"], nodes["hi"] = lo, hi
-    nodes["first"], nodes["count"] = first_all, count_all
-    return BvhData(nodes=nodes, order=order, depth=len(first))
+    return flatten(first, count, order, box_lo, box_hi)

@@ -23,6 +23,11 @@ from .scene import Scene
 F32_MAX = float(np.finfo(np.float32).max)
 
 
+# The scene's and the movable objects' trees: built once per scene (a move
+# changes a transform only), traversed by every ray of every kernel.
+BVH_QUALITY = "sah"
+
+
 def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
     array = np.ascontiguousarray(array)
     if array.nbytes == 0:  # OpenCL refuses empty buffers
@@ -43,9 +48,10 @@ def as_transform(matrix) -> np.ndarray:
 
 
 class CompiledScene:
-    def __init__(self, ctx: cl.Context, scene: Scene):
+    def __init__(self, ctx: cl.Context, scene: Scene, bvh_quality: str = BVH_QUALITY):
         self.ctx = ctx
         self.scene = scene
+        self.bvh_quality = bvh_quality
         self.bounds = scene.bounds()  # of the geometry as loaded (estimators ask for it often)
         t0 = time.perf_counter()
         v = scene.vertices[scene.faces]  # (F, 3, 3) float64
@@ -110,7 +116,7 @@ class CompiledScene:
         n_nodes, depth = 0, 0
         for k, (a, b) in enumerate(ranges):
             vk = v[a:b]
-            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1))
+            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=self.bvh_quality)
             nodes = bvh.nodes.copy()
             inner = nodes["count"] == 0
             nodes["first"][inner] += n_nodes  # children in the joint node array
