@@ -169,23 +169,30 @@ def atomic_path(path: Path):
 
 @contextmanager
 def staged_folder(path):
-    """Yield a temporary folder beside the folder ``path``; when the block
-    succeeds, move what it holds into ``path`` (created if missing), else
-    remove it: a failed run adds nothing to ``path``."""
+    """Yield a temporary folder for the files of the folder ``path``; when
+    the block succeeds, move what it holds into ``path``, else remove it: a
+    failed run adds nothing to ``path``.
+
+    A missing ``path`` is staged beside it and renamed into place whole; an
+    existing one is staged inside it (hidden), which needs no right to write
+    its parent.
+    """
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise OclgiError(f"{path}: exists and is not a folder")
     check_output(path / "frame")  # the folder (or where it will be) takes files
     tempfiles.install_signal_cleanup()
+    existed = path.is_dir()
+    beside = path / path.name if existed else path
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tempfiles.remove_stale(path.parent)
-        stage = tempfiles.create_folder(path)
+        beside.parent.mkdir(parents=True, exist_ok=True)
+        tempfiles.remove_stale(beside.parent)
+        stage = tempfiles.create_folder(beside)
     except OSError as exc:
         raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
     try:
         yield stage
-        if not path.exists():
+        if not existed:
             os.rename(stage, path)  # all at once
         else:
             for entry in sorted(stage.iterdir()):

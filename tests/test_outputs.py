@@ -242,7 +242,10 @@ SLOW_WRITE = textwrap.dedent("""
     def slow(tmp, path, pixels):
         real(tmp, path, pixels)
         print("writing", flush=True)  # the temporary file exists now
-        time.sleep(60)
+        # Short sleeps: the signal may reach one of the OpenCL runtime's
+        # threads, and Python runs its handler only once the main thread wakes.
+        for _ in range(600):
+            time.sleep(0.1)
 
     io.write_image_file = slow
     sys.exit(cli.main(sys.argv[1:]))
@@ -265,6 +268,24 @@ def test_sigterm_while_writing_leaves_no_temporary_file(scene, tmp_path):
     assert proc.returncode in (-signal.SIGTERM, 128 + signal.SIGTERM), proc.returncode
     assert "Traceback" not in proc.stderr.read()
     assert snapshot(tmp_path) == before
+
+
+def test_sigkill_leftover_is_removed_by_the_next_run(oclgi, scene, tmp_path):
+    before = snapshot(tmp_path)
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, "render", "s.toml", "-o", "x.exr", "--quiet"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "writing\n", proc.stderr.read()
+        proc.kill()  # SIGKILL: no handler runs
+        proc.wait(timeout=30)
+    finally:
+        proc.kill()
+        proc.wait()
+    left = [p.name for p in tmp_path.iterdir() if tempfiles.is_temporary(p.name)]
+    assert left and all(f"-{proc.pid}-" in name for name in left)
+    rc, out, err = oclgi(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", "--quiet")
+    assert rc == 0, err
+    assert snapshot(tmp_path).keys() == {*before, Path("e.npy")}
 
 
 def _dead_pid() -> int:
@@ -464,22 +485,27 @@ def test_read_only_places_fail_before_any_work():
 # -- animations ---------------------------------------------------------------------------------------------
 
 class FakeSession:
-    """The two calls animate() makes; ``fail_at`` raises at that frame."""
+    """The two calls animate() makes; ``fail_at`` raises at that frame,
+    ``hang_at`` says so on stdout and waits there."""
 
-    def __init__(self, fail_at=None, hang_at=None):
+    def __init__(self, fail_at=None, hang_at=None, look=None):
         self.fail_at, self.hang_at, self.frame = fail_at, hang_at, -1
+        self.look, self.seen = look, []  # the entries of folder ``look`` at each frame
 
     def move(self, name, pose):
         from oclgi.incremental.session import UpdateStats
 
         self.frame += 1
+        if self.look is not None:
+            self.seen.append(sorted(os.listdir(self.look)))
         if self.frame == self.fail_at:
             raise OclgiError("the device ran out of memory")
         if self.frame == self.hang_at:
             print("frames written", flush=True)
             import time
 
-            time.sleep(60)
+            for _ in range(600):  # short sleeps, as in SLOW_WRITE
+                time.sleep(0.1)
         return UpdateStats(paths=1, segments_removed=0, segments_added=0, points=4, seconds={"total": 0.001})
 
     def render(self, exposure):
@@ -498,7 +524,10 @@ def test_failed_animation_adds_no_frame(tmp_path):
         animate(FakeSession(fail_at=3), "block", "line:1,0,0", 4, old)
     assert snapshot(tmp_path) == {Path("old/frame_0000.png"): b"earlier run"}
 
-    rows = animate(FakeSession(), "block", "line:1,0,0", 2, old)
+    session = FakeSession(look=tmp_path)
+    rows = animate(session, "block", "line:1,0,0", 2, old)
+    # An existing folder is staged inside it: its parent needs no write right.
+    assert session.seen == [["old"], ["old"]]
     assert len(rows) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
     assert sorted(p.name for p in old.iterdir()) == ["frame_0000.png", "frame_0001.png", "timing.csv"]
