@@ -240,8 +240,8 @@ def _render_outputs(args) -> list[Path]:
         raise OclgiError(f"{out}: the output must end in .exr or .png")
     if args.no_png and args.no_exr:
         raise OclgiError("--no-png and --no-exr together leave nothing to write")
-    for flag, refused in (("--no-png", ".png"), ("--no-exr", ".exr")):
-        if getattr(args, flag[2:].replace("-", "_")) and named is not None and suffix == refused:
+    for off, flag, refused in ((args.no_png, "--no-png", ".png"), (args.no_exr, "--no-exr", ".exr")):
+        if off and named is not None and suffix == refused:
             raise OclgiError(f"{flag} contradicts -o {named}")
     exr = out if suffix == ".exr" else out.with_suffix(".exr")
     png = out if suffix == ".png" else out.with_suffix(".png")

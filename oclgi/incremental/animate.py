@@ -52,10 +52,14 @@ def _matrix_problem(m: np.ndarray) -> str | None:
     return None
 
 
+def _frame_stem(f: int) -> str:
+    return f"frame_{f:04d}"
+
+
 def output_names(frames: int, write_exr: bool = False) -> list[str]:
     """The files :func:`animate` writes into its folder."""
-    names = [f"frame_{f:04d}{ext}" for f in range(frames) for ext in ((".png", ".exr") if write_exr else (".png",))]
-    return names + ["timing.csv"]
+    exts = (".png", ".exr") if write_exr else (".png",)
+    return [_frame_stem(f) + ext for f in range(frames) for ext in exts] + ["timing.csv"]
 
 
 def poses(spec: str, frames: int) -> list[np.ndarray]:
@@ -109,8 +113,9 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
     """Move ``name`` along the path, write one PNG (and EXR) per frame and a
     per-frame timing log (``timing.csv``); returns the log rows.
 
-    The files are made in a temporary folder beside ``out_dir`` and moved
-    into it at the end: a run that fails part-way adds no frame to it.
+    The files are made in a hidden temporary folder (beside ``out_dir``, or
+    inside it when it exists) and moved into it at the end: a run that fails
+    part-way adds no frame to it.
     """
     from ..io import staged_folder, write_array_text, write_images
 
@@ -120,7 +125,7 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
         for f, pose in enumerate(path):
             stats = session.move(name, pose)
             radiance, pixels = session.render(exposure)
-            stem = stage / f"frame_{f:04d}"
+            stem = stage / _frame_stem(f)
             images = {stem.with_suffix(".png"): pixels}
             if write_exr:
                 images[stem.with_suffix(".exr")] = radiance
