@@ -93,12 +93,13 @@ def is_oclgi_image(path) -> bool:
         inp.close()
 
 
-def _sync(tmp: Path, path: Path) -> None:
+def _sync(tmp: Path, path: Path, flush: bool = True) -> None:
     """Flush ``tmp`` to disk and refuse an empty one: a full disk may only
-    show here (delayed allocation, network file systems)."""
+    show here (network file systems report it at the flush)."""
     fd = os.open(tmp, os.O_RDONLY)
     try:
-        os.fsync(fd)
+        if flush:
+            os.fsync(fd)
         size = os.fstat(fd).st_size
     finally:
         os.close(fd)
@@ -121,10 +122,14 @@ def _sync_folder(folder: Path) -> None:
 
 
 @contextmanager
-def atomic_paths(paths):
+def atomic_paths(paths, sync: bool = True):
     """Yield temporary paths beside ``paths`` (same suffixes); when the block
     succeeds, each is flushed and checked, and only then are all renamed into
-    place: all or nothing. OS errors become an :class:`OclgiError`."""
+    place: all or nothing. OS errors become an :class:`OclgiError`.
+
+    ``sync=False`` leaves the flush to the caller: files made inside a
+    :func:`staged_folder`, which flushes them all once at its end.
+    """
     paths = [Path(p) for p in paths]
     for path in paths:
         check_output(path)
@@ -143,12 +148,12 @@ def atomic_paths(paths):
         yield list(temps)
         for tmp, path in zip(temps, paths):
             current = path
-            _sync(tmp, path)
+            _sync(tmp, path, sync)
         for tmp, path in zip(temps, paths):
             current = path
             os.replace(tmp, path)
             tempfiles.release(tmp)
-        for folder in {p.parent for p in paths}:
+        for folder in {p.parent for p in paths} if sync else ():
             _sync_folder(folder)
     except OSError as exc:
         for tmp in temps:
@@ -161,9 +166,9 @@ def atomic_paths(paths):
 
 
 @contextmanager
-def atomic_path(path: Path):
+def atomic_path(path: Path, sync: bool = True):
     """:func:`atomic_paths` for one file: yield its temporary path."""
-    with atomic_paths([path]) as (tmp,):
+    with atomic_paths([path], sync) as (tmp,):
         yield tmp
 
 
@@ -192,6 +197,11 @@ def staged_folder(path):
         raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
     try:
         yield stage
+        # One flush of everything, rather than one per file as it was made.
+        for entry in stage.iterdir():
+            if entry.is_file():
+                _sync(entry, path / entry.name)
+        _sync_folder(stage)
         if not existed:
             os.rename(stage, path)  # all at once
         else:
@@ -199,6 +209,7 @@ def staged_folder(path):
                 os.replace(entry, path / entry.name)
             stage.rmdir()
         tempfiles.release(stage)
+        _sync_folder(path.parent if not existed else path)
     except OSError as exc:
         tempfiles.remove(stage)
         raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
@@ -220,8 +231,9 @@ def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
     """Write an image to ``tmp`` (a temporary name from :func:`atomic_path`; ``path``
     names it in errors): the one OpenImageIO writer of every image oclgi makes.
 
-    The file is flushed to disk and read back whole before this returns: some
-    writers (PNG's) report success for a file the disk had no room for.
+    The file is read back whole before this returns: some writers (PNG's)
+    report success for a file the disk had no room for. (:func:`atomic_paths`
+    flushes it before the rename.)
     """
     import OpenImageIO as oiio
 
@@ -242,10 +254,6 @@ def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
     closed = out.close()
     if not ok or not closed:
         raise OclgiError(f"cannot write {path}: {_oiio_error(err or out.geterror(), tmp, path)}")
-    try:
-        _sync(tmp, path)
-    except OSError as exc:
-        raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
     _check_readable(tmp, path, (h, w, c))
 
 
@@ -291,14 +299,15 @@ def write_image(path, pixels: np.ndarray) -> Path:
     return path
 
 
-def write_images(images: dict) -> list[Path]:
+def write_images(images: dict, sync: bool = True) -> list[Path]:
     """Write several images ``{path: pixels}``, all or nothing.
 
     Every image is written to its temporary file and checked first; only
-    when all are complete are they renamed into place.
+    when all are complete are they renamed into place. ``sync``: as for
+    :func:`atomic_paths`.
     """
     paths = [Path(p) for p in images]
-    with atomic_paths(paths) as temps:
+    with atomic_paths(paths, sync) as temps:
         for tmp, p, pixels in zip(temps, paths, images.values()):
             write_image_file(tmp, p, pixels)
     return paths
@@ -317,15 +326,13 @@ def read_image(path) -> np.ndarray:
 
 
 def _write_bytes(tmp: Path, data: bytes) -> None:
-    """Write ``data`` to ``tmp`` and check that every byte reached the disk.
+    """Write ``data`` to ``tmp`` and check that every byte reached the file.
 
     The data is made in memory first (it is small: one row per point or
     frame) so that a full disk surfaces as the OS's own error here.
     """
     with open(tmp, "wb") as f:
         f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
     if os.stat(tmp).st_size != len(data):
         raise OSError(errno.EIO, "the file on disk is shorter than what was written")
 
@@ -352,12 +359,13 @@ def write_array(path, values: np.ndarray, points=None) -> Path:
     return path
 
 
-def write_array_text(path, columns: list[str], rows) -> Path:
-    """A CSV table with a header line (e.g. a per-frame timing log)."""
+def write_array_text(path, columns: list[str], rows, sync: bool = True) -> Path:
+    """A CSV table with a header line (e.g. a per-frame timing log); ``sync``:
+    as for :func:`atomic_paths`."""
     path = Path(path)
     lines = [",".join(columns)] + [
         ",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r) for r in rows]
     data = ("\n".join(lines) + "\n").encode()
-    with atomic_path(path) as tmp:
+    with atomic_path(path, sync) as tmp:
         _write_bytes(tmp, data)
     return path

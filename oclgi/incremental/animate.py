@@ -129,12 +129,12 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
             images = {stem.with_suffix(".png"): pixels}
             if write_exr:
                 images[stem.with_suffix(".exr")] = radiance
-            write_images(images)
+            write_images(images, sync=False)  # the staged folder flushes them all at its end
             rows.append({"frame": f, "paths": stats.paths, "segments_removed": stats.segments_removed,
                          "segments_added": stats.segments_added, "points": stats.points,
                          **{f"{k}_s": v for k, v in stats.seconds.items()}})
             if progress:
                 progress(f, rows[-1])
         keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
-        write_array_text(stage / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows])
+        write_array_text(stage / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows], sync=False)
     return rows
