@@ -192,6 +192,7 @@ def staged_folder(path):
     try:
         beside.parent.mkdir(parents=True, exist_ok=True)
         tempfiles.remove_stale(beside.parent)
+        tempfiles.remove_stale(path.parent)  # an earlier run's stage beside it
         stage = tempfiles.create_folder(beside)
     except OSError as exc:
         raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
