@@ -1,6 +1,6 @@
 """The ``oclgi`` command.
 
-    oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE]
+    oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE] [--no-png|--no-exr] [--force]
     oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv
     oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]

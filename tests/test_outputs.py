@@ -369,8 +369,8 @@ def test_sibling_never_replaces_a_users_file(oclgi, scene, tmp_path):
 
 
 def test_sibling_of_a_png_and_reruns(oclgi, scene, tmp_path):
-    for _ in range(2):  # the second run replaces oclgi's own files (make render does this)
-        rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", "x.png", "--quiet")
+    for named in ("x.exr", "x.png", "x.exr"):  # each run replaces oclgi's own files (make render does this)
+        rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", named, "--quiet")
         assert rc == 0, err
         assert out == "wrote x.exr\nwrote x.png\n"
     (tmp_path / "y.exr").write_bytes(b"not an image")
@@ -396,6 +396,14 @@ def test_default_outputs_are_both_protected(no_work, oclgi, scene, tmp_path):
 def test_sibling_flags_that_contradict(no_work, oclgi, scene, tmp_path, args, match):
     before = snapshot(tmp_path)
     refused(oclgi(tmp_path, "render", "s.toml", *args, "--quiet"), match)
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", [["render", "s.toml"], ["animate", "s.toml", "--path", "line:1,0,0", "-o", "a"]])
+@pytest.mark.parametrize("exposure", ["-1", "nan", "0", "inf"])
+def test_bad_exposure_is_refused(no_work, oclgi, scene, tmp_path, command, exposure):
+    before = snapshot(tmp_path)
+    refused(oclgi(tmp_path, *command, "--exposure", exposure), "argument --exposure: expected a positive number")
     assert snapshot(tmp_path) == before
 
 
