@@ -1,6 +1,6 @@
 """The ``oclgi`` command.
 
-    oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE]
+    oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE] [--no-png|--no-exr] [--force]
     oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv
     oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
@@ -140,8 +140,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("render", help="render the scene's camera to EXR (linear) and PNG (sRGB)")
     _estimate_args(r)
-    r.add_argument("-o", "--output", type=Path, help="output path; .exr and .png are written with its stem "
-                   "(default: out/SCENE.exr)")
+    r.add_argument("-o", "--output", type=Path,
+                   help="output path, .exr or .png; the other format is written beside it with the same stem "
+                        "(-o x.exr writes x.exr and x.png) unless --no-png or --no-exr (default: out/SCENE.exr)")
+    r.add_argument("--no-png", action="store_true", help="write only the EXR")
+    r.add_argument("--no-exr", action="store_true", help="write only the PNG")
+    r.add_argument("--force", action="store_true",
+                   help="replace an existing file of the name not given with -o even when oclgi did not write it")
     r.add_argument("--width", type=_positive_int, help="image width (default: the scene camera's)")
     r.add_argument("--height", type=_positive_int, help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
@@ -221,31 +226,59 @@ def _est_kwargs(args):
                 max_depth=args.max_depth, **dict(args.option))
 
 
+def _render_outputs(args) -> list[Path]:
+    """The files ``render`` writes: the one -o names and, unless --no-png or
+    --no-exr, the other format beside it. A file of the name not given (both,
+    by default) may replace an existing one only when oclgi wrote that one
+    (or with --force): a user's photo.png survives ``-o photo.exr``."""
+    from .io import check_not_input, is_oclgi_image
+
+    named = args.output
+    out = named or Path("out") / f"{args.scene.stem}.exr"
+    suffix = out.suffix.lower()
+    if suffix not in (".exr", ".png"):
+        raise OclgiError(f"{out}: the output must end in .exr or .png")
+    if args.no_png and args.no_exr:
+        raise OclgiError("--no-png and --no-exr together leave nothing to write")
+    for off, flag, refused in ((args.no_png, "--no-png", ".png"), (args.no_exr, "--no-exr", ".exr")):
+        if off and named is not None and suffix == refused:
+            raise OclgiError(f"{flag} contradicts -o {named}")
+    exr = out if suffix == ".exr" else out.with_suffix(".exr")
+    png = out if suffix == ".png" else out.with_suffix(".png")
+    paths = [p for p, off in ((exr, args.no_exr), (png, args.no_png)) if not off]
+    check_not_input(paths, {args.scene: "the scene file"})
+    for p in paths:
+        if p != named and p.is_file() and not args.force and not is_oclgi_image(p):
+            other = "--no-png" if p.suffix == ".png" else "--no-exr"
+            raise OclgiError(f"{p} exists and oclgi did not write it: give --force to replace it, "
+                             f"{other} to leave it, or another -o")
+    return paths
+
+
 def cmd_render(args):
     from .io import check_output, write_images
 
-    out = args.output or Path("out") / f"{args.scene.stem}.exr"
-    if out.suffix.lower() not in (".exr", ".png"):
-        raise OclgiError(f"{out}: the output must end in .exr or .png")
-    exr, png = out.with_suffix(".exr"), out.with_suffix(".png")
-    check_output(exr)
-    check_output(png)
+    paths = _render_outputs(args)
+    for p in paths:
+        check_output(p)
     engine = _engine(args)
     result = engine.render(width=args.width, height=args.height, exposure=args.exposure, **_est_kwargs(args))
-    write_images({exr: result.radiance, png: result.pixels})  # both or neither
+    # All or none: a failure leaves neither file.
+    write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths})
     if not args.quiet:
         print(result.stats.summary(), file=sys.stderr)
-    print(f"wrote {exr}")
-    print(f"wrote {png}")
+    for p in paths:
+        print(f"wrote {p}")
 
 
 def cmd_irradiance(args):
-    from .io import check_output, write_array
+    from .io import check_not_input, check_output, write_array
     from .queries import from_file
 
     if args.output.suffix.lower() not in (".npy", ".csv"):
         raise OclgiError(f"{args.output}: the output must end in .npy or .csv")
     check_output(args.output)
+    check_not_input([args.output], {args.scene: "the scene file", args.points: "the points file (--points)"})
     points = from_file(args.points)
     engine = _engine(args)
     est = engine.irradiance(points, **_est_kwargs(args))
@@ -256,12 +289,18 @@ def cmd_irradiance(args):
 
 
 def cmd_animate(args):
-    from .incremental.animate import animate, poses
+    from .incremental.animate import animate, output_names, poses
     from .incremental.session import Session
+    from .io import check_not_input, check_output
 
     out = args.output
     if out.exists() and not out.is_dir():
         raise OclgiError(f"{out}: exists and is not a folder")
+    check_output(out / "timing.csv")
+    inputs = {args.scene: "the scene file"}
+    if Path(args.path).is_file():
+        inputs[Path(args.path)] = "the keyframes file (--path)"
+    check_not_input([out / n for n in output_names(args.frames, args.exr)], inputs)
     poses(args.path, args.frames)  # a bad path fails before any work
     engine = _engine(args)
     movable = [o.name for o in engine.scene.objects if o.movable]
@@ -271,7 +310,6 @@ def cmd_animate(args):
             raise OclgiError(f"--object is needed: the scene has {len(movable)} movable objects {movable}")
         name = movable[0]
     engine.scene.object_id(name)
-    out.mkdir(parents=True, exist_ok=True)
     session = Session(engine, dynamic=args.dynamic, **_est_kwargs(args))
     show = None if args.quiet or not sys.stderr.isatty() else (
         lambda f, r: print(f"\rframe {f + 1}/{args.frames}: {r['paths']:,} paths re-traced, "

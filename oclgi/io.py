@@ -1,95 +1,295 @@
 """Writing results: images through OpenImageIO, arrays as .npy or .csv.
 
-Every file is written under a temporary name in the target folder and
-renamed into place, so a failed or interrupted run never leaves a partial
-output file (nor the temporary one). :func:`write_images` writes several
-files all or nothing (a render's EXR and PNG).
+Every file is written under a temporary name in the target folder (see
+:mod:`oclgi.tempfiles`), flushed to disk, checked (an image is read back
+whole) and only then renamed into place: a failed, interrupted or
+terminated run, or a full disk, never leaves a partial output file (nor the
+temporary one). :func:`write_images` writes several files all or nothing (a
+render's EXR and PNG). Every image carries the ``Software`` attribute
+``oclgi``, so a later run can tell its own earlier output from a user's file.
 """
 
 from __future__ import annotations
 
+import errno
+import io
 import os
-import tempfile
-from contextlib import ExitStack, contextmanager
+import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from . import tempfiles
 from .errors import OclgiError
 
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+SOFTWARE = "oclgi"
 
 
-def check_output(path) -> Path:
-    """Fail early (before any work) when ``path`` can never be written."""
-    path = Path(path)
-    if path.is_dir():
-        raise OclgiError(f"cannot write {path}: it is a folder")
+def _reason(exc: OSError) -> str:
+    """An OS error in plain words: "no space left on device"."""
+    text = exc.strerror or str(exc)
+    return text[:1].lower() + text[1:]
+
+
+def _existing_ancestor(path: Path) -> Path:
     parent = path.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
+    return parent
+
+
+def check_output(path) -> Path:
+    """Fail early (before any work) when ``path`` can never be written: a
+    folder, a parent that is a file, a folder (or its nearest existing
+    ancestor) where no file can be created, or an existing read-only file."""
+    path = Path(path)
+    if path.is_dir():
+        raise OclgiError(f"cannot write {path}: it is a folder")
+    parent = _existing_ancestor(path)
     if parent.exists() and not parent.is_dir():
         raise OclgiError(f"cannot write {path}: {parent} is not a folder")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise OclgiError(f"cannot write {path}: the file is read-only")
+    # Creating a file is the only test that also holds for root (who passes
+    # every permission check) and read-only or virtual file systems.
+    try:
+        probe = tempfiles.create_file(parent / path.name, ".probe")
+    except OSError as exc:
+        raise OclgiError(f"cannot write {path}: {_reason(exc)} (in {parent})") from None
+    tempfiles.remove(probe)
     return path
 
 
-@contextmanager
-def atomic_path(path: Path):
-    """Yield a temporary path beside ``path`` (same suffix); rename on success.
+def check_not_input(outputs, inputs: dict) -> None:
+    """Refuse (before any work) an output that is one of the run's input files.
 
-    The file gets the permissions a plain ``open`` would give it (0666 less
-    the umask), not mkstemp's 0600. OS errors become an :class:`OclgiError`.
+    ``inputs`` maps a file to what it is ("the scene file"); files that do not
+    exist are ignored (an output can only overwrite what exists).
     """
-    path = Path(path)
-    check_output(path)
+    for out in map(Path, outputs):
+        if not out.exists():
+            continue
+        for inp, what in inputs.items():
+            try:
+                same = Path(inp).exists() and os.path.samefile(out, inp)
+            except OSError:
+                same = False
+            if same:
+                raise OclgiError(f"cannot write {out}: it is {what}, which the output would replace")
+
+
+def is_oclgi_image(path) -> bool:
+    """Whether ``path`` is an image oclgi wrote (its Software attribute)."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        oiio.geterror()  # clear it: not an image is a plain "no"
+        return False
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OclgiError(f"cannot create output folder {path.parent}: {exc.strerror}") from None
+        return inp.spec().get_string_attribute("Software") == SOFTWARE
+    finally:
+        inp.close()
+
+
+def _sync(tmp: Path, path: Path, flush: bool = True) -> None:
+    """Flush ``tmp`` to disk and refuse an empty one: a full disk may only
+    show here (network file systems report it at the flush)."""
+    fd = os.open(tmp, os.O_RDONLY)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    except OSError as exc:
-        raise OclgiError(f"cannot write {path}: {exc.strerror}") from None
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
+        if flush:
+            os.fsync(fd)
+        size = os.fstat(fd).st_size
     finally:
         os.close(fd)
+    if size == 0:
+        raise OclgiError(f"cannot write {path}: nothing reached the disk (is it full?)")
+
+
+def _sync_folder(folder: Path) -> None:
+    # The rename itself is durable only once the folder is flushed.
     try:
-        yield Path(tmp)
-        os.replace(tmp, path)
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems do not sync folders; the file itself is synced
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def atomic_paths(paths, sync: bool = True):
+    """Yield temporary paths beside ``paths`` (same suffixes); when the block
+    succeeds, each is flushed and checked, and only then are all renamed into
+    place: all or nothing. OS errors become an :class:`OclgiError`.
+
+    ``sync=False`` leaves the flush to the caller: files made inside a
+    :func:`staged_folder`, which flushes them all once at its end.
+    """
+    paths = [Path(p) for p in paths]
+    for path in paths:
+        check_output(path)
+    tempfiles.install_signal_cleanup()
+    temps = []
+    current = paths[0] if paths else None
+    try:
+        for path in paths:
+            current = path
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OclgiError(f"cannot create output folder {path.parent}: {_reason(exc)}") from None
+            tempfiles.remove_stale(path.parent)
+            temps.append(tempfiles.create_file(path))
+        yield list(temps)
+        for tmp, path in zip(temps, paths):
+            current = path
+            _sync(tmp, path, sync)
+        for tmp, path in zip(temps, paths):
+            current = path
+            os.replace(tmp, path)
+            tempfiles.release(tmp)
+        for folder in {p.parent for p in paths} if sync else ():
+            _sync_folder(folder)
     except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
-        raise OclgiError(f"cannot write {path}: {exc.strerror or exc}") from None
+        for tmp in temps:
+            tempfiles.remove(tmp)
+        raise OclgiError(f"cannot write {current}: {_reason(exc)}") from None
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp in temps:
+            tempfiles.remove(tmp)
         raise
+
+
+@contextmanager
+def atomic_path(path: Path, sync: bool = True):
+    """:func:`atomic_paths` for one file: yield its temporary path."""
+    with atomic_paths([path], sync) as (tmp,):
+        yield tmp
+
+
+@contextmanager
+def staged_folder(path):
+    """Yield a temporary folder for the files of the folder ``path``; when
+    the block succeeds, move what it holds into ``path``, else remove it: a
+    failed run adds nothing to ``path``.
+
+    A missing ``path`` is staged beside it and renamed into place whole; an
+    existing one is staged inside it (hidden), which needs no right to write
+    its parent.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OclgiError(f"{path}: exists and is not a folder")
+    check_output(path / "frame")  # the folder (or where it will be) takes files
+    tempfiles.install_signal_cleanup()
+    existed = path.is_dir()
+    beside = path / path.name if existed else path
+    try:
+        beside.parent.mkdir(parents=True, exist_ok=True)
+        tempfiles.remove_stale(beside.parent)
+        tempfiles.remove_stale(path.parent)  # an earlier run's stage beside it
+        stage = tempfiles.create_folder(beside)
+    except OSError as exc:
+        raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
+    try:
+        yield stage
+        # One flush of everything, rather than one per file as it was made.
+        for entry in stage.iterdir():
+            if entry.is_file():
+                _sync(entry, path / entry.name)
+        _sync_folder(stage)
+        if not existed:
+            os.rename(stage, path)  # all at once
+        else:
+            for entry in sorted(stage.iterdir()):
+                os.replace(entry, path / entry.name)
+            stage.rmdir()
+        tempfiles.release(stage)
+        _sync_folder(path.parent if not existed else path)
+    except OSError as exc:
+        tempfiles.remove(stage)
+        raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
+    except BaseException:
+        tempfiles.remove(stage)
+        raise
+
+
+def _oiio_error(text: str, tmp: Path, path: Path) -> str:
+    # The library names the temporary file; the user knows only the output.
+    return _one_line(str(text).replace(str(tmp), str(path))) or "the image library gave no reason"
+
+
+def _one_line(text: str) -> str:
+    return " ".join(part.strip() for part in text.splitlines() if part.strip())
 
 
 def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
     """Write an image to ``tmp`` (a temporary name from :func:`atomic_path`; ``path``
-    names it in errors): the one OpenImageIO writer of every image oclgi makes."""
+    names it in errors): the one OpenImageIO writer of every image oclgi makes.
+
+    The file is read back whole before this returns: some writers (PNG's)
+    report success for a file the disk had no room for. (:func:`atomic_paths`
+    flushes it before the rename.)
+    """
     import OpenImageIO as oiio
 
     h, w, c = pixels.shape
     fmt = oiio.FLOAT if pixels.dtype == np.float32 else oiio.UINT8
     out = oiio.ImageOutput.create(str(tmp))
     if out is None:
-        raise OclgiError(f"cannot write {path}: {oiio.geterror()}")
+        raise OclgiError(f"cannot write {path}: {_oiio_error(oiio.geterror(), tmp, path)}")
     spec = oiio.ImageSpec(w, h, c, fmt)
     # No time stamp (OpenEXR's writer adds one unless told otherwise): the
     # same run gives the same bytes, so renders can be compared with cmp.
     spec.attribute("DateTime", "")
+    spec.attribute("Software", SOFTWARE)
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
     ok = out.open(str(tmp), spec) and out.write_image(np.ascontiguousarray(pixels))
     err = out.geterror()
-    out.close()
-    if not ok:
-        raise OclgiError(f"cannot write {path}: {err}")
+    closed = out.close()
+    if not ok or not closed:
+        raise OclgiError(f"cannot write {path}: {_oiio_error(err or out.geterror(), tmp, path)}")
+    _check_readable(tmp, path, (h, w, c))
+
+
+def _check_readable(tmp: Path, path: Path, shape) -> None:
+    import OpenImageIO as oiio
+
+    back = None
+    with _quiet_stderr():  # libpng prints its own complaint about a truncated file
+        inp = oiio.ImageInput.open(str(tmp))
+        if inp is not None:
+            try:
+                back = inp.read_image()
+            finally:
+                inp.close()
+    oiio.geterror()  # the reason is the disk's, not the reader's
+    if back is None or tuple(back.shape) != tuple(shape):
+        raise OclgiError(f"cannot write {path}: the file on disk is incomplete (is the disk full?)")
+
+
+@contextmanager
+def _quiet_stderr():
+    """Silence what C libraries print on file descriptor 2 meanwhile."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def write_image(path, pixels: np.ndarray) -> Path:
@@ -100,18 +300,16 @@ def write_image(path, pixels: np.ndarray) -> Path:
     return path
 
 
-def write_images(images: dict) -> list[Path]:
+def write_images(images: dict, sync: bool = True) -> list[Path]:
     """Write several images ``{path: pixels}``, all or nothing.
 
-    Every image is written to its temporary file first; only when all are
-    complete are they renamed into place.
+    Every image is written to its temporary file and checked first; only
+    when all are complete are they renamed into place. ``sync``: as for
+    :func:`atomic_paths`.
     """
     paths = [Path(p) for p in images]
-    for p in paths:
-        check_output(p)
-    with ExitStack() as stack:
-        for p, pixels in zip(paths, images.values()):
-            tmp = stack.enter_context(atomic_path(p))
+    with atomic_paths(paths, sync) as temps:
+        for tmp, p, pixels in zip(temps, paths, images.values()):
             write_image_file(tmp, p, pixels)
     return paths
 
@@ -128,6 +326,18 @@ def read_image(path) -> np.ndarray:
         inp.close()
 
 
+def _write_bytes(tmp: Path, data: bytes) -> None:
+    """Write ``data`` to ``tmp`` and check that every byte reached the file.
+
+    The data is made in memory first (it is small: one row per point or
+    frame) so that a full disk surfaces as the OS's own error here.
+    """
+    with open(tmp, "wb") as f:
+        f.write(data)
+    if os.stat(tmp).st_size != len(data):
+        raise OSError(errno.EIO, "the file on disk is shorter than what was written")
+
+
 def write_array(path, values: np.ndarray, points=None) -> Path:
     """Irradiance per point: ``.npy`` (n, 3) float64, or ``.csv`` with the points' columns."""
     path = Path(path)
@@ -136,26 +346,27 @@ def write_array(path, values: np.ndarray, points=None) -> Path:
         raise OclgiError(f"{path}: output must end in .npy or .csv")
     values = np.asarray(values, dtype=np.float64)
     with atomic_path(path) as tmp:
+        buf = io.BytesIO()
         if suffix == ".npy":
-            with open(tmp, "wb") as f:
-                np.save(f, values)
+            np.save(buf, values)
         else:
             cols = ["E_r", "E_g", "E_b"]
             data = values
             if points is not None:
                 cols = ["x", "y", "z", "nx", "ny", "nz"] + cols
                 data = np.hstack([points.positions[:, :3], points.normals[:, :3], values])
-            np.savetxt(tmp, data, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
+            np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
+        _write_bytes(tmp, buf.getvalue())
     return path
 
 
-def write_array_text(path, columns: list[str], rows) -> Path:
-    """A CSV table with a header line (e.g. a per-frame timing log)."""
+def write_array_text(path, columns: list[str], rows, sync: bool = True) -> Path:
+    """A CSV table with a header line (e.g. a per-frame timing log); ``sync``:
+    as for :func:`atomic_paths`."""
     path = Path(path)
-    check_output(path)
-    with atomic_path(path) as tmp:
-        with open(tmp, "w") as f:
-            f.write(",".join(columns) + "\n")
-            for r in rows:
-                f.write(",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r) + "\n")
+    lines = [",".join(columns)] + [
+        ",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r) for r in rows]
+    data = ("\n".join(lines) + "\n").encode()
+    with atomic_path(path, sync) as tmp:
+        _write_bytes(tmp, data)
     return path

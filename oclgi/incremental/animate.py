@@ -39,6 +39,29 @@ def _numbers(text: str, where: str) -> list[float]:
     return vals
 
 
+def _matrix_problem(m: np.ndarray) -> str | None:
+    """Why a row-major 4x4 pose cannot place an object, or None."""
+    if not np.allclose(m[3], [0, 0, 0, 1], rtol=0, atol=1e-9):
+        return f"has the last row {m[3].tolist()}, not 0,0,0,1 (a pose cannot be projective)"
+    linear = m[:3, :3]
+    # Singular (a zero scale flattens the object): tested relative to the
+    # matrix's own size, so a uniform small scale is still fine.
+    size = np.abs(linear).max()
+    if size == 0 or abs(np.linalg.det(linear)) <= 1e-9 * size ** 3:
+        return "is singular (a zero scale would flatten the object)"
+    return None
+
+
+def _frame_stem(f: int) -> str:
+    return f"frame_{f:04d}"
+
+
+def output_names(frames: int, write_exr: bool = False) -> list[str]:
+    """The files :func:`animate` writes into its folder."""
+    exts = (".png", ".exr") if write_exr else (".png",)
+    return [_frame_stem(f) + ext for f in range(frames) for ext in exts] + ["timing.csv"]
+
+
 def poses(spec: str, frames: int) -> list[np.ndarray]:
     """The object's 4x4 pose at each of ``frames`` frames."""
     if frames < 1:
@@ -74,7 +97,12 @@ def poses(spec: str, frames: int) -> list[np.ndarray]:
     if keys.shape[1] == 16:
         if len(keys) != frames:
             raise OclgiError(f"--path {path}: {len(keys)} matrices for {frames} frames")
-        return [k.reshape(4, 4) for k in keys]
+        matrices = [k.reshape(4, 4) for k in keys]
+        for row, m in enumerate(matrices, 1):
+            problem = _matrix_problem(m)
+            if problem:
+                raise OclgiError(f"--path {path}: the matrix of row {row} {problem}")
+        return matrices
     u = np.linspace(0, len(keys) - 1, frames) if frames > 1 else np.zeros(1)
     cols = [np.interp(u, np.arange(len(keys)), keys[:, c]) for c in range(keys.shape[1])]
     return [_translate_rotate(*(c[i] for c in cols)) for i in range(frames)]
@@ -83,23 +111,30 @@ def poses(spec: str, frames: int) -> list[np.ndarray]:
 def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure: float = 1.0,
             write_exr: bool = False, progress=None) -> list[dict]:
     """Move ``name`` along the path, write one PNG (and EXR) per frame and a
-    per-frame timing log (``timing.csv``); returns the log rows."""
-    from ..io import write_array_text, write_images
+    per-frame timing log (``timing.csv``); returns the log rows.
+
+    The files are made in a hidden temporary folder (beside ``out_dir``, or
+    inside it when it exists) and moved into it at the end: a run that fails
+    part-way adds no frame to it.
+    """
+    from ..io import staged_folder, write_array_text, write_images
 
     rows = []
-    for f, pose in enumerate(poses(spec, frames)):
-        stats = session.move(name, pose)
-        radiance, pixels = session.render(exposure)
-        stem = out_dir / f"frame_{f:04d}"
-        images = {stem.with_suffix(".png"): pixels}
-        if write_exr:
-            images[stem.with_suffix(".exr")] = radiance
-        write_images(images)
-        rows.append({"frame": f, "paths": stats.paths, "segments_removed": stats.segments_removed,
-                     "segments_added": stats.segments_added, "points": stats.points,
-                     **{f"{k}_s": v for k, v in stats.seconds.items()}})
-        if progress:
-            progress(f, rows[-1])
-    keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
-    write_array_text(out_dir / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows])
+    path = poses(spec, frames)
+    with staged_folder(out_dir) as stage:
+        for f, pose in enumerate(path):
+            stats = session.move(name, pose)
+            radiance, pixels = session.render(exposure)
+            stem = stage / _frame_stem(f)
+            images = {stem.with_suffix(".png"): pixels}
+            if write_exr:
+                images[stem.with_suffix(".exr")] = radiance
+            write_images(images, sync=False)  # the staged folder flushes them all at its end
+            rows.append({"frame": f, "paths": stats.paths, "segments_removed": stats.segments_removed,
+                         "segments_added": stats.segments_added, "points": stats.points,
+                         **{f"{k}_s": v for k, v in stats.seconds.items()}})
+            if progress:
+                progress(f, rows[-1])
+        keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
+        write_array_text(stage / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows], sync=False)
     return rows

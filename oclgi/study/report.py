@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import io as _io
 import math
-from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -216,7 +215,7 @@ def _save(fig, path) -> None:
 def write_all(result, out_dir, stem: str = "study", plots: bool = True, prefix: str = "") -> list:
     """``stem.md``, ``stem.csv`` and the plots (``prefix`` + their names) in
     ``out_dir``, each under a temporary name until all are complete."""
-    from ..io import atomic_path, check_output
+    from ..io import atomic_paths, check_output
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -231,13 +230,13 @@ def write_all(result, out_dir, stem: str = "study", plots: bool = True, prefix: 
         check_output(p)
     created = not out_dir.exists()
     try:
-        with ExitStack() as stack:
+        # Every file is flushed and checked before any is renamed into place.
+        with atomic_paths(paths) as temps:
+            tmp = dict(zip(paths, temps))
             for p, text in texts.items():
-                tmp = stack.enter_context(atomic_path(p))
-                tmp.write_text(text)
+                tmp[p].write_text(text)
             for p, plot in figures.items():
-                tmp = stack.enter_context(atomic_path(p))
-                plot(result, tmp)
+                plot(result, tmp[p])
     except BaseException:
         if created and out_dir.is_dir() and not any(out_dir.iterdir()):
             out_dir.rmdir()  # nothing was written: leave no empty folder either
