@@ -13,6 +13,7 @@ a NaN or infinite vertex coordinate is an error naming its line.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,8 +40,16 @@ class ObjMesh:
     materials: dict[str, MtlMaterial] = field(default_factory=dict)
 
 
+# Python's int() and float() also take "0_2" (as 2), "1_000" and non-ASCII
+# digits; the format has none of these, so a field must look like a number.
+_INT = re.compile(r"[+-]?[0-9]+")
+_FLOAT = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[+-]?(nan|inf|infinity)", re.IGNORECASE)
+
+
 def _floats(parts, path, lineno, n):
     try:
+        if not all(_FLOAT.fullmatch(x) for x in parts[:n]):
+            raise ValueError
         vals = [float(x) for x in parts[:n]]
     except ValueError:
         raise OclgiError(f"{path}:{lineno}: malformed number in {' '.join(parts)!r}") from None
@@ -128,15 +137,15 @@ def read_obj(path: Path, text: str | None = None,
                 raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
             idx = []
             for tok in line[1:]:
-                try:
-                    k = int(tok.split("/", 1)[0])
-                except ValueError:
-                    raise OclgiError(f"{path}:{lineno}: malformed face index {tok!r}") from None
+                num = tok.split("/", 1)[0]
+                if not _INT.fullmatch(num):
+                    raise OclgiError(f"{path}:{lineno}: malformed face index {tok!r}")
+                k = int(num)
                 if k < 0:
                     k = len(verts) + k  # relative: -1 is the last vertex read so far
                 else:
                     k -= 1
-                if k < 0 or k >= len(verts) or tok.split("/", 1)[0] in ("0", "-0"):
+                if k < 0 or k >= len(verts) or int(num) == 0:
                     raise OclgiError(f"{path}:{lineno}: face index {tok!r} refers to no vertex")
                 idx.append(k)
             for j in range(1, len(idx) - 1):
