@@ -106,29 +106,92 @@ def _check_ply(path, data):
         _check_ply_binary(path, data[start:], elements, _PLY_FORMATS[fmt])
 
 
+_SPACE = np.zeros(256, bool)
+_SPACE[list(b" \t\r\n\v\f")] = True
+
+
+class _Words:
+    """The words of an ASCII body, found with numpy (a list of words per line
+    would cost more than trimesh's whole read): for each non-blank line, its
+    number of words and where its first word is."""
+
+    def __init__(self, body: bytes):
+        self.body = body
+        self.bytes = a = np.frombuffer(body, np.uint8)
+        space = _SPACE[a]
+        word = ~space
+        self.starts = np.flatnonzero(word & np.concatenate(([True], space[:-1])))
+        self.ends = np.flatnonzero(word & np.concatenate((space[1:], [True]))) + 1
+        line = np.searchsorted(np.flatnonzero(a == 10), self.starts)  # each word's line, ascending
+        self.first = np.flatnonzero(np.diff(line, prepend=-1))  # each line's first word
+        self.count = np.diff(self.first, append=len(line))
+
+    def __len__(self) -> int:
+        return len(self.first)
+
+    def numbers(self, rows: slice, k: int) -> np.ndarray:
+        """Word ``k`` of each of ``rows`` as a whole number; -1 where it is none."""
+        first, count = self.first[rows], self.count[rows]
+        out = np.full(len(first), -1, np.int64)
+        has = np.flatnonzero(count > k)
+        start = self.starts[first[has] + k]
+        size = self.ends[first[has] + k] - start
+        # up to 9 digits, read as a table of digits: far more than any list holds
+        cols = np.arange(9)
+        inside = cols < size[:, None]
+        digits = self.bytes[start[:, None] + np.minimum(cols, size[:, None] - 1)].astype(np.int64) - 48
+        ok = (size <= 9) & (((digits >= 0) & (digits <= 9)) | ~inside).all(axis=1)
+        scale = np.where(inside, 10 ** np.maximum(size[:, None] - 1 - cols, 0), 0)
+        out[has[ok]] = (digits * scale).sum(axis=1)[ok]
+        return out
+
+    def row(self, r: int) -> list:
+        w = slice(self.first[r], self.first[r] + self.count[r])
+        return [self.body[s:e].decode("latin-1") for s, e in zip(self.starts[w], self.ends[w])]
+
+
+def _first_bad(ok: np.ndarray) -> int:
+    """The first index where ``ok`` is False; -1 if none."""
+    return int(np.argmin(ok)) if len(ok) and not ok.all() else -1
+
+
 def _check_ply_ascii(path, body, elements):
-    lines = [line for line in body.decode("latin-1").splitlines() if line.strip()]
+    words = _Words(body)
     declared = sum(e.count for e in elements)
-    if len(lines) != declared:
-        counts = _counts(elements)
-        _fail(path, "PLY", f"its header declares {counts} ({declared:,} lines of data), "
-                           f"the file holds {len(lines):,} lines")
-    row = 0
+    if len(words) != declared:
+        _fail(path, "PLY", f"its header declares {_counts(elements)} ({declared:,} lines of data), "
+                           f"the file holds {len(words):,} lines")
+    first = 0
     for e in elements:
-        for i in range(e.count):
-            words = lines[row].split()
-            at = 0
-            for _, item in e.props:
-                if item is not None:
-                    if at >= len(words) or not re.fullmatch(r"[0-9]+", words[at]):
-                        at = -1
-                        break
-                    at += int(words[at])
-                at += 1
-            if at != len(words):
-                _fail(path, "PLY", f"{e.name} {i} (data line {row + 1}) does not hold the numbers "
-                                   "its header's properties call for")
-            row += 1
+        rows = slice(first, first + e.count)
+        lists = [k for k, (_, item) in enumerate(e.props) if item is not None]
+        if len(lists) <= 1:
+            # the usual layouts (scalars, at most one list), for all rows at once
+            want = np.full(e.count, len(e.props), np.int64)
+            ok = np.ones(e.count, bool)
+            if lists:
+                n = words.numbers(rows, lists[0])
+                ok, want = n >= 0, want + n
+            bad = _first_bad(ok & (words.count[rows] == want))
+        else:
+            bad = next((i for i in range(e.count)
+                        if _words_wanted(row := words.row(first + i), e.props) != len(row)), -1)
+        if bad >= 0:
+            _fail(path, "PLY", f"{e.name} {bad} (data line {first + bad + 1}) does not hold the numbers "
+                               "its header's properties call for")
+        first += e.count
+
+
+def _words_wanted(words, props) -> int:
+    """How many words a row of ``props`` holds, by its list lengths; -1 if it cannot."""
+    at = 0
+    for _, item in props:
+        if item is not None:
+            if at >= len(words) or not (words[at].isascii() and words[at].isdigit()):
+                return -1
+            at += int(words[at])
+        at += 1
+    return at
 
 
 def _check_ply_binary(path, body, elements, order):
@@ -188,23 +251,25 @@ def _walk_rows(path, body, at, e, order):
 # -- OFF ---------------------------------------------------------------------------------
 
 def _check_off(path, data):
-    text = data.decode("latin-1")
-    lines = [line.split("#", 1)[0].split() for line in text.splitlines()]
-    lines = [words for words in lines if words]
-    if not lines or not re.fullmatch(r"C?N?OFF", lines[0][0]):
+    if b"#" in data:
+        data = b"\n".join(line.split(b"#", 1)[0] for line in data.splitlines())
+    words = _Words(data)
+    head = words.row(0) if len(words) else []
+    if not head or not re.fullmatch(r"C?N?OFF", head[0]):
         _fail(path, "OFF", "it does not start with 'OFF'")
-    rest = lines[0][1:] or (lines[1] if len(lines) > 1 else [])
-    first = 1 if lines[0][1:] else 2
-    if len(rest) not in (2, 3) or not all(re.fullmatch(r"[0-9]+", w) for w in rest):
+    counts, first = (head[1:], 1) if head[1:] else (words.row(1) if len(words) > 1 else [], 2)
+    if len(counts) not in (2, 3) or not all(w.isascii() and w.isdigit() for w in counts):
         _fail(path, "OFF", "the line after 'OFF' must give the vertex, face (and edge) counts")
-    nv, nf = int(rest[0]), int(rest[1])
-    body = lines[first:]
-    if nv + nf != len(body):
+    nv, nf = int(counts[0]), int(counts[1])
+    if nv + nf != len(words) - first:
         _fail(path, "OFF", f"its header declares {nv:,} vertices and {nf:,} faces, "
-                           f"{nv + nf:,} lines of data; the file holds {len(body):,} lines")
-    for i, words in enumerate(body[:nv]):
-        if len(words) < 3:
-            _fail(path, "OFF", f"vertex {i} has fewer than 3 coordinates")
-    for i, words in enumerate(body[nv:]):
-        if not re.fullmatch(r"[0-9]+", words[0]) or int(words[0]) < 3 or len(words) < 1 + int(words[0]):
-            _fail(path, "OFF", f"face {i} does not give its count and that many vertex indices")
+                           f"{nv + nf:,} lines of data; the file holds {len(words) - first:,} lines")
+    bad = _first_bad(words.count[first:first + nv] >= 3)
+    if bad >= 0:
+        _fail(path, "OFF", f"vertex {bad} has fewer than 3 coordinates")
+    faces = slice(first + nv, first + nv + nf)
+    n = words.numbers(faces, 0)
+    # a face line may go on past its indices (a colour)
+    bad = _first_bad((n >= 3) & (words.count[faces] >= 1 + n))
+    if bad >= 0:
+        _fail(path, "OFF", f"face {bad} does not give its count and that many vertex indices")
