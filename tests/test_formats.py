@@ -321,3 +321,23 @@ def test_seed_in_toml_is_exact_up_to_2_64(tmp_path, seed):
 def test_seed_past_2_64_refused(tmp_path):
     with pytest.raises(OclgiError, match=r"photons\.seed: expected an integer in 0\.\.2\^64-1"):
         _scene(tmp_path, QUADS + f"[photons]\nseed = {2**64}\n")
+
+
+def test_gltf_buffer_over_the_zip_bound_is_named(tmp_path, monkeypatch):
+    from oclgi.scene import zip_reader
+
+    files = _gltf_files()
+    monkeypatch.setattr(zip_reader, "MAX_INFLATED", len(files["model.gltf"]) + 10)
+    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+    with pytest.raises(OclgiError, match=r"m\.zip: member 'gltf_buffer_\d\.bin' inflates to \d+ bytes, more than "
+                                         r"the 10 bytes left"):
+        load_mesh(tmp_path / "m.zip")
+
+
+def test_real_meshes_still_load(scenes_dir):
+    bunny = load_mesh(scenes_dir / "stanford-bunny" / "bun_zipper.ply")  # ASCII PLY with extra properties
+    assert bunny.vertices.shape == (35947, 3) and bunny.faces.shape == (69451, 3)
+    sponza = load_mesh(scenes_dir / "sponza-dabrovic" / "sponza.zip")  # an OBJ in a zip
+    assert sponza.faces.shape == (66454, 3)
