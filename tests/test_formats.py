@@ -341,3 +341,19 @@ def test_real_meshes_still_load(scenes_dir):
     assert bunny.vertices.shape == (35947, 3) and bunny.faces.shape == (69451, 3)
     sponza = load_mesh(scenes_dir / "sponza-dabrovic" / "sponza.zip")  # an OBJ in a zip
     assert sponza.faces.shape == (66454, 3)
+
+
+def test_room_with_huge_ground_plane_runs(tmp_path):
+    # was "the scene has no emitter": the light's triangles were dropped as degenerate
+    from cli_run import run
+
+    def mesh(m):
+        return f"[[mesh]]\nvertices = {m['vertices']}\nfaces = {m['faces']}\nemission = {m.get('emission', [0, 0, 0])}\n"
+
+    (tmp_path / "s.toml").write_text(mesh(FLOOR) + mesh(LIGHT) + mesh(GROUND) +
+                                     "[photons]\ncount = 2000\n[estimator]\nradius = 0.1\n")
+    (tmp_path / "p.csv").write_text("x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n")
+    res = run(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv", "--quiet")
+    assert res.returncode == 0 and "degenerate" not in res.stderr, res.stderr
+    e = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1)
+    assert e.shape == (9,) and np.isfinite(e).all()

@@ -2,10 +2,10 @@
 
 Both formats declare their element counts up front, and trimesh trusts
 them: a PLY or OFF that declares 4 vertices and gives 3 loads with the
-first face's numbers as the fourth vertex and no face, without a word; a
-header declaring 10^10 faces would have memory set aside for them. Here the
-declared counts must fit in the file's size (checked before anything is
-allocated) and match the data exactly: in ASCII files one line per element
+first face's numbers as the fourth vertex and no face, without a word, and
+an ASCII PLY declaring 10^10 faces loads whatever follows. Here the declared
+counts must fit in the file's size (checked before anything is allocated
+for them) and match the data exactly: in ASCII files one line per element
 with the numbers its properties call for, in binary PLY the exact number of
 bytes.
 """

@@ -24,7 +24,6 @@ import numpy as np
 from ..errors import OclgiError
 from .counts import check_counts
 from .obj import MtlMaterial, read_obj
-from .resolvers import FolderResolver, MemberResolver
 from .trimesh_errors import trimesh_problem
 from .zip_reader import ZipReader
 
@@ -42,6 +41,8 @@ class LoadedMesh:
 
 
 def load_mesh(path: Path) -> LoadedMesh:
+    from . import resolvers  # imports trimesh: only when a mesh needs it
+
     path = Path(path)
     if not path.is_file():
         raise OclgiError(f"mesh file not found: {path}")
@@ -55,7 +56,7 @@ def load_mesh(path: Path) -> LoadedMesh:
             data = path.read_bytes()
         except OSError as exc:
             raise OclgiError(f"cannot read mesh file {path}: {exc.strerror or exc}") from None
-        return _load_trimesh(path, data, suffix, lambda: FolderResolver(path))
+        return _load_trimesh(path, data, suffix, lambda: resolvers.FolderResolver(path))
     raise OclgiError(f"{path}: unsupported mesh type {suffix!r} (use one of {sorted(MESH_TYPES | {'.zip'})})")
 
 
@@ -65,6 +66,8 @@ def _from_obj(obj) -> LoadedMesh:
 
 
 def _load_zip(path: Path) -> LoadedMesh:
+    from . import resolvers
+
     try:
         with zipfile.ZipFile(path) as z:
             reader = ZipReader(path, z)
@@ -86,7 +89,7 @@ def _load_zip(path: Path) -> LoadedMesh:
                 return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib))
             # a glTF's buffers and images are members beside it
             return _load_trimesh(path / inner, data, inner.suffix.lower(),
-                                 lambda: MemberResolver(reader, inner.parent.as_posix()))
+                                 lambda: resolvers.MemberResolver(reader, inner.parent.as_posix()))
     except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError,
             OSError, ValueError) as exc:
         raise OclgiError(f"{path}: not a readable zip file ({exc})") from None
