@@ -112,8 +112,9 @@ def _vec3(value, where, limit=_F32_MAX):
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
     if any(abs(x) > limit for x in v):
-        raise OclgiError(f"{where}: expected 3 numbers, each from -{_show(limit)} to {_show(limit)} "
-                         f"({'float32 on the device' if limit == _F32_MAX else 'as for vertex coordinates: the device squares them in float32'}), "
+        why = ("float32 on the device" if limit == _F32_MAX
+               else "as for vertex coordinates: the device squares them in float32")
+        raise OclgiError(f"{where}: expected 3 numbers, each from -{_show(limit)} to {_show(limit)} ({why}), "
                          f"got {value!r}")
     return v
 

@@ -146,11 +146,12 @@ def read_obj(path: Path, text: str | None = None,
                     k = int(num)
                 except ValueError:
                     raise OclgiError(f"{path}:{lineno}: malformed face index {tok!r}") from None
+                zero = k == 0  # OBJ counts from 1 (and back from -1): 0 and -0 name nothing
                 if k < 0:
                     k = len(verts) + k  # relative: -1 is the last vertex read so far
                 else:
                     k -= 1
-                if k < 0 or k >= len(verts) or int(num) == 0:
+                if zero or k < 0 or k >= len(verts):
                     raise OclgiError(f"{path}:{lineno}: face index {tok!r} refers to no vertex")
                 idx.append(k)
             for j in range(1, len(idx) - 1):
