@@ -13,8 +13,10 @@ from __future__ import annotations
 import json
 import traceback
 
-# trimesh's optional packages that the formats oclgi reads need
-# (setup.cfg installs them with oclgi); the package to install for each.
+# trimesh's optional packages that the formats oclgi reads may need, by
+# module, and the package to install for each. setup.cfg installs
+# charset-normalizer with oclgi (plain STL and OFF files need it when they
+# are not UTF-8); DracoPy only Draco-compressed glTF needs, and it is large.
 PACKAGES = {"charset_normalizer": "charset-normalizer", "DracoPy": "DracoPy"}
 
 
@@ -31,8 +33,8 @@ def _raised_by_trimesh(exc: BaseException) -> bool:
 
 def trimesh_problem(exc: BaseException, missing: list[str]) -> str:
     """What is wrong with the file, as one short phrase."""
-    if isinstance(exc, ImportError):
-        module = (exc.name or "").split(".")[0]
+    if isinstance(exc, ImportError) and exc.name:
+        module = exc.name.split(".")[0]
         package = PACKAGES.get(module, module)
         return (f"reading it needs the Python package {package!r}, which is not installed "
                 f"(pip install {package})")
