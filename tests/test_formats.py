@@ -357,3 +357,17 @@ def test_room_with_huge_ground_plane_runs(tmp_path):
     assert res.returncode == 0 and "degenerate" not in res.stderr, res.stderr
     e = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1)
     assert e.shape == (9,) and np.isfinite(e).all()
+
+
+@pytest.mark.parametrize("name, export", [
+    ("m.glb", lambda box: trimesh.Scene(box).export(file_type="glb")),
+    ("m.gltf", lambda box: trimesh.Scene(box).export(file_type="gltf", embed_buffers=True)["model.gltf"]),
+    ("m.stl", lambda box: box.export(file_type="stl")),
+    ("m.stl", lambda box: box.export(file_type="stl_ascii").encode()),
+    ("m.off", lambda box: box.export(file_type="off").encode()),
+    ("m.ply", lambda box: box.export(file_type="ply", encoding="ascii")),
+    ("m.ply", lambda box: box.export(file_type="ply")),
+])
+def test_each_format_loads_a_box(tmp_path, name, export):
+    mesh = _load(tmp_path, name, export(trimesh.creation.box()))
+    assert mesh.faces.shape == (12, 3) and np.allclose(np.abs(mesh.vertices), 0.5)
