@@ -134,6 +134,14 @@ def test_malformed_toml(fails_cleanly, tmp_path):
     fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"s\.toml: malformed TOML.*line 1")
 
 
+@pytest.mark.parametrize("nested", ["a = " + "[" * 1000 + "]" * 1000, "a = " + "{b = " * 1000 + "1" + "}" * 1000])
+def test_deeply_nested_toml(fails_cleanly, tmp_path, nested):
+    # was a RecursionError's traceback
+    write_scene(tmp_path)
+    (tmp_path / "s.toml").write_text(nested + "\n")
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"s\.toml: malformed TOML: .*nested too deeply")
+
+
 def test_binary_scene_file(fails_cleanly, tmp_path):
     (tmp_path / "s.toml").write_bytes(b"\xff\xfe\x00garbage")
     fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="not a text", sub=INP)
@@ -195,6 +203,10 @@ def test_mesh_type_unsupported(fails_cleanly, tmp_path):
     (SUB, "v 1 0 -1\n", "v nan 0 -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
     (SUB, "v 1 0 -1\n", "v inf 0 -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
     (SUB, "v 1 0 -1\n", "v 1 -inf -1\n", r"box\.obj:3: vertex coordinate is NaN or infinite"),
+    # Python's int() and float() read "0_8" as 8 and "1_0" as 10
+    (SUB, "f 5 6 7 8\n", "f 5 6 7 0_8\n", r"box\.obj:13: malformed face index '0_8'"),
+    (INP, "v 1 0 -1\n", "v 1_0 0 -1\n", r"box\.obj:3: malformed number in '1_0 0 -1'"),
+    (INP, "v 1 0 -1\n", "v \u0661 0 -1\n", r"box\.obj:3: malformed number"),  # an Arabic-Indic 1
 ])
 def test_malformed_obj(fails_cleanly, sub, tmp_path, old, new, match):
     assert old in BOX_OBJ

@@ -48,7 +48,7 @@ import numpy as np
 from ..errors import OclgiError
 from .. import params
 from .mesh import load_mesh
-from .scene import Camera, Material, PointLight, Scene, SceneObject
+from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
@@ -78,6 +78,8 @@ def load_file(path) -> Scene:
         raise OclgiError(f"{path}: malformed TOML: {exc}") from None
     except UnicodeDecodeError:
         raise OclgiError(f"{path}: not a text (TOML) file") from None
+    except RecursionError:  # tomllib recurses once per level of nested arrays or tables
+        raise OclgiError(f"{path}: malformed TOML: arrays or tables nested too deeply") from None
     except OSError as exc:
         raise OclgiError(f"cannot read scene file {path}: {exc.strerror or exc}") from None
     desc.setdefault("name", path.stem)
@@ -92,24 +94,35 @@ def _check_keys(d, allowed, where):
         raise OclgiError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
 
 
-def _vec3(value, where):
+def _show(x: float) -> str:
+    return f"{x:.2g}".replace("e+", "e")
+
+
+def _vec3(value, where, limit=_F32_MAX):
+    """3 finite numbers, none beyond ``limit`` in size (by default float32's
+    range: the device would see infinity)."""
     if isinstance(value, (str, bytes, dict)) or value is None:
         raise OclgiError(f"{where}: expected 3 numbers, got {value!r}")
     try:
         if any(isinstance(x, bool) for x in value):
             raise TypeError
         v = tuple(float(x) for x in value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond float's range
         raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
         raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
+    if any(abs(x) > limit for x in v):
+        why = ("float32 on the device" if limit == _F32_MAX
+               else "as for vertex coordinates: the device squares them in float32")
+        raise OclgiError(f"{where}: expected 3 numbers, each from -{_show(limit)} to {_show(limit)} ({why}), "
+                         f"got {value!r}")
     return v
 
 
 def _radiant(value, where):
     """An emission or intensity: 3 numbers, each 0 or in float32's normal
     range (negative ones are the scene's to refuse, with the material's name)."""
-    v = _vec3(value, where)
+    v = _vec3(value, where, math.inf)
     if any(0 < x < _F32_TINY or x > _F32_MAX for x in v):
         raise OclgiError(f"{where}: expected 3 numbers, each 0 or from 1.2e-38 to 3.4e38 "
                          f"(float32 on the device), got {value!r}")
@@ -117,10 +130,14 @@ def _radiant(value, where):
 
 
 def _number(value, where, kind=float):
+    """A finite number within float32's range (the device's), as ``kind``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise OclgiError(f"{where}: expected a number, got {value!r}")
-    if not math.isfinite(value):
+    if isinstance(value, float) and not math.isfinite(value):
         raise OclgiError(f"{where}: expected a finite number, got {value!r}")
+    if abs(value) > _F32_MAX:  # an int is compared exactly: no float conversion to overflow
+        raise OclgiError(f"{where}: expected a number from -3.4e38 to 3.4e38 (float32 on the device), "
+                         f"got {value!r}")
     if kind is int:
         if float(value) != int(value):
             raise OclgiError(f"{where}: expected an integer, got {value!r}")
@@ -274,7 +291,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     lights = []
     for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
         _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
-        lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position"),
+        lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position", MAX_COORDINATE),
                                  _radiant(pl.get("intensity"), f"point_light[{i}].intensity")))
 
     camera = None
@@ -284,8 +301,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         if "position" not in c or "look_at" not in c:
             raise OclgiError("camera: 'position' and 'look_at' are required")
         camera = Camera(
-            position=_vec3(c["position"], "camera.position"),
-            look_at=_vec3(c["look_at"], "camera.look_at"),
+            position=_vec3(c["position"], "camera.position", MAX_COORDINATE),
+            look_at=_vec3(c["look_at"], "camera.look_at", MAX_COORDINATE),
             up=_vec3(c.get("up", (0, 1, 0)), "camera.up"),
             fov=_number(c.get("fov", 40.0), "camera.fov"),
             width=_number(c.get("width", 256), "camera.width", int),

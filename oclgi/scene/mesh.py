@@ -2,7 +2,11 @@
 
 OBJ goes through oclgi's own reader (:mod:`oclgi.scene.obj`); PLY, glTF/GLB,
 STL and OFF through trimesh. A ``.zip`` holding one mesh file is read in
-memory (Sponza ships that way). Every mesh comes back as float64 vertices,
+memory (Sponza ships that way), within a bound on what it inflates to
+(:mod:`oclgi.scene.zip_reader`); a glTF's buffers come from beside it, on
+disk or in the zip. PLY and OFF headers are checked against their data
+first (:mod:`oclgi.scene.counts`): trimesh reads a file whose counts lie
+without a word. Every mesh comes back as float64 vertices,
 int64 faces and one material name per face ('' when the file names none),
 plus the materials the file itself defines.
 """
@@ -10,6 +14,7 @@ plus the materials the file itself defines.
 from __future__ import annotations
 
 import io
+import logging
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
+from .counts import check_counts
 from .obj import MtlMaterial, read_obj
+from .trimesh_errors import trimesh_problem
+from .zip_reader import ZipReader
 
 TRIMESH_TYPES = {".ply", ".glb", ".gltf", ".stl", ".off"}
 MESH_TYPES = {".obj"} | TRIMESH_TYPES
@@ -33,6 +41,8 @@ class LoadedMesh:
 
 
 def load_mesh(path: Path) -> LoadedMesh:
+    from . import resolvers  # imports trimesh: only when a mesh needs it
+
     path = Path(path)
     if not path.is_file():
         raise OclgiError(f"mesh file not found: {path}")
@@ -42,7 +52,11 @@ def load_mesh(path: Path) -> LoadedMesh:
     if suffix == ".obj":
         return _from_obj(read_obj(path))
     if suffix in TRIMESH_TYPES:
-        return _load_trimesh(path, path.read_bytes(), suffix)
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise OclgiError(f"cannot read mesh file {path}: {exc.strerror or exc}") from None
+        return _load_trimesh(path, data, suffix, lambda: resolvers.FolderResolver(path))
     raise OclgiError(f"{path}: unsupported mesh type {suffix!r} (use one of {sorted(MESH_TYPES | {'.zip'})})")
 
 
@@ -52,41 +66,70 @@ def _from_obj(obj) -> LoadedMesh:
 
 
 def _load_zip(path: Path) -> LoadedMesh:
+    from . import resolvers
+
     try:
         with zipfile.ZipFile(path) as z:
-            members = [m for m in z.namelist() if Path(m).suffix.lower() in MESH_TYPES]
+            reader = ZipReader(path, z)
+            members = [m for m in reader.names() if Path(m).suffix.lower() in MESH_TYPES]
             if len(members) != 1:
                 raise OclgiError(f"{path}: expected exactly one mesh file inside, found {len(members)}")
             inner = Path(members[0])
-            data = z.read(members[0])
+            data = reader.read(members[0])
             if inner.suffix.lower() == ".obj":
                 # material libraries are looked up beside the OBJ inside the zip
-                names = set(z.namelist())
+                names = set(reader.names())
 
                 def read_lib(name):
                     member = (inner.parent / name).as_posix()
                     if member not in names:
                         return None
-                    return z.read(member).decode("utf-8", errors="replace")
+                    return reader.read(member).decode("utf-8", errors="replace")
 
                 return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib))
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError) as exc:
+            # a glTF's buffers and images are members beside it
+            return _load_trimesh(path / inner, data, inner.suffix.lower(),
+                                 lambda: resolvers.MemberResolver(reader, inner.parent.as_posix()))
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError,
+            OSError, ValueError) as exc:
         raise OclgiError(f"{path}: not a readable zip file ({exc})") from None
-    return _load_trimesh(path, data, inner.suffix.lower())
 
 
-def _load_trimesh(path: Path, data: bytes, suffix: str) -> LoadedMesh:
+def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
+    """``data`` read by trimesh as a ``suffix`` file; ``resolver()`` gives
+    the files it names (a glTF's ``.bin`` buffers), beside ``path``."""
     import trimesh
 
+    kind = suffix[1:].upper()
+    check_counts(path, data, suffix)
+    files = resolver()
+    # trimesh logs what it tries and fails on a malformed file, tracebacks
+    # included; the user gets one line (below) instead
+    log, hush = logging.getLogger("trimesh"), logging.NullHandler()
+    log.addHandler(hush)
+    propagate, log.propagate = log.propagate, False
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="scene")
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], process=False, force="scene",
+                              resolver=files)
+    except OclgiError:
+        raise
     except Exception as exc:  # trimesh raises many types for malformed files
-        raise OclgiError(f"{path}: cannot read {suffix[1:].upper()} file ({type(exc).__name__}: {exc})") from None
+        if files.refused is not None:
+            raise files.refused from None
+        raise OclgiError(f"{path}: cannot read {kind} file: {trimesh_problem(exc, files.missing)}") from None
+    finally:
+        log.removeHandler(hush)
+        log.propagate = propagate
     verts, faces, fmat, names, mats = [], [], [], [""], {}
     offset = 0
     for name, geom in loaded.geometry.items():
         if not hasattr(geom, "faces") or len(geom.faces) == 0:
             continue
+        f = np.asarray(geom.faces, dtype=np.int64)
+        # checked per geometry: after the offset a -1 would name the previous one's last vertex
+        if f.min() < 0 or f.max() >= len(geom.vertices):
+            raise OclgiError(f"{path}: face indices out of range (0..{len(geom.vertices) - 1} for "
+                             f"{len(geom.vertices)} vertices, found {f.min()}..{f.max()})")
         # world transform of every node that instances this geometry
         nodes = loaded.graph.geometry_nodes.get(name, [None])
         for node in nodes:
@@ -95,15 +138,15 @@ def _load_trimesh(path: Path, data: bytes, suffix: str) -> LoadedMesh:
                 m, _ = loaded.graph[node]
                 v = v @ m[:3, :3].T + m[:3, 3]
             verts.append(v)
-            faces.append(np.asarray(geom.faces, dtype=np.int64) + offset)
+            faces.append(f + offset)
             offset += len(v)
             mat = _trimesh_material(geom)
             if mat is not None:
                 names.append(name)
                 mats[name] = mat
-                fmat.append(np.full(len(geom.faces), len(names) - 1))
+                fmat.append(np.full(len(f), len(names) - 1))
             else:
-                fmat.append(np.zeros(len(geom.faces), dtype=np.int64))
+                fmat.append(np.zeros(len(f), dtype=np.int64))
     if not faces:
         raise OclgiError(f"{path}: no faces")
     return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats)

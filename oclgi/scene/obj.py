@@ -39,8 +39,18 @@ class ObjMesh:
     materials: dict[str, MtlMaterial] = field(default_factory=dict)
 
 
+def _plain(words) -> bool:
+    """Python's int() and float() also read "0_2" (as 2), "1_000" and
+    non-ASCII digits; the format has none of these. (Checked on the words
+    joined: two string methods per line, not a pattern per number.)"""
+    text = "".join(words)
+    return text.isascii() and "_" not in text
+
+
 def _floats(parts, path, lineno, n):
     try:
+        if not _plain(parts[:n]):
+            raise ValueError
         vals = [float(x) for x in parts[:n]]
     except ValueError:
         raise OclgiError(f"{path}:{lineno}: malformed number in {' '.join(parts)!r}") from None
@@ -127,16 +137,21 @@ def read_obj(path: Path, text: str | None = None,
             if len(line) < 4:
                 raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
             idx = []
+            plain = _plain(line[1:])
             for tok in line[1:]:
+                num = tok.split("/", 1)[0]
                 try:
-                    k = int(tok.split("/", 1)[0])
+                    if not plain and not _plain([num]):
+                        raise ValueError
+                    k = int(num)
                 except ValueError:
                     raise OclgiError(f"{path}:{lineno}: malformed face index {tok!r}") from None
+                zero = k == 0  # OBJ counts from 1 (and back from -1): 0 and -0 name nothing
                 if k < 0:
                     k = len(verts) + k  # relative: -1 is the last vertex read so far
                 else:
                     k -= 1
-                if k < 0 or k >= len(verts) or tok.split("/", 1)[0] in ("0", "-0"):
+                if zero or k < 0 or k >= len(verts):
                     raise OclgiError(f"{path}:{lineno}: face index {tok!r} refers to no vertex")
                 idx.append(k)
             for j in range(1, len(idx) - 1):

@@ -2,8 +2,9 @@
 
 A scene is built from a description (a TOML file or the same structure as a
 Python dict, see :mod:`oclgi.scene.description`). Geometry is validated here:
-non-finite vertices are an error, degenerate triangles are dropped with a
-warning that counts them, a scene without any emitter is an error.
+non-finite vertices are an error, degenerate triangles (each judged by its
+own shape, :mod:`oclgi.scene.degenerate`) are dropped with a warning that
+counts them, a scene without any emitter is an error.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from ..errors import OclgiError
 from ..params import RunParams
+from .degenerate import degenerate_triangles
 
 
 class OclgiWarning(UserWarning):
@@ -152,15 +154,14 @@ class Scene:
             raise OclgiError(f"{self.name}: face indices out of range")
         self.vertices, self.faces = v, f
         self.tri_material = np.asarray(self.tri_material, dtype=np.int64)
-        areas = self.triangle_areas()
-        scale = max(self.diagonal, 1e-30)
-        degenerate = ~(areas > 1e-12 * scale * scale)
+        degenerate = degenerate_triangles(v, f)
         if degenerate.any():
             n_bad = int(degenerate.sum())
             keep = ~degenerate
             self.faces, self.tri_material = self.faces[keep], self.tri_material[keep]
             self.tri_object = np.asarray(self.tri_object)[keep]
-            warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area)", OclgiWarning, stacklevel=3)
+            warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
+                          "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
                 raise OclgiError(f"{self.name}: every triangle is degenerate")
         for m in self.materials:
