@@ -26,27 +26,37 @@ import math
 import os
 from dataclasses import dataclass, field
 
+from . import params
 from .errors import OclgiError
+
+DEFAULT_K = 50  # Photon Maps' default k (oclgi/estimators/photon_map.py)
 
 GIB = float(1 << 30)
 SEGMENT_BYTES = 48  # oclgi.cl.layout.Segment
-# Device bytes per query point that every estimator of a method keeps
-# (positions, normals, sums, irradiance, and the index built over the points).
-POINT_DEVICE_BYTES = {"detp": 72, "detp_disc_index": 136, "detp_ray_map": 120, "detp_sphere_cache": 104,
-                      "impact": 40, "photon_map": 80}
-POINT_SUMS_BYTES = 24  # the int64 RGB sums per point: the largest per-point buffer but Photon Maps' k lists
+# The device buffers every estimator of a method keeps per query point,
+# bytes per point: positions, normals, sums, irradiance, and the index built
+# over the points (Photon Maps' neighbour lists: point_buffers).
+POINT_BUFFERS = {
+    "detp": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16},
+    "impact": {"positions": 16, "barycentrics": 8, "irradiance": 16},
+    "photon_map": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16, "query order": 4, "radii": 4},
+}
+INDEX_BYTES = {"detp_disc_index": 64, "detp_ray_map": 48, "detp_sphere_cache": 32}  # the variants' index
 # Host bytes per query point of one estimate: its irradiance and sums read
 # back (16 + 24) and the temporaries of checking and packing points.
 POINT_HOST_BYTES = 96
 # A rendered pixel on the host: the camera's points (40), the estimate (40),
 # the radiance and pixels (32), and the images' encoding when written (32).
+# (On a CPU device the device buffers come on top: 1024x1024 pixels of DETP
+# peaked at 235 bytes a pixel in all, this estimate says 268.)
 PIXEL_HOST_BYTES = 144
-# A rendered pixel on the device beside the estimator: the camera's points
-# (40, while the camera runs) and the shading's copies, radiance and pixels (52).
-PIXEL_DEVICE_BYTES = 52
+# A rendered pixel on the device beside the estimator: the shading's copies
+# of the points, its radiance and its pixels (oclgi/engine.py's shade).
+PIXEL_BUFFERS = {"shaded positions": 16, "shaded normals": 16, "radiance": 16, "pixels": 4}
 # The host's share of one stored estimate in a study (float64 RGB, and the
 # list it is stacked from).
 STUDY_VALUE_BYTES = 2 * 3 * 8
+RANDOM_POINT_HOST_BYTES = 256  # a random point's float64 draws and temporaries, and its packed copy
 SEED_HOST_BYTES = 40  # a Python int in the seeds' list
 POSE_HOST_BYTES = 256  # a 4x4 float64 pose and its array header
 FRAME_HOST_BYTES = 1024  # a frame's row of timings
@@ -99,6 +109,14 @@ def host_available() -> int | None:
         return None
 
 
+def shares_host_memory(device) -> bool:
+    """Whether the device's buffers live in the host's memory (a CPU
+    device, as PoCL's): then they count against the host's memory too."""
+    import pyopencl as cl
+
+    return bool(device.type & cl.device_type.CPU)
+
+
 def check(need: Need, device=None) -> Need:
     """Raise OclgiError if ``need`` does not fit ``device`` (None: check the
     host only) or the host's available memory; return it otherwise."""
@@ -111,8 +129,9 @@ def check(need: Need, device=None) -> Need:
                              f"{gib(need.device_largest)} in its largest buffer ({biggest}) (the device allows "
                              f"{gib(largest)} in one buffer, {gib(total)} in all){hint}")
     available = host_available()
-    if available is not None and need.host > available:
-        raise OclgiError(f"{need.what} needs about {gib(need.host)} of host memory ({gib(available)} is "
+    host = need.host + (need.device_total if device is not None and shares_host_memory(device) else 0)
+    if available is not None and host > available:
+        raise OclgiError(f"{need.what} needs about {gib(host)} of host memory ({gib(available)} is "
                          f"available){hint}")
     return need
 
@@ -127,15 +146,14 @@ def batch_buffers(photons: int, max_depth: int, batch_bytes: int) -> dict:
 
 
 def point_buffers(method: str, n: int, k: int | None = None) -> dict:
-    """An estimator's buffers over ``n`` query points: its sums (the largest
-    per-point buffer), the rest together, and Photon Maps' neighbour lists
-    (k ids and k distances per point)."""
-    out = {"sums per point": n * POINT_SUMS_BYTES,
-           "other per-point buffers": n * (POINT_DEVICE_BYTES.get(method, 136) - POINT_SUMS_BYTES)}
-    if method == "photon_map":
-        k = int(k) if k is not None else 50
-        out["neighbour ids"] = out["neighbour distances"] = n * k * 4
-    return out
+    """An estimator's buffers over ``n`` query points, each by its size."""
+    per_point = dict(POINT_BUFFERS.get(method, POINT_BUFFERS["detp"]))
+    if method in INDEX_BYTES:
+        per_point["index over the points"] = INDEX_BYTES[method]
+    if method == "photon_map":  # k ids and k distances per point
+        k = int(k) if params.integral(k) else DEFAULT_K
+        per_point["neighbour ids"] = per_point["neighbour distances"] = 4 * k
+    return {name: n * size for name, size in per_point.items()}
 
 
 def irradiance_need(n_points: int, method: str, photons: int, max_depth: int, batch_bytes: int,
@@ -149,7 +167,7 @@ def render_need(width: int, height: int, method: str, photons: int, max_depth: i
                 k: int | None = None) -> Need:
     n = width * height
     device = {**point_buffers(method, n, k), **batch_buffers(photons, max_depth, batch_bytes),
-              "shading (points, radiance, pixels)": n * PIXEL_DEVICE_BYTES}
+              **{name: n * size for name, size in PIXEL_BUFFERS.items()}}
     return Need(f"a {width}x{height} image", device, n * PIXEL_HOST_BYTES, "use a smaller width/height")
 
 
@@ -157,6 +175,12 @@ def camera_need(width: int, height: int) -> Need:
     n = width * height
     return Need(f"the visible points of a {width}x{height} camera", {"points": n * 16, "normals": n * 16,
                 "barycentrics": n * 8}, n * 40 + n * POINT_HOST_BYTES, "use a smaller width/height")
+
+
+def random_points_need(n: int) -> Need:
+    """Random surface points drawn on the host: the draws, positions and
+    normals in float64, and the packed float32 points (oclgi/study/run.py)."""
+    return Need(f"{n:,} random points", {}, n * RANDOM_POINT_HOST_BYTES, "use fewer points")
 
 
 def seeds_need(n_seeds: int) -> Need:

@@ -223,6 +223,12 @@ def frames(value, name: str = "frames") -> int:
     an image file: beyond MAX_FRAMES a run is no animation one could wait
     for (nor a folder one could list), and its poses alone would take
     gigabytes."""
+    n = integral(value)
+    if n is not None and n > MAX_FRAMES:
+        from .budget import frames_need, gib
+
+        raise ParamError(name, f"expected an integer in 1..{MAX_FRAMES:,}, got {_show(value)} (its poses and "
+                               f"timings alone would take about {gib(frames_need(n).host)} of memory)")
     return _integer_in(value, name, 1, MAX_FRAMES, f"an integer in 1..{MAX_FRAMES:,}")
 
 

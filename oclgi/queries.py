@@ -52,10 +52,11 @@ def _array(value, name: str, columns: tuple, n: int | None) -> np.ndarray:
 
 
 def _finite_rows(a: np.ndarray, name: str, limit: float | None = None) -> None:
-    bad = ~np.isfinite(a).all(axis=1)
-    if limit is not None:
-        with np.errstate(invalid="ignore"):
-            bad |= ~(np.abs(a) <= limit).all(axis=1)
+    if limit is not None:  # NaN fails the comparison too
+        with np.errstate(invalid="ignore", over="ignore"):
+            bad = ~(np.abs(a) <= limit).all(axis=1)
+    else:
+        bad = ~np.isfinite(a).all(axis=1)
     if bad.any():
         what = "a NaN or infinite value" if limit is None else f"a NaN, infinite or huge (beyond {limit:g}) value"
         raise OclgiError(f"query point {int(np.argmax(bad))}: {name} has {what} ({int(bad.sum())} such points)")
@@ -88,14 +89,17 @@ class QueryPoints:
                 tri = w.astype(np.int32)
             else:
                 tri = np.full(n, -1, np.int32)
-        _finite_rows(np.asarray(xyz, np.float64), "position", MAX_COORDINATE)
+        _finite_rows(xyz, "position", MAX_COORDINATE)
         bad = tri < -1
         if bad.any():
             i = int(np.argmax(bad))
             raise OclgiError(f"query point {i}: triangle id {int(tri[i])} is neither -1 (none) nor a triangle's index")
         _finite_rows(nrm, "normal")
         _finite_rows(bary, "barycentric")
-        length = np.linalg.norm(np.asarray(nrm[:, :3], np.float64), axis=1)
+        # squared lengths in the arrays' own precision: no float64 copy of
+        # a camera's millions of normals (finite ones: checked above)
+        n3 = nrm[:, :3]
+        length = np.sqrt(np.einsum("ij,ij->i", n3, n3))
         # A zero normal is how the camera marks a pixel that sees nothing
         # (no estimator counts there); anywhere else a normal is a unit vector.
         unit = np.abs(length - 1.0) <= NORMAL_TOLERANCE
