@@ -63,6 +63,21 @@ def as_query_points(points) -> queries.QueryPoints:
     return queries.from_arrays(a[:, :3], a[:, 3:])
 
 
+def _check_float32(scene: Scene) -> None:
+    """The scene's radiant values as the device holds them, in float32: a
+    Scene made or changed in Python has not been through the scene file's
+    readers (oclgi/scene/description.py), and a value beyond float32 would
+    reach the device as inf, or as 0 for one below its normal range."""
+    for m in scene.materials:
+        for key in ("emission", "albedo"):
+            for x in np.ravel(np.asarray(getattr(m, key), dtype=object)):
+                params.float32_real(x, f"material {m.name!r}: {key}", 0.0)
+    for i, light in enumerate(scene.point_lights):
+        for x in np.ravel(np.asarray(light.intensity, dtype=object)):
+            params.float32_real(x, f"point light {i}: intensity", 0.0)
+            params.float32_real(4 * math.pi * float(x), f"point light {i}: power (4 pi intensity)", 0.0)
+
+
 @dataclass
 class Estimate:
     irradiance: np.ndarray  # (n, 3) float32, W/m^2 per channel
@@ -104,6 +119,7 @@ class Engine:
             progress = params.flag(progress, "progress")
         batch_bytes = params._integer_in(batch_bytes, "batch_bytes", 1 << 16, 1 << 40,
                                          "a number of bytes from 64 KiB to 1 TiB")
+        _check_float32(scene)
         self.scene = scene
         self.ctx, self.queue = create_context(device)
         if local_size is not None:

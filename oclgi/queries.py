@@ -58,7 +58,7 @@ def _finite_rows(a: np.ndarray, name: str, limit: float | None = None) -> None:
     else:
         bad = ~np.isfinite(a).all(axis=1)
     if bad.any():
-        what = "a NaN or infinite value" if limit is None else f"a NaN, infinite or huge (beyond {limit:g}) value"
+        what = "a NaN or infinite value" if limit is None else f"a NaN, infinite or huge (beyond {limit:g}) value".replace("e+", "e")
         raise OclgiError(f"query point {int(np.argmax(bad))}: {name} has {what} ({int(bad.sum())} such points)")
 
 
