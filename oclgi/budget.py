@@ -65,7 +65,11 @@ NOTICE_SECONDS = 60.0
 
 
 def gib(nbytes: float) -> str:
-    return f"{nbytes / GIB:.1f} GiB"
+    """A size as messages write it: GiB from 1 GiB up, else MiB or KiB."""
+    for unit, size in (("GiB", GIB), ("MiB", float(1 << 20))):
+        if nbytes >= size:
+            return f"{nbytes / size:.1f} {unit}"
+    return f"{nbytes / 1024:.1f} KiB"
 
 
 @dataclass
