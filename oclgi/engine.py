@@ -278,7 +278,6 @@ class Engine:
         run = RunParams.read({k: v for k, v in given.items() if v is not None}, base=self.scene.settings)
         if run.radius is None:
             run = replace(run, radius=read_radius(self.scene.radius, "radius (by default 1% of the scene's diagonal)"))
-        self._check_precision(run)
         return run
 
     def _check_precision(self, run: RunParams) -> None:
@@ -287,7 +286,8 @@ class Engine:
         Count's and Photon Maps' resolve) and DETP's 1 / (scale pi d^2). One
         that rounds to 0 or inf in float32 would give zeros, inf or NaN
         everywhere; the scene's power, the photon count and the radius decide
-        them, so this is checked here, where a run meets the scene, whether
+        them, so this is checked where a run meets the scene (every
+        estimator is made by Engine.estimator, the sessions' too), whether
         the scene came from a file or from Python."""
         scale = self.compiled.fixed_scale(run.photons)  # refuses a scale beyond float32 itself
         derived = {"1 / the fixed-point scale": 1.0 / scale}
@@ -316,6 +316,7 @@ class Engine:
         cls = ESTIMATORS[params.method]
         check_options(params.method, options)
         self._check_points(points)
+        self._check_precision(params)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size,
                    count_work=flag(count_work, "count_work"), **options)
