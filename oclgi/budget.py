@@ -204,6 +204,16 @@ def frames_need(frames: int) -> Need:
                 "use fewer frames")
 
 
+def frames(value, name: str = "frames") -> int:
+    """An animation's frame count (oclgi.params.frames), refused beyond its
+    cap with what its poses and timings alone would take."""
+    n = params.integral(value)
+    if n is not None and n > params.MAX_FRAMES:
+        raise params.ParamError(name, f"expected an integer in 1..{params.MAX_FRAMES:,}, got {n} (its poses and "
+                                      f"timings alone would take about {gib(frames_need(n).host)} of memory)")
+    return params.frames(value, name)
+
+
 def duration(seconds: float) -> str:
     """A rough duration in the unit that reads best."""
     for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import params
+from . import budget, params
 from .errors import OclgiError
 from .params import METHODS
 
@@ -157,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--object", help="the movable object to move (default: the scene's only one)")
     a.add_argument("--path", required=True, help="line:DX,DY,DZ | orbit:R[,TURNS] | keyframes .csv/.npy "
                    "(rows x,y,z[,angle about Y] or 16 numbers of a 4x4 matrix)")
-    a.add_argument("--frames", type=_param(params.frames, "--frames"), default=30, help="number of frames (default 30)")
+    a.add_argument("--frames", type=_param(budget.frames, "--frames"), default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
     a.add_argument("--dynamic", choices=[m for m in METHODS if m.startswith("detp")],

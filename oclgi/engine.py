@@ -57,7 +57,7 @@ def as_query_points(points) -> queries.QueryPoints:
         return points
     if points is None:
         raise OclgiError("points must be an (n, 6) array of x y z nx ny nz or a QueryPoints, got None")
-    a = queries._real_array(points, "points")
+    a = queries.real_array(points, "points")
     if a.ndim != 2 or a.shape[1] != 6:
         raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
     return queries.from_arrays(a[:, :3], a[:, 3:])
@@ -117,8 +117,7 @@ class Engine:
             raise OclgiError(f"device must be a spec such as '0:0' or a name substring, got {device!r}")
         if progress is not None:
             progress = params.flag(progress, "progress")
-        batch_bytes = params._integer_in(batch_bytes, "batch_bytes", 1 << 16, 1 << 40,
-                                         "a number of bytes from 64 KiB to 1 TiB")
+        batch_bytes = params.batch_bytes(batch_bytes)
         _check_float32(scene)
         self.scene = scene
         self.ctx, self.queue = create_context(device)

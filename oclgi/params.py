@@ -222,13 +222,7 @@ def frames(value, name: str = "frames") -> int:
     """An animation's number of frames. Each frame is a move, a render and
     an image file: beyond MAX_FRAMES a run is no animation one could wait
     for (nor a folder one could list), and its poses alone would take
-    gigabytes."""
-    n = integral(value)
-    if n is not None and n > MAX_FRAMES:
-        from .budget import frames_need, gib
-
-        raise ParamError(name, f"expected an integer in 1..{MAX_FRAMES:,}, got {_show(value)} (its poses and "
-                               f"timings alone would take about {gib(frames_need(n).host)} of memory)")
+    gigabytes (oclgi.budget.frames says how many)."""
     return _integer_in(value, name, 1, MAX_FRAMES, f"an integer in 1..{MAX_FRAMES:,}")
 
 
@@ -236,6 +230,11 @@ def seed_count(value, name: str = "seeds") -> int:
     """A study's number of seeds: at least 2 for a variance, at most one
     per seed of the study's range (oclgi/study/reference.py)."""
     return _integer_in(value, name, 2, MAX_SEEDS, f"an integer from 2 (for a variance) to {MAX_SEEDS:,}")
+
+
+def batch_bytes(value, name: str = "batch_bytes") -> int:
+    """The bytes of one batch of traced segments (the engine's batching)."""
+    return _integer_in(value, name, 1 << 16, 1 << 40, "a number of bytes from 64 KiB to 1 TiB")
 
 
 def local_size(value, name: str = "local_size") -> int:

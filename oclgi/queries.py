@@ -180,7 +180,7 @@ def _pack(p, n, tri=None, barys=None, kind="points") -> QueryPoints:
     return QueryPoints(pos, nrm, b, kind)
 
 
-def _real_array(value, name: str) -> np.ndarray:
+def real_array(value, name: str) -> np.ndarray:
     """``value`` as a float64 array if it holds real numbers (not bools,
     complex numbers, strings or objects, which a cast would turn into numbers
     silently or fail on with numpy's own message)."""
@@ -199,7 +199,7 @@ def from_arrays(points, normals) -> QueryPoints:
     Normals are normalised; a zero, NaN or infinite normal or position is an
     error that names the first offending row.
     """
-    p, n = _real_array(points, "points"), _real_array(normals, "normals")
+    p, n = real_array(points, "points"), real_array(normals, "normals")
     if p.ndim != 2 or p.shape[1] != 3 or n.shape != p.shape:
         raise OclgiError(f"points and normals must both be (n, 3) arrays, got {p.shape} and {n.shape}")
     if len(p) == 0:

@@ -461,9 +461,13 @@ def test_api_readers(reader, bad, good):
 
 
 def test_huge_frame_count_gives_its_memory():
-    with pytest.raises(params.ParamError, match=r"^--frames: expected an integer in 1..1,000,000, got 100000000 "
-                                                r"\(its poses and timings alone would take about 119.2 GiB"):
-        params.frames(10**8, "--frames")
+    from oclgi import budget
+
+    for value in (10**8, 1e8):
+        with pytest.raises(params.ParamError, match=r"^--frames: expected an integer in 1..1,000,000, got 100000000 "
+                                                    r"\(its poses and timings alone would take about 119.2 GiB"):
+            budget.frames(value, "--frames")
+    assert budget.frames(np.int64(30), "--frames") == 30
 
 
 @pytest.mark.parametrize("seed", [2**53, 2**53 + 1, 2**63 - 1])

@@ -195,7 +195,7 @@ def test_cpu_device_buffers_count_against_the_host(engine, monkeypatch):
 def test_animation_frames_capped_with_the_estimate(scene, cli):
     """--frames 1e8 built a hundred million poses (minutes, gigabytes) before any check."""
     line = cli(scene.parent, "animate", "s.toml", "--path", "line:0.1,0,0", "--frames", "1e8", "-o", "out")
-    assert line == ("oclgi: error: argument --frames: expected an integer in 1..1,000,000, got 100000000.0 "
+    assert line == ("oclgi: error: argument --frames: expected an integer in 1..1,000,000, got 100000000 "
                     "(its poses and timings alone would take about 119.2 GiB of memory) (see `oclgi animate --help`)")
     line = cli(scene.parent, "animate", "s.toml", "--path", "line:0.1,0,0", "--frames", "0", "-o", "out")
     assert "argument --frames: expected an integer in 1..1,000,000, got 0" in line
