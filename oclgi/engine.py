@@ -176,14 +176,21 @@ class Engine:
             raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
         width = None if width is None else params.image_size(width, "width")
         height = None if height is None else params.image_size(height, "height")
-        if width is not None or height is not None:
-            cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
-        try:
-            validate_camera(cam)
-            cam.frame()
-        except (TypeError, ValueError) as exc:
-            raise OclgiError(f"camera: position, look_at and up must be 3 numbers each, fov a number ({exc})") \
-                from None
+        # a Camera made in Python has not been through the scene file's readers
+        vectors = {}
+        for key in ("position", "look_at", "up"):
+            v = getattr(cam, key)
+            try:
+                a = np.asarray(v)
+            except ValueError:
+                a = np.asarray(None)
+            if a.shape != (3,) or a.dtype.kind not in "iuf" or not (np.abs(a) <= queries.MAX_COORDINATE).all():
+                raise OclgiError(f"camera.{key}: expected 3 finite numbers, got {v!r}")
+            vectors[key] = tuple(float(x) for x in a)
+        cam = replace(cam, **vectors, fov=params.float32_real(cam.fov, "camera.fov", 0.0, 180.0),
+                      width=width or params.image_size(cam.width, "camera.width"),
+                      height=height or params.image_size(cam.height, "camera.height"))
+        validate_camera(cam)
         return cam
 
     def view_points(self, cam: Camera, rect, instances=None) -> queries.QueryPoints:

@@ -253,3 +253,22 @@ def test_scene_built_in_python_is_checked_where_it_meets_the_engine():
         engine.irradiance(XYZN, photons=1000)
     with pytest.raises(OclgiError, match=r"too small for fixed-point sums"):
         oclgi.Session(engine, XYZN, photons=1000)
+
+
+@pytest.mark.parametrize("key, value, match", [
+    ("width", 2.5, r"^camera.width: expected an integer in 1..16384, got 2.5$"),  # was a pyopencl bad_cast
+    ("height", True, r"^camera.height: expected an integer in 1..16384, got True$"),
+    ("fov", True, r"^camera.fov: expected a number from 0 to 180, 0 or at least 1.2e-38"),
+    ("fov", np.nan, r"^camera.fov: expected a number"),
+    ("position", (0, 1), r"^camera.position: expected 3 finite numbers, got \(0, 1\)$"),
+    ("look_at", ("a", 0, 0), r"^camera.look_at: expected 3 finite numbers"),
+    ("up", (0, np.inf, 0), r"^camera.up: expected 3 finite numbers"),
+])
+def test_cameras_made_in_python_are_checked(engine, key, value, match):
+    import dataclasses
+
+    cam = dataclasses.replace(engine.scene.camera, **{key: value})
+    with pytest.raises(params.ParamError if key in ("width", "height", "fov") else OclgiError, match=match):
+        engine.render(camera=cam, photons=1000)
+    good = dataclasses.replace(engine.scene.camera, width=np.int64(3), fov=np.float32(30))
+    assert engine.camera_points(good).shape == (3, 3)
