@@ -198,7 +198,7 @@ def float32_real(value, name: str, lo: float | None = None, hi: float | None = N
     lo_ = -F32_MAX if lo is None else max(lo, -F32_MAX)
     hi_ = F32_MAX if hi is None else min(hi, F32_MAX)
     if r is None or not lo_ <= r <= hi_ or 0 < abs(r) < F32_TINY:
-        short = lambda x: _number(x) if abs(x) < 1e6 else f"{x:.2g}".replace("e+", "e")  # noqa: E731
+        short = lambda x: _number(x) if abs(x) < 1e6 else f"{x:.2g}".replace("e+", "e")
         span = f"from {short(lo_)} to {short(hi_)}"
         raise ParamError(name, f"expected a number {span}, 0 or at least 1.2e-38 in size "
                                f"(float32 on the device), got {_show(value)}")

@@ -131,7 +131,7 @@ class QueryPoints:
                 raise OclgiError(f"query points: shape {self.shape!r} does not hold {n} points")
             self.shape = (h, w)
 
-    def check_triangles(self, n_triangles: int, what: str = "the scene") -> "QueryPoints":
+    def check_triangles(self, n_triangles: int, what: str = "the scene") -> QueryPoints:
         """These points, checked for use with a scene of ``n_triangles``: the
         arrays still of the layout the device reads (they may have been
         reassigned since construction) and every triangle id -1 or below
