@@ -15,7 +15,8 @@ it is made (:meth:`QueryPoints.__post_init__`): float32 arrays of these
 shapes are taken as they are (w as int bits); other real arrays, or (n, 3)
 positions and normals, are converted (w then read as a number: the triangle
 id); bool, complex, string and object arrays are refused, as are NaN,
-infinite or huge coordinates and normals that are not of unit length. The
+infinite or huge coordinates and normals that are neither of unit length
+nor zero (a point that counts nothing, as a camera's pixel that sees nothing). The
 triangle ids are checked against a scene where the points meet an engine
 (:meth:`QueryPoints.check_triangles`).
 """
@@ -100,10 +101,10 @@ class QueryPoints:
         # a camera's millions of normals (finite ones: checked above)
         n3 = nrm[:, :3]
         length = np.sqrt(np.einsum("ij,ij->i", n3, n3))
-        # A zero normal is how the camera marks a pixel that sees nothing
-        # (no estimator counts there); anywhere else a normal is a unit vector.
-        unit = np.abs(length - 1.0) <= NORMAL_TOLERANCE
-        unit |= (length == 0) & (tri == -1)
+        # A zero normal is how the camera marks a pixel that sees nothing: no
+        # estimator counts anything there (arrays made first and filled
+        # later start so too); any other normal is a unit vector.
+        unit = (np.abs(length - 1.0) <= NORMAL_TOLERANCE) | (length == 0)
         if not unit.all():
             i = int(np.argmax(~unit))
             raise OclgiError(f"query point {i}: its normal has length {length[i]:.6g}, not 1 "

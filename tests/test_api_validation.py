@@ -103,13 +103,16 @@ def test_query_points_refuse_bad_values():
         QueryPoints(pos, nrm, bary, "camera", (2, 2))
 
 
-def test_zero_normal_only_where_nothing_is_seen():
-    """A camera pixel that sees nothing has tri -1 and a zero normal; a point on a triangle needs a normal."""
+def test_zero_normal_counts_nothing_other_lengths_are_refused(engine):
+    """A camera pixel that sees nothing has a zero normal: no estimator counts there."""
     pos, nrm, bary = packed()
     nrm[0] = 0
-    assert len(QueryPoints(pos, nrm, bary)) == 2
-    with pytest.raises(OclgiError, match=r"^query point 0: its normal has length 0"):
-        QueryPoints(*packed((0, 1))[:1], nrm, bary)
+    est = engine.irradiance(QueryPoints(pos, nrm, bary), method="detp", photons=2000, radius=0.3)
+    assert (est.irradiance[0] == 0).all() and est.irradiance[1].max() > 0
+    for length in (0.5, 1.01, 1e-6):
+        with pytest.raises(OclgiError, match=r"^query point 1: its normal has length .*, not 1 \(1 such points; "
+                                             r"oclgi.query_points normalises them\)$"):
+            QueryPoints(pos, np.array([[0, 1, 0, 0], [0, length, 0, 0]], np.float32), bary)
 
 
 def test_out_of_range_triangle_is_refused_not_a_crash(tmp_path):
