@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import params
+from . import budget, params
 from .errors import OclgiError
 from .params import METHODS
 
@@ -147,8 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-exr", action="store_true", help="write only the PNG")
     r.add_argument("--force", action="store_true",
                    help="replace an existing file of the name not given with -o even when oclgi did not write it")
-    r.add_argument("--width", type=_positive_int, help="image width (default: the scene camera's)")
-    r.add_argument("--height", type=_positive_int, help="image height (default: the scene camera's)")
+    r.add_argument("--width", type=_param(params.image_size, "--width"), help="image width (default: the scene camera's)")
+    r.add_argument("--height", type=_param(params.image_size, "--height"),
+                   help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
 
     i = sub.add_parser("irradiance", help="irradiance at given points (sensors)")
@@ -161,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--object", help="the movable object to move (default: the scene's only one)")
     a.add_argument("--path", required=True, help="line:DX,DY,DZ | orbit:R[,TURNS] | keyframes .csv/.npy "
                    "(rows x,y,z[,angle about Y] or 16 numbers of a 4x4 matrix)")
-    a.add_argument("--frames", type=_positive_int, default=30, help="number of frames (default 30)")
+    a.add_argument("--frames", type=_param(budget.frames, "--frames"), default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
     a.add_argument("--dynamic", choices=[m for m in METHODS if m.startswith("detp")],

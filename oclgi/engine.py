@@ -14,22 +14,24 @@ True
 
 from __future__ import annotations
 
+import math
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pyopencl as cl
 
-from . import queries
+from . import budget, params, queries
 from .cl.device import create_context
 from .cl.programs import launch, programs
 from .errors import OclgiError
 from .estimators import ESTIMATORS, check_options
 from .tracing.photon_trace import PhotonTracer
 from .scene.compiled import CompiledScene
-from .params import RunParams, radius as read_radius
+from .params import RunParams, flag, radius as read_radius
 from .scene.description import validate_camera
-from .scene.scene import Camera, Scene
+from .scene.scene import Camera, OclgiWarning, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
 
@@ -53,10 +55,27 @@ def as_query_points(points) -> queries.QueryPoints:
     """QueryPoints as given, or from an (n, 6) array of x y z nx ny nz."""
     if isinstance(points, queries.QueryPoints):
         return points
-    a = np.asarray(points, dtype=np.float64)
+    if points is None:
+        raise OclgiError("points must be an (n, 6) array of x y z nx ny nz or a QueryPoints, got None")
+    a = queries.real_array(points, "points")
     if a.ndim != 2 or a.shape[1] != 6:
         raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
     return queries.from_arrays(a[:, :3], a[:, 3:])
+
+
+def _check_float32(scene: Scene) -> None:
+    """The scene's radiant values as the device holds them, in float32: a
+    Scene made or changed in Python has not been through the scene file's
+    readers (oclgi/scene/description.py), and a value beyond float32 would
+    reach the device as inf, or as 0 for one below its normal range."""
+    for m in scene.materials:
+        for key in ("emission", "albedo"):
+            for x in np.ravel(np.asarray(getattr(m, key), dtype=object)):
+                params.float32_real(x, f"material {m.name!r}: {key}", 0.0)
+    for i, light in enumerate(scene.point_lights):
+        for x in np.ravel(np.asarray(light.intensity, dtype=object)):
+            params.float32_real(x, f"point light {i}: intensity", 0.0)
+            params.float32_real(4 * math.pi * float(x), f"point light {i}: power (4 pi intensity)", 0.0)
 
 
 @dataclass
@@ -92,13 +111,23 @@ class Engine:
 
     def __init__(self, scene: Scene, device: str | None = None, local_size: int | None = None,
                  batch_bytes: int = DEFAULT_BATCH_BYTES, progress: bool | None = None):
+        if not isinstance(scene, Scene):
+            raise OclgiError(f"Engine takes a Scene (oclgi.load_file, oclgi.Scene), got {type(scene).__name__}")
+        if device is not None and not isinstance(device, str):
+            raise OclgiError(f"device must be a spec such as '0:0' or a name substring, got {device!r}")
+        if progress is not None:
+            progress = params.flag(progress, "progress")
+        batch_bytes = params.batch_bytes(batch_bytes)
+        _check_float32(scene)
         self.scene = scene
         self.ctx, self.queue = create_context(device)
         if local_size is not None:
             dev = self.queue.device
             limit = min(dev.max_work_group_size, dev.max_work_item_sizes[0])
-            if isinstance(local_size, bool) or not isinstance(local_size, int) or local_size < 1:
-                raise OclgiError(f"--local-size must be a positive integer, got {local_size!r}")
+            try:
+                local_size = params.local_size(local_size, "--local-size")
+            except params.ParamError:
+                raise OclgiError(f"--local-size must be a positive integer, got {local_size!r}") from None
             if local_size > limit:
                 raise OclgiError(f"--local-size {local_size} is larger than {dev.name.strip()!r} allows ({limit})")
         self.local_size = local_size
@@ -120,22 +149,47 @@ class Engine:
         matrix, relative to where the scene file put it (identity = back home).
         Later traces and renders see the object there; nothing is rebuilt but
         its instance record."""
-        self.compiled.set_transform(self.queue, self.scene.object_id(name), matrix)
+        if not isinstance(name, str):
+            raise OclgiError(f"move: the object's name must be a string, got {name!r}")
+        obj = self.scene.object_id(name)
+        try:
+            np.asarray(matrix, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise OclgiError(f"move: the matrix must be a 4x4 or 3x4 array of numbers, got {matrix!r}") from None
+        self.compiled.set_transform(self.queue, obj, matrix)
 
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
                       height: int | None = None) -> queries.QueryPoints:
         cam = self.view_camera(camera, width, height)
+        budget.check(budget.camera_need(cam.width, cam.height), self.queue.device)
         return self.view_points(cam, (0, 0, cam.width, cam.height))
 
     def view_camera(self, camera: Camera | None = None, width: int | None = None,
                     height: int | None = None) -> Camera:
-        """The camera given (or the scene's), resized, validated."""
+        """The camera given (or the scene's), resized (``width``, ``height``:
+        None keeps the camera's), validated."""
+        if camera is not None and not isinstance(camera, Camera):
+            raise OclgiError(f"camera must be an oclgi.Camera, got {type(camera).__name__}")
         cam = camera or self.scene.camera
         if cam is None:
             raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
-        if width or height:
-            cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
+        width = None if width is None else params.image_size(width, "width")
+        height = None if height is None else params.image_size(height, "height")
+        # a Camera made in Python has not been through the scene file's readers
+        vectors = {}
+        for key in ("position", "look_at", "up"):
+            v = getattr(cam, key)
+            try:
+                a = np.asarray(v)
+            except ValueError:
+                a = np.asarray(None)
+            if a.shape != (3,) or a.dtype.kind not in "iuf" or not (np.abs(a) <= queries.MAX_COORDINATE).all():
+                raise OclgiError(f"camera.{key}: expected 3 finite numbers, got {v!r}")
+            vectors[key] = tuple(float(x) for x in a)
+        cam = replace(cam, **vectors, fov=params.float32_real(cam.fov, "camera.fov", 0.0, 180.0),
+                      width=width or params.image_size(cam.width, "camera.width"),
+                      height=height or params.image_size(cam.height, "camera.height"))
         validate_camera(cam)
         return cam
 
@@ -151,16 +205,15 @@ class Engine:
         c = self.compiled
         scene_args = c.scene_args if instances is None else (c.nodes, c.tris, instances[0], int(instances[1]))
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
-        out = queries.QueryPoints(np.empty((n, 4), np.float32), np.empty((n, 4), np.float32),
-                                  np.empty((n, 2), np.float32), kind="camera", shape=(rh, rw))
-        if n == 0:
-            return out
-        launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
-               cam.width, cam.height, x0, y0, rw, rh,
-               pos, nrm, bary, local_size=self.local_size)
-        for host, dev in ((out.positions, pos), (out.normals, nrm), (out.barys, bary)):
-            cl.enqueue_copy(self.queue, host, dev)
-        return out
+        host = (np.empty((n, 4), np.float32), np.empty((n, 4), np.float32), np.empty((n, 2), np.float32))
+        if n:
+            launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
+                   cam.width, cam.height, x0, y0, rw, rh,
+                   pos, nrm, bary, local_size=self.local_size)
+            for h, dev in zip(host, (pos, nrm, bary)):
+                cl.enqueue_copy(self.queue, h, dev)
+        # made once filled: QueryPoints checks its values
+        return queries.QueryPoints(*host, kind="camera", shape=(rh, rw))
 
     def vertex_points(self) -> queries.QueryPoints:
         return queries.vertex_points(self.scene)
@@ -179,7 +232,10 @@ class Engine:
         points = as_query_points(points)
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         method, photons, radius, seed, max_depth = r.method, r.photons, r.radius, r.seed, r.max_depth
-        extension, count_emitted = r.extension, r.count_emitted
+        count_work = params.flag(count_work, "count_work")
+        self._check_points(points)
+        budget.check(budget.irradiance_need(len(points), method, photons, max_depth, self.batch_bytes,
+                                            options.get("k")), self.queue.device)
 
         stats = Stats(photons=int(photons), points=len(points), method=method, radius=float(radius))
         t0 = time.perf_counter()
@@ -192,6 +248,7 @@ class Engine:
         bar = Progress(f"{method}", photons, self.progress)
         t_trace = t_est = 0.0
         lens = np.empty(batch_paths, np.int32)
+        t_run = time.perf_counter()
         for offset in range(0, photons, batch_paths):
             n = min(batch_paths, photons - offset)
             ta = time.perf_counter()
@@ -205,6 +262,10 @@ class Engine:
             t_trace += tb - ta
             t_est += tc - tb
             bar.update(n)
+            if offset == 0:  # a long run says so, with its time from the first batch
+                notice = budget.time_notice(n, tc - t_run, photons)
+                if notice:
+                    warnings.warn(notice, OclgiWarning, stacklevel=2)
         bar.close()
         irr_buf = est.resolve(scale)
         irr = np.empty((len(points), 4), np.float32)
@@ -225,14 +286,46 @@ class Engine:
             run = replace(run, radius=read_radius(self.scene.radius, "radius (by default 1% of the scene's diagonal)"))
         return run
 
+    def _check_precision(self, run: RunParams) -> None:
+        """The run's derived constants, in the float32 the device takes them
+        in: the fixed-point scale (units per watt), its inverse (Impact
+        Count's and Photon Maps' resolve) and DETP's 1 / (scale pi d^2). One
+        that rounds to 0 or inf in float32 would give zeros, inf or NaN
+        everywhere; the scene's power, the photon count and the radius decide
+        them, so this is checked where a run meets the scene (every
+        estimator is made by Engine.estimator, the sessions' too), whether
+        the scene came from a file or from Python."""
+        scale = self.compiled.fixed_scale(run.photons)  # refuses a scale beyond float32 itself
+        derived = {"1 / the fixed-point scale": 1.0 / scale}
+        if run.method.startswith("detp"):
+            derived["1 / (scale pi d^2), DETP's resolve"] = 1.0 / (scale * math.pi * run.radius**2)
+        for what, value in derived.items():
+            if not params.F32_TINY <= value <= params.F32_MAX:
+                raise OclgiError(f"{self.scene.name}: the emitters' power "
+                                 f"({self.compiled.photon_power_max:.3g} W per photon path), {run.photons:,} "
+                                 f"photons and radius {run.radius:.3g} give {what} = {value:.3g}, out of "
+                                 "float32's range on the device; scale the emission or change the radius")
+
+    def _check_points(self, points) -> None:
+        """The gate every set of query points passes before a kernel reads it."""
+        if not isinstance(points, queries.QueryPoints):
+            raise OclgiError(f"points must be a QueryPoints, got {type(points).__name__}")
+        if len(points) == 0:
+            raise OclgiError("no query points given")
+        points.check_triangles(self.scene.n_triangles, f"scene {self.scene.name!r}")
+
     def estimator(self, points, params: RunParams, count_work: bool = False, **options):
         """A fresh estimator of ``params.method`` over ``points``; ``options``
         are the method's own (estimators.check_options checks their names)."""
+        if not isinstance(params, RunParams):
+            raise OclgiError(f"estimator: params must be a RunParams (Engine.run_params), got {type(params).__name__}")
         cls = ESTIMATORS[params.method]
         check_options(params.method, options)
+        self._check_points(points)
+        self._check_precision(params)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
-                   count_emitted=params.count_emitted, local_size=self.local_size, count_work=count_work,
-                   **options)
+                   count_emitted=params.count_emitted, local_size=self.local_size,
+                   count_work=flag(count_work, "count_work"), **options)
 
     def trace(self, photons: int | None = None, seed: int | None = None, max_depth: int | None = None):
         """Trace photon paths and return their segments on the host.
@@ -255,9 +348,15 @@ class Engine:
     # -- images -----------------------------------------------------------------
     def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
                exposure: float = 1.0, **estimate_args) -> Render:
-        """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels."""
+        """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels.
+        ``width``, ``height``: None for the camera's."""
+        exposure = params.exposure(exposure, "exposure")
+        cam = self.view_camera(camera, width, height)
+        r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
+        budget.check(budget.render_need(cam.width, cam.height, r.method, r.photons, r.max_depth, self.batch_bytes,
+                                        estimate_args.get("k")), self.queue.device)
         t0 = time.perf_counter()
-        pts = self.camera_points(camera, width, height)
+        pts = self.camera_points(cam)
         t_cam = time.perf_counter() - t0
         est = self.irradiance(pts, **estimate_args)
         radiance, pixels = self.shade(pts, est.estimator.irr, exposure)  # resolved in irradiance()
@@ -267,7 +366,14 @@ class Engine:
     def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
         pixels, from the irradiance (a device float4 buffer, one per point)."""
+        exposure = params.exposure(exposure, "exposure")
+        if not isinstance(points, queries.QueryPoints) or points.shape is None:
+            raise OclgiError("shade: points must be a camera's QueryPoints (Engine.camera_points), with a shape")
+        points.check_triangles(self.scene.n_triangles, f"scene {self.scene.name!r}")
         h, w = points.shape
+        if not isinstance(irradiance, cl.Buffer) or irradiance.size < h * w * 16:
+            raise OclgiError(f"shade: irradiance must be a device buffer of {h * w} float4 values (16 bytes each), "
+                             f"got {getattr(irradiance, 'size', type(irradiance).__name__)}")
         n = h * w
         c = self.compiled
         prog = self._programs.get("image")

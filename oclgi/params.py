@@ -42,6 +42,12 @@ MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63
 MIN_RADIUS = 1e-18
 MAX_LENGTH = 1e18
 
+F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
+F32_TINY = float(np.finfo(np.float32).tiny)  # 1.2e-38, the smallest normal float32
+MAX_IMAGE_SIDE = 16384  # pixels, as a scene's camera allows
+MAX_FRAMES = 1_000_000
+MAX_SEEDS = 1 << 40  # the study's seeds are below its reference's (oclgi/study/reference.py)
+
 # The run parameters, in RunParams' order.
 RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")
 # Run parameters that may come among a method's options (``-O extension=0.1``,
@@ -170,9 +176,71 @@ def extension(value, name: str = "extension") -> float:
 
 
 def count_emitted(value, name: str = "count_emitted") -> bool:
+    return flag(value, name)
+
+
+# -- parameters of the API and the command line beyond a run's ---------------------------------
+
+
+def flag(value, name: str) -> bool:
+    """True or false, and nothing else (not 0, 1 or a word)."""
     if not isinstance(value, (bool, np.bool_)):
         raise ParamError(name, f"expected true or false, got {_show(value)}")
     return bool(value)
+
+
+def float32_real(value, name: str, lo: float | None = None, hi: float | None = None) -> float:
+    """A finite number the device can hold in float32 without becoming inf
+    or losing it to the subnormals: 0, or a magnitude from 1.2e-38 to
+    3.4e38; within lo..hi when they are given (a scene file's values, and the
+    API's, go through this where the device takes them as float32)."""
+    r = _real(value)
+    lo_ = -F32_MAX if lo is None else max(lo, -F32_MAX)
+    hi_ = F32_MAX if hi is None else min(hi, F32_MAX)
+    if r is None or not lo_ <= r <= hi_ or 0 < abs(r) < F32_TINY:
+        short = lambda x: _number(x) if abs(x) < 1e6 else f"{x:.2g}".replace("e+", "e")
+        span = f"from {short(lo_)} to {short(hi_)}"
+        raise ParamError(name, f"expected a number {span}, 0 or at least 1.2e-38 in size "
+                               f"(float32 on the device), got {_show(value)}")
+    return r
+
+
+def exposure(value, name: str = "exposure") -> float:
+    """The tone mapping's multiplier (a float32 on the device)."""
+    r = _real(value)
+    if r is None or not F32_TINY <= r <= F32_MAX:
+        raise ParamError(name, f"expected a positive number from 1.2e-38 to 3.4e38 (float32 on the device), "
+                               f"got {_show(value)}")
+    return r
+
+
+def image_size(value, name: str = "width") -> int:
+    """An image's width or height in pixels (the camera's limit, oclgi/scene/description.py)."""
+    return _integer_in(value, name, 1, MAX_IMAGE_SIDE, f"an integer in 1..{MAX_IMAGE_SIDE}")
+
+
+def frames(value, name: str = "frames") -> int:
+    """An animation's number of frames. Each frame is a move, a render and
+    an image file: beyond MAX_FRAMES a run is no animation one could wait
+    for (nor a folder one could list), and its poses alone would take
+    gigabytes (oclgi.budget.frames says how many)."""
+    return _integer_in(value, name, 1, MAX_FRAMES, f"an integer in 1..{MAX_FRAMES:,}")
+
+
+def seed_count(value, name: str = "seeds") -> int:
+    """A study's number of seeds: at least 2 for a variance, at most one
+    per seed of the study's range (oclgi/study/reference.py)."""
+    return _integer_in(value, name, 2, MAX_SEEDS, f"an integer from 2 (for a variance) to {MAX_SEEDS:,}")
+
+
+def batch_bytes(value, name: str = "batch_bytes") -> int:
+    """The bytes of one batch of traced segments (the engine's batching)."""
+    return _integer_in(value, name, 1 << 16, 1 << 40, "a number of bytes from 64 KiB to 1 TiB")
+
+
+def local_size(value, name: str = "local_size") -> int:
+    """A work-group size (the device's own limit is checked by the engine)."""
+    return _integer_in(value, name, 1, 2**31 - 1, "a positive integer")
 
 
 READERS = {"method": method, "photons": photons, "radius": radius, "seed": seed, "max_depth": max_depth,

@@ -9,6 +9,16 @@ normal: DETP counts light arriving on the normal's side.
 Layout (float32): positions (n, 4) with w = the triangle under the point as
 int bits (-1 when unknown or none), normals (n, 4), barycentrics (n, 2) on
 that triangle. Impact Count needs the triangle; DETP does not.
+
+The device reads these arrays as they are, so a QueryPoints is checked when
+it is made (:meth:`QueryPoints.__post_init__`): float32 arrays of these
+shapes are taken as they are (w as int bits); other real arrays, or (n, 3)
+positions and normals, are converted (w then read as a number: the triangle
+id); bool, complex, string and object arrays are refused, as are NaN,
+infinite or huge coordinates and normals that are neither of unit length
+nor zero (a point that counts nothing, as a camera's pixel that sees nothing). The
+triangle ids are checked against a scene where the points meet an engine
+(:meth:`QueryPoints.check_triangles`).
 """
 
 from __future__ import annotations
@@ -19,6 +29,39 @@ import numpy as np
 
 from .errors import OclgiError
 
+# Coordinates the device squares in float32 (as the scene's vertices: oclgi/scene/scene.py).
+MAX_COORDINATE = 1e18
+# How far from 1 a normal's length may be: the kernels take normals as unit
+# vectors (DETP's disc plane, the side a point faces); float32 rounding of a
+# normalised vector is far inside this.
+NORMAL_TOLERANCE = 1e-3
+
+
+def _array(value, name: str, columns: tuple, n: int | None) -> np.ndarray:
+    """``value`` as a C-contiguous float32 (n, columns[-1]) array, or an error
+    naming ``name``. Float32 input of the full width is taken as it is (its
+    last column may hold int bits); real input of another dtype is converted
+    by value; a narrower width is padded by the caller."""
+    a = np.asarray(value) if not isinstance(value, np.ndarray) else value
+    if a.dtype.kind not in "iuf":
+        raise OclgiError(f"query points: {name} must be an array of real numbers, got dtype {a.dtype}")
+    if a.ndim != 2 or a.shape[1] not in columns or (n is not None and len(a) != n):
+        want = " or ".join(f"(n, {c})" for c in columns)
+        rows = f" of {n} rows" if n is not None else ""
+        raise OclgiError(f"query points: {name} must be a {want} array{rows}, got shape {a.shape}")
+    return a
+
+
+def _finite_rows(a: np.ndarray, name: str, limit: float | None = None) -> None:
+    if limit is not None:  # NaN fails the comparison too
+        with np.errstate(invalid="ignore", over="ignore"):
+            bad = ~(np.abs(a) <= limit).all(axis=1)
+    else:
+        bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        what = "a NaN or infinite value" if limit is None else f"a NaN, infinite or huge (beyond {limit:g}) value".replace("e+", "e")
+        raise OclgiError(f"query point {int(np.argmax(bad))}: {name} has {what} ({int(bad.sum())} such points)")
+
 
 @dataclass
 class QueryPoints:
@@ -27,6 +70,86 @@ class QueryPoints:
     barys: np.ndarray  # (n, 2) float32
     kind: str = "points"
     shape: tuple | None = None  # (height, width) for camera points
+
+    def __post_init__(self):
+        pos = _array(self.positions, "positions", (3, 4), None)
+        n = len(pos)
+        nrm = _array(self.normals, "normals", (3, 4), n)
+        bary = _array(self.barys, "barycentrics", (2,), n)
+        if pos.dtype == np.float32 and pos.shape[1] == 4:
+            tri = pos[:, 3].view(np.int32)
+            xyz = pos[:, :3]
+        else:
+            xyz = pos[:, :3]
+            if pos.shape[1] == 4:
+                w = pos[:, 3].astype(np.float64)
+                whole = np.isfinite(w) & (w == np.round(w)) & (np.abs(w) < 2**31)
+                if not whole.all():
+                    raise OclgiError(f"query point {int(np.argmax(~whole))}: positions' 4th column (the triangle "
+                                     f"id) must be an integer, got {w[np.argmax(~whole)]!r}")
+                tri = w.astype(np.int32)
+            else:
+                tri = np.full(n, -1, np.int32)
+        _finite_rows(xyz, "position", MAX_COORDINATE)
+        bad = tri < -1
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise OclgiError(f"query point {i}: triangle id {int(tri[i])} is neither -1 (none) nor a triangle's index")
+        _finite_rows(nrm, "normal")
+        _finite_rows(bary, "barycentric")
+        # squared lengths in the arrays' own precision: no float64 copy of
+        # a camera's millions of normals (finite ones: checked above)
+        n3 = nrm[:, :3]
+        length = np.sqrt(np.einsum("ij,ij->i", n3, n3))
+        # A zero normal is how the camera marks a pixel that sees nothing: no
+        # estimator counts anything there (arrays made first and filled
+        # later start so too); any other normal is a unit vector.
+        unit = (np.abs(length - 1.0) <= NORMAL_TOLERANCE) | (length == 0)
+        if not unit.all():
+            i = int(np.argmax(~unit))
+            raise OclgiError(f"query point {i}: its normal has length {length[i]:.6g}, not 1 "
+                             f"({int((~unit).sum())} such points; oclgi.query_points normalises them)")
+        if pos.dtype != np.float32 or pos.shape[1] != 4:
+            packed = np.empty((n, 4), np.float32)
+            packed[:, :3] = xyz
+            packed[:, 3] = tri.view(np.float32)
+            pos = packed
+        if nrm.dtype != np.float32 or nrm.shape[1] != 4:
+            packed = np.zeros((n, 4), np.float32)
+            packed[:, :nrm.shape[1]] = nrm
+            nrm = packed
+        self.positions = np.ascontiguousarray(pos)
+        self.normals = np.ascontiguousarray(nrm, np.float32)
+        self.barys = np.ascontiguousarray(bary, np.float32)
+        if not isinstance(self.kind, str):
+            raise OclgiError(f"query points: kind must be a string, got {self.kind!r}")
+        if self.shape is not None:
+            try:
+                h, w = (int(x) for x in self.shape)
+            except (TypeError, ValueError):
+                raise OclgiError(f"query points: shape must be (height, width), got {self.shape!r}") from None
+            if h < 0 or w < 0 or h * w != n:
+                raise OclgiError(f"query points: shape {self.shape!r} does not hold {n} points")
+            self.shape = (h, w)
+
+    def check_triangles(self, n_triangles: int, what: str = "the scene") -> QueryPoints:
+        """These points, checked for use with a scene of ``n_triangles``: the
+        arrays still of the layout the device reads (they may have been
+        reassigned since construction) and every triangle id -1 or below
+        ``n_triangles`` (a kernel reads the triangle's data by it)."""
+        for name, a, width in (("positions", self.positions, 4), ("normals", self.normals, 4),
+                               ("barycentrics", self.barys, 2)):
+            if not (isinstance(a, np.ndarray) and a.dtype == np.float32 and a.shape == (len(self.positions), width)
+                    and a.flags.c_contiguous):
+                raise OclgiError(f"query points: {name} must be a C-contiguous (n, {width}) float32 array "
+                                 f"(make a new QueryPoints to convert one)")
+        tri = self.tri
+        bad = (tri < -1) | (tri >= n_triangles)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise OclgiError(f"query point {i}: triangle id {int(tri[i])} is out of range for {what} "
+                             f"({n_triangles} triangles; -1 for none) ({int(bad.sum())} such points)")
+        return self
 
     def __len__(self):
         return len(self.positions)
@@ -58,14 +181,26 @@ def _pack(p, n, tri=None, barys=None, kind="points") -> QueryPoints:
     return QueryPoints(pos, nrm, b, kind)
 
 
+def real_array(value, name: str) -> np.ndarray:
+    """``value`` as a float64 array if it holds real numbers (not bools,
+    complex numbers, strings or objects, which a cast would turn into numbers
+    silently or fail on with numpy's own message)."""
+    try:
+        a = np.asarray(value)
+    except ValueError:  # ragged rows
+        raise OclgiError(f"{name} must be an (n, 3) array of numbers, got rows of different lengths") from None
+    if a.dtype.kind not in "iuf":
+        raise OclgiError(f"{name} must be an array of real numbers, got dtype {a.dtype}")
+    return a.astype(np.float64)
+
+
 def from_arrays(points, normals) -> QueryPoints:
     """User points: (n, 3) positions and (n, 3) normals, validated.
 
     Normals are normalised; a zero, NaN or infinite normal or position is an
     error that names the first offending row.
     """
-    p = np.asarray(points, dtype=np.float64)
-    n = np.asarray(normals, dtype=np.float64)
+    p, n = real_array(points, "points"), real_array(normals, "normals")
     if p.ndim != 2 or p.shape[1] != 3 or n.shape != p.shape:
         raise OclgiError(f"points and normals must both be (n, 3) arrays, got {p.shape} and {n.shape}")
     if len(p) == 0:

@@ -360,7 +360,7 @@ def test_bad_radius_in_toml(fails_cleanly, sub, tmp_path, radius, match):
     (INP, ["--seed", "-1"], r"argument --seed"),
     (INP, ["--seed", str(2**64)], r"argument --seed"),  # was a traceback
     (INP, ["--width", "0"], r"argument --width"),
-    (INP, ["--width", "100000"], r"camera size must be 1\.\.16384"),
+    (INP, ["--width", "100000"], r"argument --width: expected an integer in 1\.\.16384"),
     (INP, ["--exposure", "0"], r"argument --exposure"),
     (INP, ["--method", "photonmap"], r"argument --method: unknown method 'photonmap'"),
     (INP, ["--device", "no-such-device-anywhere"], r"no OpenCL device matches"),

@@ -425,3 +425,55 @@ def test_cli_subprocess_float32_radius(tmp_path):
     assert res.stderr.strip() == ("oclgi: error: argument --radius: expected a number from 1e-18 to 1e18 "
                                   "(the device squares it in float32), got 1e-300 (see `oclgi render --help`)")
     assert not (tmp_path / "x.exr").exists()
+
+
+# -- readers of the API's other numbers: float32 values, image sizes, exposure, frames, seeds ----------
+
+@pytest.mark.parametrize("value", [3.5e38, -3.5e38, 1e-39, -1e-45, math.nan, math.inf, True, "1", None, 10**400])
+def test_float32_real_refuses_what_float32_cannot_hold(value):
+    with pytest.raises(params.ParamError, match=r"^emission: expected a number from -3.4e38 to 3.4e38, 0 or at "
+                                                r"least 1.2e-38 in size \(float32 on the device\), got"):
+        params.float32_real(value, "emission")
+
+
+def test_float32_real_accepts_and_bounds():
+    assert params.float32_real(0, "x") == 0.0 and params.float32_real(np.float32(2.5), "x") == 2.5
+    assert params.float32_real(3.4e38, "x") == 3.4e38 and params.float32_real(-1.2e-38, "x") == -1.2e-38
+    with pytest.raises(params.ParamError, match=r"^x: expected a number from 0 to 1, 0 or at least"):
+        params.float32_real(-0.5, "x", 0.0, 1.0)
+
+
+@pytest.mark.parametrize("reader, bad, good", [
+    (params.image_size, [0, -1, 16385, 2.5, True, math.nan, "8"], [(1, 1), (16384, 16384), (np.int64(7), 7), (64.0, 64)]),
+    (params.exposure, [0, -1, math.nan, math.inf, 1e-39, 1e39, False, "2"], [(1, 1.0), (np.float32(0.5), 0.5)]),
+    (params.frames, [0, -3, 1.5, True, 10**6 + 1], [(1, 1), (1e6, 10**6), (np.int32(30), 30)]),
+    (params.seed_count, [1, 0, 2.5, True, 2**40 + 1], [(2, 2), (1e3, 1000)]),
+    (params.flag, [0, 1, "true", None], [(True, True), (np.bool_(False), False)]),
+    (params.local_size, [0, -1, 2.5, True], [(64, 64), (np.int64(8), 8)]),
+])
+def test_api_readers(reader, bad, good):
+    for value in bad:
+        with pytest.raises(params.ParamError, match=r"^p: expected "):
+            reader(value, "p")
+    for value, read in good:
+        got = reader(value, "p")
+        assert got == read and type(got) is type(read)
+
+
+def test_huge_frame_count_gives_its_memory():
+    from oclgi import budget
+
+    for value in (10**8, 1e8):
+        with pytest.raises(params.ParamError, match=r"^--frames: expected an integer in 1..1,000,000, got 100000000 "
+                                                    r"\(its poses and timings alone would take about 119.2 GiB"):
+            budget.frames(value, "--frames")
+    assert budget.frames(np.int64(30), "--frames") == 30
+
+
+@pytest.mark.parametrize("seed", [2**53, 2**53 + 1, 2**63 - 1])
+def test_scene_file_seeds_beyond_2_53_are_exact(seed, tmp_path, engine):
+    """TOML integers are exact: a seed the command line takes, the scene file takes, to the last bit."""
+    scene = load_file(write_scene(tmp_path, extra=f"[photons]\nseed = {seed}\n"))
+    assert scene.settings.seed == seed and type(scene.settings.seed) is int
+    assert params.seed(str(seed) and params.number_text(str(seed)), "--seed") == seed
+    assert engine.run_params(seed=seed).seed == seed

@@ -61,6 +61,8 @@ class ImpactCount(Estimator):
         self.irr = self.zeros(self.n * 16)
 
     def replace_points(self, index: np.ndarray, new) -> None:
+        # the interpolation reads faces[3 * tri]: a new point's id is checked as the first ones were
+        new.check_triangles(self.n_tris, f"scene {self.compiled.scene.name!r}")
         if new.kind != "camera" and (new.tri < 0).any():
             new = locate(self.queue, self.compiled, new)
         self.points.positions[index] = new.positions

@@ -82,13 +82,13 @@ def _image_module():
 def run(args) -> None:
     from ..engine import Engine
     from ..scene.description import load_file
-    from .run import check_seeds, run_study
+    from .run import run_study, seed_total
     from .stats import equal_time
 
     out = args.output
     if out.exists() and not out.is_dir():
         raise OclgiError(f"{out}: exists and is not a folder")
-    seeds = check_seeds(args.seeds)
+    seed_total(args.seeds)  # checked (and its list's size) before anything is built; run_study makes the list
     points = _points(args.points)
     reference = _reference(args.reference)
     image = _image_module() if args.image else None
@@ -98,7 +98,7 @@ def run(args) -> None:
     configs = _configs(engine, args)
     if image is not None:
         engine.view_camera()  # no camera: fail before the long work
-    result = run_study(engine, configs, points=points, seeds=seeds, reference=reference,
+    result = run_study(engine, configs, points=points, seeds=args.seeds, reference=reference,
                        point_seed=args.point_seed, progress=False if args.quiet else None)
     if image is not None:  # first: its five files are written all or none, then the study's
         first = configs[0]
@@ -117,6 +117,6 @@ def run(args) -> None:
     if not args.quiet:
         eq = equal_time(result)
         parts = ", ".join(f"{r['label']} {r['error']:.3g} ({r['ratio']:.2g}x)" for r in eq.rows)
-        print(f"study: {len(result.rows)} configurations x {len(seeds)} seeds at {len(result.points):,} points "
+        print(f"study: {len(result.rows)} configurations x {len(result.seeds)} seeds at {len(result.points):,} points "
               f"in {result.seconds:.1f}s; RMSE / mean reference at equal time {eq.time_s:.3g}s: {parts}",
               file=sys.stderr)

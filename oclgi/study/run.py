@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import params, queries
+from .. import budget, params, queries
 from ..engine import as_query_points
 from ..errors import OclgiError
 from ..estimators import check_options
@@ -131,16 +131,49 @@ def study_points(engine, points, seed: int = 0) -> queries.QueryPoints:
                     raise OclgiError(f"points {points!r}: expected camera:WIDTHxHEIGHT") from None
             return engine.camera_points(width=w, height=h)
         if kind == "random":
-            try:
-                n = int(arg)
-            except ValueError:
-                n = 0
-            if n < 1:
-                raise OclgiError(f"points {points!r}: expected random:N with N a positive integer")
+            n = _random_count(points)
+            budget.check(budget.random_points_need(n))
             return random_surface_points(engine.scene, n, np.random.default_rng(seed))
         raise OclgiError(f"unknown points {points!r}: use vertices, camera[:WxH], random:N, "
                          "a points file or an (n, 6) array")
     return as_query_points(points)
+
+
+def _random_count(spec: str) -> int:
+    """N of ``random:N`` (``random:2e5`` as ``--photons 2e5`` is read)."""
+    n = params.integral(params.number_text(spec.partition(":")[2]))
+    if n is None or n < 1:
+        raise OclgiError(f"points {spec!r}: expected random:N with N a positive integer")
+    return n
+
+
+def points_total(engine, points) -> int | None:
+    """How many query points ``points`` (a spec of :func:`study_points`)
+    gives, known before they are made: None for a points file (its size is
+    what is on disk) or a spec study_points will refuse."""
+    if isinstance(points, queries.QueryPoints):
+        return len(points)
+    if isinstance(points, (int, np.integer)) and not isinstance(points, bool):
+        return int(points) if points > 0 else None
+    if isinstance(points, str):
+        kind, _, arg = points.partition(":")
+        if kind == "vertices":
+            return len(engine.scene.vertices)
+        if kind == "random":
+            return _random_count(points)
+        if kind == "camera":
+            cam = engine.scene.camera
+            if arg:
+                try:
+                    w, h = (params.image_size(params.number_text(x), "points camera:WxH")
+                            for x in arg.lower().split("x"))
+                except ValueError:
+                    return None
+                return w * h
+            return cam.width * cam.height if cam is not None else None
+        return None
+    shape = getattr(points, "shape", None)
+    return int(shape[0]) if shape else None
 
 
 def random_surface_points(scene, n: int, rng, triangles=None) -> queries.QueryPoints:
@@ -258,11 +291,28 @@ class StudyResult:
 # -- the study -------------------------------------------------------------------------
 
 
-def check_seeds(seeds) -> list:
-    if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, bool):
-        if seeds < 2:
+def seed_total(seeds) -> int:
+    """How many seeds ``seeds`` (a count R, or a list) gives, checked as a
+    count (at least 2, a list of them fits in memory) without making the list."""
+    if np.isscalar(seeds) or isinstance(seeds, (str, bytes)):
+        n = params.integral(seeds)
+        if n is None:
+            raise OclgiError(f"seeds must be a count (an integer, at least 2) or a list of integers, got {seeds!r}")
+        if n < 2:
             raise OclgiError(f"the study needs at least 2 seeds for a variance, got {seeds}")
-        return list(range(1, int(seeds) + 1))
+        params.seed_count(n, "seeds")
+        budget.check(budget.seeds_need(n))
+        return n
+    try:
+        return len(seeds)
+    except TypeError:
+        raise OclgiError(f"seeds must be a count (an integer, at least 2) or a list of integers, got {seeds!r}") \
+            from None
+
+
+def check_seeds(seeds) -> list:
+    if np.isscalar(seeds) or isinstance(seeds, (str, bytes)):
+        return list(range(1, seed_total(seeds) + 1))
     seeds = list(seeds)
     for s in seeds:
         if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or not 0 <= s < study_reference.REFERENCE_SEED_BASE:
@@ -295,6 +345,9 @@ def run_study(engine, configs, points="random:256", seeds=8, reference=None, poi
     for c in configs:
         if not isinstance(c, Config):
             raise OclgiError(f"configurations must be oclgi.study.Config, got {c!r}")
+    n_points = points_total(engine, points)
+    if n_points is not None:  # a study too large for the host is refused before any list or point is made
+        budget.check(budget.study_need(n_points, seed_total(seeds), sum(len(c.photons) for c in configs)))
     seeds = check_seeds(seeds)
     point_seed = params.seed(point_seed, "point_seed")
     reference = study_reference.Reference() if reference is None else study_reference.parse(reference)

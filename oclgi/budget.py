@@ -1,0 +1,237 @@
+"""What a job will need, estimated and checked before any work is done.
+
+A job too large for the device would otherwise end in an OpenCL error
+(INVALID_BUFFER_SIZE, out of resources) after minutes of work, and one too
+large for the host in swapping or the kernel's out-of-memory killer. Each
+estimate here counts the job's large arrays, those that grow with its
+pixels, points, seeds or photons (the scene's own buffers are small beside
+them and already allocated), and :func:`check` compares:
+
+- the largest single device buffer with CL_DEVICE_MAX_MEM_ALLOC_SIZE,
+- all device buffers together with CL_DEVICE_GLOBAL_MEM_SIZE,
+- the host arrays with the memory the system has available now.
+
+The estimates are rough and lean to the large side (a 1024x1024 DETP
+render on a CPU device peaked at 235 bytes a pixel, the estimate says 268),
+and they are held against the limits the device states: a CPU runtime that
+lets its buffers grow past its stated global memory may have run a job
+refused here.
+
+>>> need = Need("a 16384x16384 image", {"radiance": 16384 * 16384 * 16}, 0, "use a smaller width/height")
+>>> need.device_total / 2**30
+4.0
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+from . import params
+from .errors import OclgiError
+
+DEFAULT_K = 50  # Photon Maps' default k (oclgi/estimators/photon_map.py)
+
+GIB = float(1 << 30)
+SEGMENT_BYTES = 48  # oclgi.cl.layout.Segment
+# The device buffers every estimator of a method keeps per query point,
+# bytes per point: positions, normals, sums, irradiance, and the index built
+# over the points (Photon Maps' neighbour lists: point_buffers).
+POINT_BUFFERS = {
+    "detp": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16},
+    "impact": {"positions": 16, "barycentrics": 8, "irradiance": 16},
+    "photon_map": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16, "query order": 4, "radii": 4},
+}
+INDEX_BYTES = {"detp_disc_index": 64, "detp_ray_map": 48, "detp_sphere_cache": 32}  # the variants' index
+# Host bytes per query point of one estimate: its irradiance and sums read
+# back (16 + 24) and the temporaries of checking and packing points.
+POINT_HOST_BYTES = 96
+# A rendered pixel on the host: the camera's points (40), the estimate (40),
+# the radiance and pixels (32), and the images' encoding when written (32).
+# (On a CPU device the device buffers come on top: 1024x1024 pixels of DETP
+# peaked at 235 bytes a pixel in all, this estimate says 268.)
+PIXEL_HOST_BYTES = 144
+# A rendered pixel on the device beside the estimator: the shading's copies
+# of the points, its radiance and its pixels (oclgi/engine.py's shade).
+PIXEL_BUFFERS = {"shaded positions": 16, "shaded normals": 16, "radiance": 16, "pixels": 4}
+# The host's share of one stored estimate in a study (float64 RGB, and the
+# list it is stacked from).
+STUDY_VALUE_BYTES = 2 * 3 * 8
+RANDOM_POINT_HOST_BYTES = 256  # a random point's float64 draws and temporaries, and its packed copy
+SEED_HOST_BYTES = 40  # a Python int in the seeds' list
+POSE_HOST_BYTES = 256  # a 4x4 float64 pose and its array header
+FRAME_HOST_BYTES = 1024  # a frame's row of timings
+# A run whose estimated time exceeds this gets a notice with the estimate.
+NOTICE_SECONDS = 60.0
+
+
+def gib(nbytes: float) -> str:
+    """A size as messages write it: GiB from 1 GiB up, else MiB or KiB."""
+    for unit, size in (("GiB", GIB), ("MiB", float(1 << 20))):
+        if nbytes >= size:
+            return f"{nbytes / size:.1f} {unit}"
+    return f"{nbytes / 1024:.1f} KiB"
+
+
+@dataclass
+class Need:
+    """What a job needs: ``what`` names it in messages ("a 16384x16384
+    image"), ``device`` maps each large device buffer to its bytes, ``host``
+    counts host bytes, ``hint`` says how to make it smaller."""
+
+    what: str
+    device: dict = field(default_factory=dict)
+    host: int = 0
+    hint: str = ""
+
+    @property
+    def device_total(self) -> int:
+        return int(sum(self.device.values()))
+
+    @property
+    def device_largest(self) -> int:
+        return int(max(self.device.values(), default=0))
+
+
+def device_limits(device) -> tuple[int, int]:
+    """(largest buffer, all buffers) the device allows, in bytes."""
+    return int(device.max_mem_alloc_size), int(device.global_mem_size)
+
+
+def host_available() -> int | None:
+    """Bytes of memory the host can give now without swapping (Linux's
+    MemAvailable, else the free pages), None where the system does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def shares_host_memory(device) -> bool:
+    """Whether the device's buffers live in the host's memory (a CPU
+    device, as PoCL's): then they count against the host's memory too."""
+    import pyopencl as cl
+
+    return bool(device.type & cl.device_type.CPU)
+
+
+def check(need: Need, device=None) -> Need:
+    """Raise OclgiError if ``need`` does not fit ``device`` (None: check the
+    host only) or the host's available memory; return it otherwise."""
+    hint = f"; {need.hint}" if need.hint else ""
+    if device is not None and need.device:
+        largest, total = device_limits(device)
+        if need.device_largest > largest or need.device_total > total:
+            biggest = max(need.device, key=need.device.get)
+            raise OclgiError(f"{need.what} needs about {gib(need.device_total)} of device memory, "
+                             f"{gib(need.device_largest)} in its largest buffer ({biggest}) (the device allows "
+                             f"{gib(largest)} in one buffer, {gib(total)} in all){hint}")
+    available = host_available()
+    host = need.host + (need.device_total if device is not None and shares_host_memory(device) else 0)
+    if available is not None and host > available:
+        raise OclgiError(f"{need.what} needs about {gib(host)} of host memory ({gib(available)} is "
+                         f"available){hint}")
+    return need
+
+
+# -- the jobs ------------------------------------------------------------------------------
+
+
+def batch_buffers(photons: int, max_depth: int, batch_bytes: int) -> dict:
+    """The tracer's reused buffers: one batch of paths (oclgi/engine.py's batching)."""
+    paths = max(1, min(photons, batch_bytes // (max_depth * SEGMENT_BYTES)))
+    return {"photon segments": paths * max_depth * SEGMENT_BYTES, "path lengths": paths * 4}
+
+
+def point_buffers(method: str, n: int, k: int | None = None) -> dict:
+    """An estimator's buffers over ``n`` query points, each by its size."""
+    per_point = dict(POINT_BUFFERS.get(method, POINT_BUFFERS["detp"]))
+    if method in INDEX_BYTES:
+        per_point["index over the points"] = INDEX_BYTES[method]
+    if method == "photon_map":  # k ids and k distances per point
+        k = int(k) if params.integral(k) else DEFAULT_K
+        per_point["neighbour ids"] = per_point["neighbour distances"] = 4 * k
+    return {name: n * size for name, size in per_point.items()}
+
+
+def irradiance_need(n_points: int, method: str, photons: int, max_depth: int, batch_bytes: int,
+                    k: int | None = None) -> Need:
+    device = {**point_buffers(method, n_points, k), **batch_buffers(photons, max_depth, batch_bytes)}
+    return Need(f"an estimate at {n_points:,} points", device, n_points * POINT_HOST_BYTES,
+                "use fewer points")
+
+
+def render_need(width: int, height: int, method: str, photons: int, max_depth: int, batch_bytes: int,
+                k: int | None = None) -> Need:
+    n = width * height
+    device = {**point_buffers(method, n, k), **batch_buffers(photons, max_depth, batch_bytes),
+              **{name: n * size for name, size in PIXEL_BUFFERS.items()}}
+    return Need(f"a {width}x{height} image", device, n * PIXEL_HOST_BYTES, "use a smaller width/height")
+
+
+def camera_need(width: int, height: int) -> Need:
+    n = width * height
+    return Need(f"the visible points of a {width}x{height} camera", {"points": n * 16, "normals": n * 16,
+                "barycentrics": n * 8}, n * 40 + n * POINT_HOST_BYTES, "use a smaller width/height")
+
+
+def random_points_need(n: int) -> Need:
+    """Random surface points drawn on the host: the draws, positions and
+    normals in float64, and the packed float32 points (oclgi/study/run.py)."""
+    return Need(f"{n:,} random points", {}, n * RANDOM_POINT_HOST_BYTES, "use fewer points")
+
+
+def seeds_need(n_seeds: int) -> Need:
+    return Need(f"a study of {n_seeds:,} seeds", {}, n_seeds * SEED_HOST_BYTES, "use fewer seeds")
+
+
+def study_need(n_points: int, n_seeds: int, n_rows: int) -> Need:
+    """A study's estimates kept on the host: every (configuration, photon
+    count) row keeps one RGB estimate per seed and point."""
+    host = n_rows * n_seeds * n_points * STUDY_VALUE_BYTES + n_points * POINT_HOST_BYTES * 4
+    return Need(f"a study of {n_rows} configurations x {n_seeds:,} seeds at {n_points:,} points", {}, host,
+                "use fewer seeds, points or photon counts")
+
+
+def frames_need(frames: int) -> Need:
+    return Need(f"an animation of {frames:,} frames", {}, frames * (POSE_HOST_BYTES + FRAME_HOST_BYTES),
+                "use fewer frames")
+
+
+def frames(value, name: str = "frames") -> int:
+    """An animation's frame count (oclgi.params.frames), refused beyond its
+    cap with what its poses and timings alone would take."""
+    n = params.integral(value)
+    if n is not None and n > params.MAX_FRAMES:
+        raise params.ParamError(name, f"expected an integer in 1..{params.MAX_FRAMES:,}, got {n} (its poses and "
+                                      f"timings alone would take about {gib(frames_need(n).host)} of memory)")
+    return params.frames(value, name)
+
+
+def duration(seconds: float) -> str:
+    """A rough duration in the unit that reads best."""
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if seconds >= 2 * size:
+            return f"{seconds / size:.0f} {unit}"
+    return f"{seconds:.0f} seconds"
+
+
+def time_notice(done: int, seconds: float, total: int) -> str | None:
+    """A notice of the whole run's time, extrapolated from its first ``done``
+    paths of ``total`` traced and estimated in ``seconds``; None when the run
+    is short (under NOTICE_SECONDS)."""
+    if done <= 0 or done >= total or not math.isfinite(seconds):
+        return None
+    estimate = seconds * total / done
+    if estimate < NOTICE_SECONDS:
+        return None
+    return (f"{total:,} photon paths will take about {duration(estimate)} on this device "
+            f"(from the first {done:,} in {seconds:.1f}s); use fewer photons for a quicker run")
