@@ -147,7 +147,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-exr", action="store_true", help="write only the PNG")
     r.add_argument("--force", action="store_true",
                    help="replace an existing file of the name not given with -o even when oclgi did not write it")
-    r.add_argument("--width", type=_param(params.image_size, "--width"), help="image width (default: the scene camera's)")
+    r.add_argument("--width", type=_param(params.image_size, "--width"),
+                   help="image width (default: the scene camera's)")
     r.add_argument("--height", type=_param(params.image_size, "--height"),
                    help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")

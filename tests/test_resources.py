@@ -47,9 +47,11 @@ def engine(tmp_path_factory):
 
 @pytest.fixture
 def device(monkeypatch):
-    """A device that allows ``one`` bytes in a buffer and ``total`` in all; a roomy host."""
+    """A device with memory of its own (a GPU) that allows ``one`` bytes in a
+    buffer and ``total`` in all; a roomy host."""
     def limit(one, total):
         monkeypatch.setattr(budget, "device_limits", lambda dev: (one, total))
+        monkeypatch.setattr(budget, "shares_host_memory", lambda dev: False)
         monkeypatch.setattr(budget, "host_available", lambda: 1 << 50)
 
     return limit
@@ -126,6 +128,20 @@ def test_points_refused_on_a_small_device(engine, device):
             engine.irradiance(points, method=method, photons=1000)
     with pytest.raises(OclgiError, match=r"^the visible points of a 64x64 camera needs about"):
         engine.camera_points(width=64, height=64)
+
+
+def test_cpu_device_total_is_the_hosts_memory(engine, monkeypatch):
+    """On a CPU device the buffers are host memory: a job past the device's
+    stated global memory runs when the host has room (PoCL's 8192x8192
+    render did), and is refused by the host's memory when it has not."""
+    points = np.tile(XYZN, (500, 1))
+    monkeypatch.setattr(budget, "device_limits", lambda dev: (1 << 50, 500 * 2 * 40))
+    monkeypatch.setattr(budget, "shares_host_memory", lambda dev: True)
+    monkeypatch.setattr(budget, "host_available", lambda: 1 << 50)
+    assert engine.irradiance(points, method="detp", photons=1000).irradiance.shape == (1000, 3)
+    monkeypatch.setattr(budget, "host_available", lambda: 500 * 2 * 40)
+    with pytest.raises(OclgiError, match=r"^an estimate at 1,000 points needs about [\d.]+ [KM]iB of host memory"):
+        engine.irradiance(points, method="detp", photons=1000)
 
 
 def test_photon_maps_count_their_neighbour_lists(engine, device):
