@@ -20,11 +20,20 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
-
-from . import params
+from . import interrupt, streams
 from .errors import OclgiError
-from .params import METHODS
+
+# Start-up: before numpy and pyopencl are imported (they take half a second,
+# and start threads), a SIGINT ignored at start is made to stay ignored in
+# every thread, and a Ctrl-C during the imports ends as any other one does.
+interrupt.keep_ignored()
+try:
+    import numpy as np
+
+    from . import params
+    from .params import METHODS
+except KeyboardInterrupt:
+    interrupt.exit_interrupted()
 
 
 class _Parser(argparse.ArgumentParser):
@@ -324,22 +333,34 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 
 def main(argv=None) -> int:
+    """The command; returns its exit status. Whatever happens after start-up,
+    it ends with one line at most on stderr: an OclgiError's message, or
+    ``oclgi: interrupted`` (130) on Ctrl-C, or a closed or full stdout's
+    (oclgi.streams)."""
+    try:
+        with interrupt.handled():
+            return _run(argv)
+    except KeyboardInterrupt:
+        interrupt.say_interrupted()
+        return interrupt.EXIT_STATUS
+
+
+def _run(argv) -> int:
     args = build_parser().parse_args(argv)
     if args.verbose:
         from .cl.programs import COMPILER_OUTPUT_ENV
 
         os.environ[COMPILER_OUTPUT_ENV] = "1"
     try:
-        with warnings.catch_warnings():
+        with streams.guarded_stdout(), warnings.catch_warnings():
             warnings.showwarning = _show_warning
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
              "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("oclgi: interrupted", file=sys.stderr)
-        return 130
+    except streams.StdoutError as exc:  # the files were written before their "wrote" lines
+        return streams.stdout_failed(exc)
     return 0
 
 

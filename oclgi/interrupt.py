@@ -1,0 +1,88 @@
+"""Ctrl-C on the command line: one line, ``oclgi: interrupted``, and exit
+status 130 (128 + SIGINT, what shells report for a job stopped by Ctrl-C),
+whenever it comes: while Python imports numpy and pyopencl, while PoCL
+compiles a kernel, during a run, and when it comes twice.
+
+Standard library only: the command line imports this before anything slow.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from contextlib import contextmanager
+
+EXIT_STATUS = 130
+MESSAGE = "oclgi: interrupted"
+
+
+def say_interrupted() -> None:
+    """The one line, written straight to file descriptor 2: ``sys.stderr`` may
+    be half set up (an interrupt during start-up) or be a captured stream."""
+    try:
+        sys.stderr.flush()
+    except (OSError, ValueError, AttributeError):
+        pass
+    try:
+        os.write(2, (MESSAGE + "\n").encode())
+    except OSError:
+        pass
+
+
+def exit_interrupted():
+    """Leave now, as interrupted (raises SystemExit, which prints nothing)."""
+    ignore_further()
+    say_interrupted()
+    raise SystemExit(EXIT_STATUS)
+
+
+def ignore_further() -> None:
+    """A second Ctrl-C while the first unwinds (temporary files being removed,
+    the device released) would raise in the middle of that clean-up and end
+    with a traceback: from the first one on, further ones are ignored. The
+    unwinding is short, as kernels run in short slices (cl/programs.launch)."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: nothing to change there
+        pass
+
+
+def _on_sigint(signum, frame):
+    ignore_further()
+    raise KeyboardInterrupt
+
+
+def keep_ignored() -> bool:
+    """A job started with SIGINT ignored (``nohup``, ``cmd &`` in a script)
+    must not be stopped by one. PoCL's compiler (LLVM) installs its own
+    SIGINT handler during a kernel build, whatever the disposition was, and a
+    SIGINT then aborts the build. Blocked in this thread before any other
+    thread exists (numpy's, PoCL's), SIGINT is blocked in every thread the
+    process will have, so no handler ever runs; an ignored signal is never
+    wanted, so blocking it loses nothing. True if SIGINT was ignored."""
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        return False
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    return True
+
+
+@contextmanager
+def handled():
+    """Within: the first Ctrl-C raises KeyboardInterrupt (which the command's
+    main turns into the one line and 130) and the next ones are ignored; a
+    SIGINT ignored at start stays ignored. The previous handler comes back on
+    the way out, unless a Ctrl-C came (the process is ending then, and a
+    second one must not find the default handler again)."""
+    if keep_ignored():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise
+    except BaseException:
+        signal.signal(signal.SIGINT, previous)
+        raise
+    signal.signal(signal.SIGINT, previous)
