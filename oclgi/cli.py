@@ -316,10 +316,10 @@ def cmd_warm(args):
 
 
 def cmd_info(_args):
-    from .cl.device import INSTALL_HINT, describe_devices, list_devices
+    from .cl.device import describe_devices, list_devices, no_device_message
 
     if not list_devices():
-        raise OclgiError(f"no OpenCL platform found: {INSTALL_HINT}")
+        raise OclgiError(no_device_message())
     print(describe_devices())
 
 

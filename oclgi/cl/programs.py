@@ -41,6 +41,7 @@ import pyopencl as cl
 
 from ..errors import OclgiError
 from .constants import build_defines
+from .device import check_cache_dir
 
 COMPILER_OUTPUT_ENV = "OCLGI_COMPILER_OUTPUT"
 
@@ -212,6 +213,7 @@ class ProgramCache:
             log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (str(failure), compiler_text) if t.strip()))
             if compiler_output_wanted():
                 _show_log(path.name, options, log)
+            check_cache_dir()  # an unwritable kernel cache fails builds without a compiler error
             raise KernelBuildError(f"kernel {path.name} does not build: {_first_error(log)} "
                                    f"({COMPILER_OUTPUT_ENV}=1 shows the compiler's log)", log) from None
         log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (_program_log(program), compiler_text) if t.strip()))
