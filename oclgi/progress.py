@@ -3,7 +3,7 @@
 On a terminal: a bar redrawn in place (``\\r``). Elsewhere (a log file, a CI
 job, a pipe): one line every PERIOD seconds, such as
 
-    oclgi: detp 35% (7.0M of 20M paths), 12 s left
+    oclgi: detp 36% (7.3M of 20M paths), 18 s left
 
 so that a long run under ``nohup`` or in a batch job still says how far it
 is; a run shorter than PERIOD prints nothing, so short runs' stderr stays
@@ -19,13 +19,15 @@ PERIOD = 10.0  # seconds between two lines when stderr is not a terminal
 
 
 def count_text(n: int) -> str:
-    """A count as people read it: 2,000; 35k; 7.0M; 1.2G."""
+    """A count as people read it: 2,000; 35k; 7.3M; 20M; 1.2G."""
     if n < 10_000:
         return f"{n:,}"
     for scale, suffix in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
         if n >= scale:
             x = n / scale
-            return f"{x:.1f}{suffix}" if x < 100 else f"{x:.0f}{suffix}"
+            if x >= 100 or x == int(x):  # round counts (a total, as given) without decimals
+                return f"{x:.0f}{suffix}"
+            return f"{x:.1f}{suffix}"
     return f"{n:,}"
 
 

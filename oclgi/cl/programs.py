@@ -297,7 +297,8 @@ def timed_slices(queue: cl.CommandQueue, key, total: int, unit: int = 1, first: 
     multiples of ``unit`` but the last. ``key`` names what is sliced (its
     slice size is remembered for its next run)."""
     key = (key, queue.device.int_ptr)
-    step = _slice_items.get(key) or max(unit, first // unit * unit)
+    step = _slice_items.get(key) or first
+    step = max(unit, step // unit * unit)  # a size learned with another unit (work-group size) is rounded
     queue.finish()  # the first piece's time must not include earlier work
     start = 0
     while start < total:
