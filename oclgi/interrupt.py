@@ -18,12 +18,14 @@ MESSAGE = "oclgi: interrupted"
 
 
 def say_interrupted() -> None:
-    """The one line, written straight to file descriptor 2: ``sys.stderr`` may
-    be half set up (an interrupt during start-up) or be a captured stream."""
-    try:
-        sys.stderr.flush()
-    except (OSError, ValueError, AttributeError):
-        pass
+    """The one line on stderr (straight to file descriptor 2 if sys.stderr
+    cannot take it)."""
+    if sys.stderr is not None:
+        try:
+            print(MESSAGE, file=sys.stderr, flush=True)
+            return
+        except (OSError, ValueError):
+            pass
     try:
         os.write(2, (MESSAGE + "\n").encode())
     except OSError:
