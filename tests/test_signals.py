@@ -33,7 +33,12 @@ def _env(**extra):
 
 def _start(cwd, *args, env=None, ignore_sigint=False, stdout=subprocess.PIPE, code=None):
     cmd = [sys.executable, "-c", code] if code else [sys.executable, "-m", "oclgi", *map(str, args)]
-    pre = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if ignore_sigint else None
+    def pre():
+        # As a terminal's job: SIGINT at its default (or ignored, as a
+        # background job's), whatever this test process inherited.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, signal.SIG_IGN if ignore_sigint else signal.SIG_DFL)
+
     return subprocess.Popen(cmd, cwd=cwd, env=env or _env(), stdout=stdout, stderr=subprocess.PIPE,
                             text=True, preexec_fn=pre)
 
