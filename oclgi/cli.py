@@ -338,7 +338,9 @@ def main(argv=None) -> int:
     ``oclgi: interrupted`` (130) on Ctrl-C, or a closed or full stdout's
     (oclgi.streams)."""
     try:
-        with interrupt.handled():
+        # argv None: run as the command (the console script, python -m oclgi),
+        # the process ends after this; a list: called in-process.
+        with interrupt.handled(command_line=argv is None):
             return _run(argv)
     except KeyboardInterrupt:
         interrupt.say_interrupted()

@@ -70,12 +70,17 @@ def keep_ignored() -> bool:
 
 
 @contextmanager
-def handled():
+def handled(command_line: bool = True):
     """Within: the first Ctrl-C raises KeyboardInterrupt (which the command's
     main turns into the one line and 130) and the next ones are ignored; a
-    SIGINT ignored at start stays ignored. The previous handler comes back on
-    the way out, unless a Ctrl-C came (the process is ending then, and a
-    second one must not find the default handler again)."""
+    SIGINT ignored at start stays ignored.
+
+    On the way out of a ``command_line`` run the process is about to end:
+    SIGINT is ignored from then on, as Python's teardown (releasing the
+    device, PoCL's threads) would otherwise meet it with the default action
+    and die of it, after the work was done. For a caller that goes on
+    (``command_line`` False: main called in-process) the previous handler
+    comes back, unless a Ctrl-C came."""
     if keep_ignored():
         yield
         return
@@ -85,6 +90,13 @@ def handled():
     except KeyboardInterrupt:
         raise
     except BaseException:
-        signal.signal(signal.SIGINT, previous)
+        _leave(command_line, previous)
         raise
-    signal.signal(signal.SIGINT, previous)
+    _leave(command_line, previous)
+
+
+def _leave(command_line: bool, previous) -> None:
+    if command_line:
+        ignore_further()
+    else:
+        signal.signal(signal.SIGINT, previous)
