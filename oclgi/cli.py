@@ -348,13 +348,13 @@ def main(argv=None) -> int:
 
 
 def _run(argv) -> int:
-    args = build_parser().parse_args(argv)
-    if args.verbose:
-        from .cl.programs import COMPILER_OUTPUT_ENV
-
-        os.environ[COMPILER_OUTPUT_ENV] = "1"
     try:
         with streams.guarded_stdout(), warnings.catch_warnings():
+            args = build_parser().parse_args(argv)  # --help writes to stdout too
+            if args.verbose:
+                from .cl.programs import COMPILER_OUTPUT_ENV
+
+                os.environ[COMPILER_OUTPUT_ENV] = "1"
             warnings.showwarning = _show_warning
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
              "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)

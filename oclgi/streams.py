@@ -60,8 +60,8 @@ class _Guarded:
 @contextmanager
 def guarded_stdout():
     """Within: writes to sys.stdout raise StdoutError; what was printed is
-    flushed on the way out (when a failure can still be reported, not at
-    exit)."""
+    flushed on the way out, whichever way (when a failure can still be
+    reported, not at exit)."""
     stream = sys.stdout
     if stream is None:
         yield
@@ -69,9 +69,11 @@ def guarded_stdout():
     sys.stdout = _Guarded(stream)
     try:
         yield
-        sys.stdout.flush()
     finally:
-        sys.stdout = stream
+        try:
+            sys.stdout.flush()  # also after argparse's SystemExit (--help)
+        finally:
+            sys.stdout = stream
 
 
 def _detach_stdout() -> None:

@@ -187,6 +187,19 @@ def test_closed_stdout_pipe_ends_quietly_with_141(tmp_path):
     assert (tmp_path / "p.exr").is_file() and (tmp_path / "p.png").is_file()
 
 
+def test_help_into_a_closed_pipe_ends_as_a_run_does(tmp_path):
+    """argparse drops the write error of --help itself; the status is still
+    the closed pipe's, as for any other output."""
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = _start(tmp_path, "render", "--help", stdout=w)
+    finally:
+        os.close(w)
+    _, err = p.communicate(timeout=120)
+    assert (p.returncode, err) == (141, "")
+
+
 def test_full_stdout_is_one_line_and_status_2(tmp_path):
     with open("/dev/full", "w") as full:
         p = _start(tmp_path, *_render(tmp_path / "f.exr", 2000, 8, method="detp_disc_index"), stdout=full)
