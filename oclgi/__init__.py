@@ -8,17 +8,45 @@
     est = engine.irradiance(points_and_normals)       # (n, 6) array -> (n, 3) irradiance
 """
 
+import importlib as _importlib
 from pathlib import Path as _Path
 
-from .engine import Engine, Estimate, Render, Stats
 from .errors import OclgiError
-from .queries import QueryPoints, from_arrays as query_points, from_file as read_points
-from .scene.description import load_dict, load_file
-from .scene.scene import Camera, Material, OclgiWarning, PointLight, Scene
-from .incremental.photon_map_session import PhotonMapSession
-from .incremental.session import Session, UpdateStats
 
 __version__ = "0.1.0"
+
+# The API's names are imported on first use (PEP 562), not with the package:
+# the command line (oclgi.cli) imports this package first, and must be able
+# to set up its Ctrl-C handling before numpy and pyopencl load.
+_LAZY = {
+    "Engine": ".engine", "Estimate": ".engine", "Render": ".engine", "Stats": ".engine",
+    "QueryPoints": ".queries", "query_points": (".queries", "from_arrays"),
+    "read_points": (".queries", "from_file"),
+    "load_dict": ".scene.description", "load_file": ".scene.description",
+    "Camera": ".scene.scene", "Material": ".scene.scene", "OclgiWarning": ".scene.scene",
+    "PointLight": ".scene.scene", "Scene": ".scene.scene",
+    "PhotonMapSession": ".incremental.photon_map_session",
+    "Session": ".incremental.session", "UpdateStats": ".incremental.session",
+}
+
+
+def __getattr__(name):
+    where = _LAZY.get(name)
+    if where is None:
+        try:  # a sub-package or module, as ``oclgi.engine`` after ``import oclgi``
+            return _importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    module, attr = where if isinstance(where, tuple) else (where, name)
+    value = getattr(_importlib.import_module(module, __name__), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
 
 
 def scene_path(name: str) -> _Path:
@@ -29,7 +57,7 @@ def scene_path(name: str) -> _Path:
     raise OclgiError(f"shipped scene {name!r} not found (scenes/ is part of the source tree)")
 
 
-def save_render(result: Render, path) -> tuple[_Path, _Path]:
+def save_render(result: "Render", path) -> tuple[_Path, _Path]:
     """Write the linear radiance as EXR and the tone-mapped image as PNG (same stem)."""
     from .io import write_images
 

@@ -20,11 +20,20 @@ import sys
 import warnings
 from pathlib import Path
 
-import numpy as np
-
-from . import budget, params
+from . import interrupt, streams
 from .errors import OclgiError
-from .params import METHODS
+
+# Start-up: before numpy and pyopencl are imported (they take half a second,
+# and start threads), a SIGINT ignored at start is made to stay ignored in
+# every thread, and a Ctrl-C during the imports ends as any other one does.
+interrupt.keep_ignored()
+try:
+    import numpy as np
+
+    from . import budget, params
+    from .params import METHODS
+except KeyboardInterrupt:
+    interrupt.exit_interrupted()
 
 
 class _Parser(argparse.ArgumentParser):
@@ -347,10 +356,10 @@ def cmd_warm(args):
 
 
 def cmd_info(_args):
-    from .cl.device import INSTALL_HINT, describe_devices, list_devices
+    from .cl.device import describe_devices, list_devices, no_device_message
 
     if not list_devices():
-        raise OclgiError(f"no OpenCL platform found: {INSTALL_HINT}")
+        raise OclgiError(no_device_message())
     print(describe_devices())
 
 
@@ -364,22 +373,36 @@ def _show_warning(message, category, filename, lineno, file=None, line=None):
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.verbose:
-        from .cl.programs import COMPILER_OUTPUT_ENV
-
-        os.environ[COMPILER_OUTPUT_ENV] = "1"
+    """The command; returns its exit status. Whatever happens after start-up,
+    it ends with one line at most on stderr: an OclgiError's message, or
+    ``oclgi: interrupted`` (130) on Ctrl-C, or a closed or full stdout's
+    (oclgi.streams)."""
     try:
-        with warnings.catch_warnings():
+        # argv None: run as the command (the console script, python -m oclgi),
+        # the process ends after this; a list: called in-process.
+        with interrupt.handled(command_line=argv is None):
+            return _run(argv)
+    except KeyboardInterrupt:
+        interrupt.say_interrupted()
+        return interrupt.EXIT_STATUS
+
+
+def _run(argv) -> int:
+    try:
+        with streams.guarded_stdout(), warnings.catch_warnings():
+            args = build_parser().parse_args(argv)  # --help writes to stdout too
+            if args.verbose:
+                from .cl.programs import COMPILER_OUTPUT_ENV
+
+                os.environ[COMPILER_OUTPUT_ENV] = "1"
             warnings.showwarning = _show_warning
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
              "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("oclgi: interrupted", file=sys.stderr)
-        return 130
+    except streams.StdoutError as exc:  # the files were written before their "wrote" lines
+        return streams.stdout_failed(exc)
     return 0
 
 

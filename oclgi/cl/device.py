@@ -11,6 +11,7 @@ lists them) or a case-insensitive substring of the platform or device name.
 from __future__ import annotations
 
 import os
+import tempfile
 
 import pyopencl as cl
 
@@ -26,6 +27,52 @@ from ..errors import OclgiError
 os.environ.setdefault("POCL_WORK_GROUP_SPECIALIZATION", "0")
 
 INSTALL_HINT = "install an OpenCL runtime, e.g. `apt-get install pocl-opencl-icd` (or run `make setup`)"
+
+# Variables that decide which OpenCL devices a process sees: the ICD loader's
+# (where the runtimes are listed) and PoCL's. Set wrongly, they leave the
+# runtime installed but silent, and the message must blame them, not a
+# missing runtime. (POCL_CACHE_DIR, PoCL's folder for compiled kernels, is
+# checked on its own: check_cache_dir.)
+RUNTIME_VARIABLES = ("OCL_ICD_VENDORS", "OCL_ICD_FILENAMES", "OPENCL_VENDOR_PATH", "POCL_DEVICES")
+
+
+def runtime_settings() -> list[str]:
+    """``NAME=value`` of each of RUNTIME_VARIABLES that is set."""
+    return [f"{name}={os.environ[name]}" for name in RUNTIME_VARIABLES if os.environ.get(name, "").strip()]
+
+
+def check_cache_dir() -> None:
+    """PoCL writes every compiled kernel under POCL_CACHE_DIR; when it cannot,
+    it fails builds without a reason, or shows no device at all. Tried the
+    way PoCL uses it: the folder made if missing, a file written in it."""
+    value = os.environ.get("POCL_CACHE_DIR", "").strip()
+    if not value:
+        return
+    if os.path.exists(value) and not os.path.isdir(value):
+        problem = "not a folder"
+    else:
+        try:
+            os.makedirs(value, exist_ok=True)
+            with tempfile.TemporaryFile(dir=value):
+                pass
+            return
+        except OSError as exc:
+            problem = (exc.strerror or str(exc)).lower()
+    raise OclgiError(f"POCL_CACHE_DIR={value} cannot hold PoCL's compiled kernels ({problem}): "
+                     "point it at a writable folder, or unset it")
+
+
+def no_device_message() -> str:
+    """Why no device answers, naming the variables that may be the cause."""
+    check_cache_dir()
+    settings = runtime_settings()
+    if not settings:
+        return f"no OpenCL platform found: {INSTALL_HINT}"
+    named = ", ".join(settings)
+    verb = "is" if len(settings) == 1 else "are"
+    them = "it" if len(settings) == 1 else "them"
+    return (f"no OpenCL device found ({named} {verb} set and may hide the devices: correct or unset {them}); "
+            f"if that is not it, {INSTALL_HINT}")
 
 
 def list_devices() -> list[tuple[int, int, cl.Device]]:
@@ -68,7 +115,7 @@ def _match(spec: str, devices):
 def choose_device(spec: str | None = None) -> cl.Device:
     devices = list_devices()
     if not devices:
-        raise OclgiError(f"no OpenCL platform found: {INSTALL_HINT}")
+        raise OclgiError(no_device_message())
     spec = spec or os.environ.get("OCLGI_DEVICE") or os.environ.get("PYOPENCL_CTX")
     if spec:
         return _match(spec, devices)
@@ -89,6 +136,7 @@ def check_device(dev: cl.Device) -> None:
 
 
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
+    check_cache_dir()
     dev = choose_device(spec)
     check_device(dev)
     ctx = cl.Context([dev])
@@ -107,7 +155,7 @@ def _kind(dev: cl.Device) -> str:
 def describe_devices() -> str:
     devices = list_devices()
     if not devices:
-        return f"no OpenCL platform found: {INSTALL_HINT}"
+        return no_device_message()
     try:
         chosen = choose_device()
     except OclgiError:

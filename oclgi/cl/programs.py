@@ -30,6 +30,7 @@ import re
 import sys
 import tempfile
 import threading
+import time
 import warnings
 from contextlib import contextmanager
 from importlib import resources
@@ -40,6 +41,7 @@ import pyopencl as cl
 
 from ..errors import OclgiError
 from .constants import build_defines
+from .device import check_cache_dir
 
 COMPILER_OUTPUT_ENV = "OCLGI_COMPILER_OUTPUT"
 
@@ -211,6 +213,7 @@ class ProgramCache:
             log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (str(failure), compiler_text) if t.strip()))
             if compiler_output_wanted():
                 _show_log(path.name, options, log)
+            check_cache_dir()  # an unwritable kernel cache fails builds without a compiler error
             raise KernelBuildError(f"kernel {path.name} does not build: {_first_error(log)} "
                                    f"({COMPILER_OUTPUT_ENV}=1 shows the compiler's log)", log) from None
         log = _SOURCE_NAME.sub(path.name, "\n".join(t for t in (_program_log(program), compiler_text) if t.strip()))
@@ -264,15 +267,68 @@ def _local_size_for(queue: cl.CommandQueue, kernel: cl.Kernel) -> int:
     return size
 
 
+# Kernels run in slices, each waited for: Python handles a signal (Ctrl-C)
+# only between two calls into the OpenCL runtime, so one long launch would
+# hold a Ctrl-C for its whole duration (seconds, unbounded for big batches).
+# A slice is sized from the previous one's time to take about SLICE_SECONDS;
+# a launch that fits in one slice stays one launch, asynchronous, as small
+# launches (an interactive session's) must. Slicing by work-item offset
+# changes nothing in the results: every kernel indexes its work by
+# get_global_id alone (no group ids, global sizes or local memory) and its
+# sums are integer (fixed point), whatever the order.
+SLICE_SECONDS = 0.1
+FIRST_SLICE_ITEMS = 1 << 14  # a kernel's first slice, before any is timed
+_slice_items: dict = {}  # (kernel or caller's key, device) -> items of a SLICE_SECONDS slice
+
+
+def _next_slice(items: int, elapsed: float, unit: int) -> int:
+    """The size of the next slice after one of ``items`` took ``elapsed`` s:
+    scaled to SLICE_SECONDS, at most 4x larger (a cheap first slice says
+    little), a multiple of ``unit``."""
+    want = items * SLICE_SECONDS / max(elapsed, 1e-6)
+    want = min(want, 4.0 * items)
+    return max(unit, int(want) // unit * unit)
+
+
+def timed_slices(queue: cl.CommandQueue, key, total: int, unit: int = 1, first: int = FIRST_SLICE_ITEMS):
+    """(start, count) pieces of ``range(total)``; the caller enqueues each
+    piece's work, this waits for it before the next (the moment a Ctrl-C is
+    seen) and sizes the next to take about SLICE_SECONDS. Counts are
+    multiples of ``unit`` but the last. ``key`` names what is sliced (its
+    slice size is remembered for its next run)."""
+    key = (key, queue.device.int_ptr)
+    step = _slice_items.get(key) or first
+    step = max(unit, step // unit * unit)  # a size learned with another unit (work-group size) is rounded
+    queue.finish()  # the first piece's time must not include earlier work
+    start = 0
+    while start < total:
+        count = min(step, total - start)
+        t0 = time.perf_counter()
+        yield start, count
+        queue.finish()
+        start += count
+        if count == step:
+            step = _slice_items[key] = _next_slice(count, time.perf_counter() - t0, unit)
+
+
 def launch(queue: cl.CommandQueue, kernel: cl.Kernel, n: int, *args, local_size: int | None = None):
     """Run ``kernel`` over ``n`` work-items (kernels guard ``i >= n``).
 
     The global size is rounded up to a multiple of the work-group size:
     ``local_size``, else DEFAULT_LOCAL_SIZE (or less, if the kernel allows
-    less). Results never depend on it (fixed-point sums).
+    less). Results never depend on it (fixed-point sums). A launch longer
+    than SLICE_SECONDS runs in slices (see above) and returns when done;
+    a shorter one returns at once.
     """
     if n <= 0:
         return None
     local = local_size or _local_size_for(queue, kernel)
     gsize = (n + local - 1) // local * local
-    return kernel(queue, (gsize,), (local,), *args)
+    key = (kernel.int_ptr, queue.device.int_ptr)
+    if gsize <= _slice_items.get(key, FIRST_SLICE_ITEMS):
+        return kernel(queue, (gsize,), (local,), *args)
+    kernel.set_args(*args)
+    event = None
+    for start, count in timed_slices(queue, kernel.int_ptr, gsize, local):
+        event = cl.enqueue_nd_range_kernel(queue, kernel, (count,), (local,), global_work_offset=(start,))
+    return event

@@ -1,0 +1,261 @@
+"""Signals and streams: Ctrl-C at any moment ends the command with one line
+and status 130, a SIGINT ignored at start stays ignored (kernel builds
+included), a closed or full stdout ends without a traceback, and progress
+shows on streams that are not terminals.
+
+Commands run in subprocesses, as a user runs them; SIGINT is sent the way a
+terminal sends Ctrl-C.
+"""
+
+import io
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import pytest
+from conftest import ROOT
+
+from oclgi.progress import Progress
+
+BOX = ROOT / "scenes" / "cornell_box.toml"
+INTERRUPTED = "oclgi: interrupted\n"
+
+
+def _env(**extra):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    env.update(extra)
+    return env
+
+
+def _start(cwd, *args, env=None, ignore_sigint=False, stdout=subprocess.PIPE, code=None):
+    cmd = [sys.executable, "-c", code] if code else [sys.executable, "-m", "oclgi", *map(str, args)]
+    def pre():
+        # As a terminal's job: SIGINT at its default (or ignored, as a
+        # background job's), whatever this test process inherited.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, signal.SIG_IGN if ignore_sigint else signal.SIG_DFL)
+
+    return subprocess.Popen(cmd, cwd=cwd, env=env or _env(), stdout=stdout, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=pre)
+
+
+def _render(out, photons, size, method="detp"):
+    return ("render", BOX, "--method", method, "--photons", photons, "--width", size, "--height", size,
+            "-o", out, "--quiet")
+
+
+# -- Ctrl-C during start-up ------------------------------------------------------
+
+# The command as the console script runs it (`oclgi = oclgi.cli:main`) and as
+# `python -m oclgi` does, with a Ctrl-C arriving while MODULE is imported:
+# an import hook sends the SIGINT, so the moment is exact.
+_INTERRUPTING_IMPORT = """
+import os, signal, sys
+class Hook:
+    def find_spec(self, name, path=None, target=None):
+        if name == {module!r}:
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(1000):  # the signal is handled between two bytecodes
+                pass
+        return None
+sys.meta_path.insert(0, Hook())
+sys.argv = ["oclgi", "info"]
+{entry}
+"""
+ENTRIES = {
+    "console script": "from oclgi.cli import main\nsys.exit(main())",
+    "python -m": "import runpy\nrunpy.run_module('oclgi', run_name='__main__', alter_sys=True)",
+}
+
+
+@pytest.mark.parametrize("entry", ENTRIES)
+@pytest.mark.parametrize("module", ["numpy", "pyopencl"])
+def test_ctrl_c_while_importing_is_one_line_and_130(tmp_path, entry, module):
+    p = _start(tmp_path, code=_INTERRUPTING_IMPORT.format(module=module, entry=ENTRIES[entry]))
+    out, err = p.communicate(timeout=120)
+    assert (p.returncode, err) == (130, INTERRUPTED)
+    assert out == ""
+
+
+# -- Ctrl-C during a run -----------------------------------------------------------
+
+def _wait_then_interrupt(p, delay, repeat=False):
+    """SIGINT after ``delay`` s (again every 20 ms until the process ends if
+    ``repeat``); returns (seconds from the first SIGINT to the exit, stdout, stderr)."""
+    time.sleep(delay)
+    assert p.poll() is None, "the run ended before it could be interrupted"
+    t0 = time.perf_counter()
+    p.send_signal(signal.SIGINT)
+    while repeat and p.poll() is None:
+        time.sleep(0.02)
+        try:
+            p.send_signal(signal.SIGINT)
+        except ProcessLookupError:
+            break
+    try:
+        out, err = p.communicate(timeout=30)
+    except subprocess.TimeoutExpired:  # still running: the SIGINT waits for the kernel
+        p.kill()
+        out, err = p.communicate()
+    return time.perf_counter() - t0, out, err
+
+
+@pytest.fixture(scope="module")
+def warm_detp(tmp_path_factory):
+    """A tiny plain-DETP render first, so that the long runs below find their
+    kernels compiled and are inside a kernel when the SIGINT comes."""
+    d = tmp_path_factory.mktemp("warm")
+    p = _start(d, *_render(d / "w.exr", 2000, 8))
+    out, err = p.communicate(timeout=300)
+    assert p.returncode == 0, err
+
+
+# Plain DETP over 128 x 128 pixels: one batch of 349,525 paths (the default
+# batch) is tens of seconds of one kernel launch when not sliced (over 100 s
+# on 2 cores); tracing it (about 2 s) is over by the SIGINT.
+LONG_RUN = dict(photons=340_000, size=128)
+SIGINT_AT = 6.0
+
+
+def test_ctrl_c_during_a_long_kernel_exits_within_a_second(tmp_path, warm_detp):
+    out_file = tmp_path / "long.exr"
+    p = _start(tmp_path, *_render(out_file, **LONG_RUN))
+    latency, out, err = _wait_then_interrupt(p, SIGINT_AT)
+    assert (p.returncode, err) == (130, INTERRUPTED)
+    assert latency < 1.5, f"{latency:.2f} s from SIGINT to exit"
+    assert not list(tmp_path.iterdir()), "an interrupted run left files"
+
+
+def test_repeated_ctrl_c_is_still_one_line_and_130(tmp_path, warm_detp):
+    p = _start(tmp_path, *_render(tmp_path / "long.exr", **LONG_RUN))
+    _, out, err = _wait_then_interrupt(p, SIGINT_AT, repeat=True)
+    assert (p.returncode, err) == (130, INTERRUPTED)
+    assert not list(tmp_path.iterdir())
+
+
+def test_ctrl_c_during_a_cold_kernel_build(tmp_path):
+    """Interrupted while PoCL compiles (an empty kernel cache): one line, 130,
+    and the cache it leaves serves the next run."""
+    cache = tempfile.mkdtemp(dir=tmp_path, prefix="pocl-")
+    env = _env(POCL_CACHE_DIR=cache)
+    p = _start(tmp_path, *_render(tmp_path / "a.exr", 2000, 8, method="detp_disc_index"), env=env)
+    _, out, err = _wait_then_interrupt(p, 1.5)
+    assert (p.returncode, err) == (130, INTERRUPTED)
+    again = _start(tmp_path, *_render(tmp_path / "a.exr", 2000, 8, method="detp_disc_index"), env=env)
+    out, err = again.communicate(timeout=300)
+    assert (again.returncode, err) == (0, "")
+    assert (tmp_path / "a.exr").is_file()
+
+
+def test_a_run_started_with_sigint_ignored_ignores_it_during_cold_builds(tmp_path):
+    """`nohup oclgi ... &`: SIGINT is ignored from the start. PoCL's compiler
+    installs a SIGINT handler of its own during a build; a SIGINT then used
+    to abort the build. Here SIGINTs keep coming for the whole cold run."""
+    cache = tempfile.mkdtemp(dir=tmp_path, prefix="pocl-")
+    out_file = tmp_path / "bg.exr"
+    p = _start(tmp_path, *_render(out_file, 2000, 8, method="detp_disc_index"),
+               env=_env(POCL_CACHE_DIR=cache), ignore_sigint=True)
+    time.sleep(0.5)
+    while p.poll() is None:
+        try:
+            p.send_signal(signal.SIGINT)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    out, err = p.communicate(timeout=300)
+    assert (p.returncode, err) == (0, "")
+    assert out_file.is_file() and out_file.with_suffix(".png").is_file()
+
+
+# -- standard output going away ----------------------------------------------------
+
+def test_closed_stdout_pipe_ends_quietly_with_141(tmp_path):
+    """`oclgi render ... | head -0`: the reader is gone before the "wrote" lines."""
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = _start(tmp_path, *_render(tmp_path / "p.exr", 2000, 8, method="detp_disc_index"), stdout=w)
+    finally:
+        os.close(w)
+    _, err = p.communicate(timeout=300)
+    assert (p.returncode, err) == (141, "")
+    assert (tmp_path / "p.exr").is_file() and (tmp_path / "p.png").is_file()
+
+
+def test_help_into_a_closed_pipe_ends_as_a_run_does(tmp_path):
+    """argparse drops the write error of --help itself; the status is still
+    the closed pipe's, as for any other output."""
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = _start(tmp_path, "render", "--help", stdout=w)
+    finally:
+        os.close(w)
+    _, err = p.communicate(timeout=120)
+    assert (p.returncode, err) == (141, "")
+
+
+def test_full_stdout_is_one_line_and_status_2(tmp_path):
+    with open("/dev/full", "w") as full:
+        p = _start(tmp_path, *_render(tmp_path / "f.exr", 2000, 8, method="detp_disc_index"), stdout=full)
+        _, err = p.communicate(timeout=300)
+    assert p.returncode == 2
+    assert err == "oclgi: error: cannot write to standard output: No space left on device\n"
+    assert (tmp_path / "f.exr").is_file()
+
+
+# -- progress --------------------------------------------------------------------
+
+class _Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_progress_off_a_terminal_is_a_line_every_period_with_the_time_left():
+    stream, clock = io.StringIO(), _Clock()
+    bar = Progress("detp", 20_000_000, stream=stream, period=10.0, clock=clock)
+    clock.now += 4.0
+    bar.update(2_000_000)
+    assert stream.getvalue() == ""  # shorter than a period: nothing yet
+    clock.now += 6.55
+    bar.update(5_300_000)  # 36.5% after 10.55 s: 18.3 s left
+    assert stream.getvalue() == "oclgi: detp 36% (7.3M of 20M paths), 18 s left\n"
+    clock.now += 1.0
+    bar.update(1_000_000)
+    assert stream.getvalue().count("\n") == 1  # one line per period
+    clock.now += 10.0
+    bar.update(1_700_000)
+    assert stream.getvalue().splitlines()[1] == "oclgi: detp 50% (10M of 20M paths), 22 s left"
+    bar.update(10_000_000)
+    bar.close()
+    assert stream.getvalue().count("\n") == 2  # nothing at 100% nor on close
+
+
+def test_progress_on_a_terminal_keeps_the_bar():
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    stream, clock = Tty(), _Clock()
+    bar = Progress("detp", 1000, stream=stream, clock=clock)
+    clock.now += 1.0
+    bar.update(250)
+    assert stream.getvalue().startswith("\rdetp [#######") and " 25.0%" in stream.getvalue()
+    assert "\n" not in stream.getvalue()
+
+
+def test_progress_disabled_prints_nothing():
+    stream, clock = io.StringIO(), _Clock()
+    bar = Progress("detp", 10, enabled=False, stream=stream, period=0.0, clock=clock)
+    clock.now += 60
+    bar.update(5)
+    bar.close()
+    assert stream.getvalue() == ""
