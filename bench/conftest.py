@@ -43,6 +43,22 @@ def scale(request):
     return lambda n: max(1000, int(n * factor))
 
 
+_TREES = {}
+
+
+def compiled_with(engine, quality):
+    """The engine's scene compiled with the given scene tree ("sah", "lbvh"):
+    the engine's own for its default, else built once per session."""
+    if engine.compiled.bvh_quality == quality:
+        return engine.compiled
+    key = (id(engine), quality)
+    if key not in _TREES:
+        from oclgi.scene.compiled import CompiledScene
+
+        _TREES[key] = CompiledScene(engine.ctx, engine.scene, bvh_quality=quality)
+    return _TREES[key]
+
+
 def _engine(desc) -> oclgi.Engine:
     """An engine on a shipped scene file (its name) or a scene dict."""
     with warnings.catch_warnings():

@@ -38,7 +38,7 @@ import pytest
 
 from oclgi.accel.bvh import closest_hits, traversal_work
 from oclgi.accel.bvh_build import QUALITIES
-from oclgi.scene.compiled import CompiledScene
+from conftest import compiled_with
 
 RAYS = 1_000_000
 ROUNDS = 5
@@ -92,25 +92,12 @@ class Embree:
         return np.concatenate([r["tfar"] for r in runs]), np.concatenate([r["primID"] for r in runs])
 
 
-_TREES = {}
-
-
-def _tree(engine, quality):
-    """The engine's scene compiled with the given tree (the engine's own for its default)."""
-    if engine.compiled.bvh_quality == quality:
-        return engine.compiled
-    key = (id(engine), quality)
-    if key not in _TREES:
-        _TREES[key] = CompiledScene(engine.ctx, engine.scene, bvh_quality=quality)
-    return _TREES[key]
-
-
 @pytest.mark.parametrize("tree", QUALITIES)
 @pytest.mark.parametrize("rays", list(RAY_SETS))
 @pytest.mark.parametrize("scene", ["bunny", "sponza"])
 def test_closest_hit(benchmark, request, scale, cores_used, scene, rays, tree):
     engine = request.getfixturevalue(scene)
-    compiled = _tree(engine, tree)
+    compiled = compiled_with(engine, tree)
     n = scale(RAYS)
     origins, dirs = RAY_SETS[rays](engine.scene, n, np.random.default_rng(7))
     origins, dirs = origins.astype(np.float32), dirs.astype(np.float32)

@@ -7,6 +7,9 @@ segments/s is the engine's raw speed on a scene. It depends on the BVH
 (closest hit per segment) and on memory: every path writes its ``max_depth``
 segment slots, the unused ones zero-filled.
 
+Each scene is traced with both scene trees (binned SAH, the default, and
+the Morton LBVH), the same paths with each.
+
 The workload is what ``Engine.irradiance`` does for its trace step: the same
 ``PhotonTracer``, the same batch size, the path lengths read back per batch.
 """
@@ -17,6 +20,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
+from conftest import compiled_with
+
+from oclgi.accel.bvh_build import QUALITIES
 from oclgi.cl.layout import Segment
 from oclgi.tracing.photon_trace import PhotonTracer
 
@@ -36,13 +42,14 @@ def trace_all(engine, tracer, lens, n_paths):
     return segments
 
 
+@pytest.mark.parametrize("tree", QUALITIES)
 @pytest.mark.parametrize("scene", ["cornell", "bunny_in_box", "sponza"])
-def test_photon_trace(benchmark, request, scale, cores_used, scene):
+def test_photon_trace(benchmark, request, scale, cores_used, scene, tree):
     engine = request.getfixturevalue(scene)
     n_paths = scale(PATHS)
     # The engine's batch rule: a batch's segment buffer fits in batch_bytes.
     batch = max(1, min(n_paths, engine.batch_bytes // (MAX_DEPTH * Segment.itemsize)))
-    tracer = PhotonTracer(engine.queue, engine.compiled, SEED, MAX_DEPTH, batch)
+    tracer = PhotonTracer(engine.queue, compiled_with(engine, tree), SEED, MAX_DEPTH, batch)
     lens = np.empty(batch, np.int32)
 
     benchmark.group = "photon trace"
@@ -52,7 +59,7 @@ def test_photon_trace(benchmark, request, scale, cores_used, scene):
 
     assert segments >= n_paths  # every path has at least its emission segment
     info = benchmark.extra_info
-    info.update(scene=scene, triangles=engine.scene.n_triangles, paths=n_paths, max_depth=MAX_DEPTH,
+    info.update(scene=scene, tree=tree, triangles=engine.scene.n_triangles, paths=n_paths, max_depth=MAX_DEPTH,
                 segments=segments, segments_per_path=round(segments / n_paths, 3))
     if benchmark.stats:  # absent under --benchmark-disable
         seconds = benchmark.stats.stats.median

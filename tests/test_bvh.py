@@ -202,9 +202,12 @@ def test_sah_beats_lbvh_on_the_surface_area_cost(scenes_dir):
     assert cost(sah) < 0.9 * cost(lbvh)
 
 
-def test_unknown_quality_is_refused():
+def test_unknown_quality_is_refused(cornell_spheres):
     with pytest.raises(ValueError, match="quality"):
         build_bvh(np.zeros((2, 3)), np.ones((2, 3)), quality="best")
+    with pytest.raises(oclgi.OclgiError, match="bvh must be one of lbvh, sah"):
+        oclgi.Engine(cornell_spheres.scene, bvh="best")
+    assert oclgi.Engine(cornell_spheres.scene, bvh="lbvh").compiled.bvh_quality == "lbvh"
 
 
 def test_watertight_shared_edges(rng):
