@@ -22,6 +22,7 @@ import pickle
 import shutil
 import sys
 import time
+import traceback
 from collections import Counter, defaultdict
 from pathlib import Path
 
@@ -44,6 +45,7 @@ class Campaign:
         self.seconds = Counter()
         self.causes = defaultdict(list)  # signature -> [(format, reproducer or None, detail)]
         self.failures = []
+        self.broken = []  # formats whose generator failed
         self.done = 0
         self.t0 = time.perf_counter()
 
@@ -91,6 +93,8 @@ class Campaign:
             lines.append(f"| {fmt} | " + " | ".join(str(row[c]) for c in cols) + f" | {self.seconds[fmt]:.0f} |")
         lines.append("| **all** | " + " | ".join(str(total[c]) for c in cols)
                      + f" | {sum(self.seconds.values()):.0f} |")
+        if self.broken:
+            lines += ["", f"The generator of {', '.join(self.broken)} failed: those rows are short."]
         lines += ["", f"{len(self.causes)} distinct causes of failure:", "",
                   "| kind and cause | cases | formats | a reproducer |", "|---|---:|---|---|"]
         for sig, hits in sorted(self.causes.items(), key=lambda kv: -len(kv[1])):
@@ -151,9 +155,15 @@ def main(argv=None) -> int:
     shares = _shares(args.cases, formats)
     t0 = time.perf_counter()
     try:
-        for i, fmt in enumerate(formats):
+        for fmt in formats:
             print(f"{fmt}: {shares[fmt]} cases", file=sys.stderr)
-            campaign.run(fmt, shares[fmt], args.seed + i)
+            try:
+                # one seed per format, whichever others run with it
+                campaign.run(fmt, shares[fmt], args.seed * 100 + list(FORMATS).index(fmt))
+            except Exception:  # a generator's bug: the other formats still run
+                traceback.print_exc()
+                campaign.broken.append(fmt)
+            (args.out / "summary.md").write_text(campaign.tables(f"Fuzzing campaign so far: seed {args.seed}"))
     finally:
         runner.close()
         shutil.rmtree(args.out / "cases", ignore_errors=True)

@@ -18,7 +18,7 @@ def document(vertices, faces, index_type=5125, base_color=(0.8, 0.8, 0.8, 1.0),
     """The glTF JSON and its binary buffer (positions, then indices)."""
     with np.errstate(all="ignore"):  # a huge coordinate becomes float32's inf, as an exporter writes it
         pos = np.asarray(vertices, np.float32).reshape(-1, 3)
-    idx = np.asarray(faces, np.int64).reshape(-1)
+    idx = np.asarray([min(max(int(i), -2**63), 2**63 - 1) for i in faces], np.int64)  # int64 as a writer casts
     dtype = INDEX_TYPES.get(index_type, np.uint32)
     idx_bytes = (idx % (np.iinfo(dtype).max + 1)).astype(dtype).tobytes()
     pos_bytes = pos.tobytes()

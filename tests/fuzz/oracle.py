@@ -181,13 +181,11 @@ class Worker:
             self.proc = None
 
 
-_DICT_SCRIPT = """import pickle, sys
-import oclgi
-try:
-    oclgi.load_dict(pickle.load(open(sys.argv[1], "rb")), base_dir=".")
-except oclgi.OclgiError as exc:
-    print("oclgi: error:", exc, file=sys.stderr)
-    sys.exit(2)
+# load_dict in a fresh process: the worker's own call, on the pickled description
+_DICT_SCRIPT = """import base64, os, sys
+sys.path.insert(0, sys.argv[1])
+from worker import _call
+sys.exit(_call({"dir": os.getcwd(), "desc": base64.b64encode(open(sys.argv[2], "rb").read())}))
 """
 
 
@@ -235,7 +233,7 @@ class Runner:
             cmd = [sys.executable, "-m", "oclgi", *case.argv]
         else:
             (folder / ".desc.pickle").write_bytes(pickle.dumps(case.desc))
-            cmd = [sys.executable, "-c", _DICT_SCRIPT, ".desc.pickle"]
+            cmd = [sys.executable, "-c", _DICT_SCRIPT, str(WORKER.parent), ".desc.pickle"]
         try:
             res = subprocess.run(cmd, cwd=folder, capture_output=True, timeout=self.timeout)
         except subprocess.TimeoutExpired:
@@ -373,6 +371,9 @@ def judge(case: Case, raw: dict, folder: Path, before: set) -> Outcome:
             first = (others or errors or ["(no stderr)"])[0]
             return fail("multi-line error", f"{len(lines)} stderr lines, {len(errors)} error lines: {first[:200]}",
                         _generic(first))
+        if re.search(r"^wrote ", out.stdout, re.M):
+            return fail("partial file", f"exit 2 after reporting {out.stdout.split(chr(10))[0][:200]!r}",
+                        f"{case.argv[0] if case.argv else 'load_dict'} wrote then failed")
         if new:
             kind = "stray temporary" if hidden and len(hidden) == len(new) else "partial file"
             return fail(kind, f"exit 2 left {sorted(map(str, new))}: {errors[0][:200]}",

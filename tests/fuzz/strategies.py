@@ -173,6 +173,14 @@ def _slots(obj):
         yield from _slots(v)
 
 
+def _scaled(value, factor):
+    """value * factor in value's type (an int too large for a float stays as it is)."""
+    try:
+        return type(value)(value * factor)
+    except (OverflowError, ValueError):
+        return value
+
+
 @st.composite
 def tweak(draw, value):
     """A value near ``value``: a number scaled, negated or made nasty, one
@@ -180,8 +188,8 @@ def tweak(draw, value):
     if isinstance(value, bool):
         return draw(st.sampled_from([not value, 0, 1, "true"]))
     if isinstance(value, (int, float)):
-        return draw(st.one_of(st.floats(0.1, 10).map(lambda f: type(value)(value * f)), st.just(-value),
-                              st.just(float(value)), floats, ints))
+        return draw(st.one_of(st.floats(0.1, 10).map(lambda f: _scaled(value, f)), st.just(-value),
+                              st.just(_scaled(value, 1.0)), floats, ints))
     if isinstance(value, str):
         return draw(st.one_of(st.sampled_from(METHODS), st.just(value.upper()), st.just(value + " "),
                               st.just(value[:-1]), texts))
@@ -379,7 +387,9 @@ def small_mesh(draw):
         if what == "coord":
             verts[draw(st.integers(0, n - 1))][draw(st.integers(0, 2))] = draw(floats)
         elif what == "index":
-            faces[draw(st.integers(0, len(faces) - 1))][draw(st.integers(0, 2))] = draw(ints)
+            face = faces[draw(st.integers(0, len(faces) - 1))]
+            if face:
+                face[draw(st.integers(0, len(face) - 1))] = draw(ints)
         else:
             faces[draw(st.integers(0, len(faces) - 1))] = draw(st.lists(st.integers(-1, n), max_size=6))
     return verts, faces
@@ -520,14 +530,14 @@ def csv_points(draw) -> bytes:
     for _ in range(draw(st.integers(0, 3))):
         i = draw(st.integers(0, len(rows) - 1))
         op = draw(st.sampled_from(["cell", "cell", "row", "short", "long"]))
-        if op == "cell":
+        if op == "cell" and rows[i]:
             rows[i][draw(st.integers(0, len(rows[i]) - 1))] = draw(st.one_of(st.sampled_from(CSV_CELLS),
                                                                             floats.map(repr)))
         elif op == "row":
             rows[i] = draw(st.lists(st.sampled_from(CSV_CELLS), max_size=8))
         elif op == "short" and rows[i]:
             rows[i] = rows[i][:-1]
-        else:
+        elif op == "long":
             rows[i] = rows[i] + ["0"]
     sep = draw(st.sampled_from([",", ",", " ", "\t", ", ", ";"]))
     header = draw(st.one_of(st.none(), st.sampled_from(HEADERS)))

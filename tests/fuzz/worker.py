@@ -23,6 +23,7 @@ import pickle
 import sys
 import tempfile
 import traceback
+import warnings
 
 
 def _run(request) -> dict:
@@ -58,10 +59,22 @@ def _call(request):
     from oclgi import OclgiError, load_dict
 
     desc = pickle.loads(base64.b64decode(request["desc"]))
-    try:
-        load_dict(desc, base_dir=request["dir"])
-    except OclgiError as exc:
-        print(f"oclgi: error: {exc}", file=sys.stderr)
+    # the API warns through the warnings module: shown as the command line shows them
+    # and the error folded on one line as the command line folds it: an API
+    # message may hold a value's repr over several lines
+    from oclgi.cli import _one_line
+
+    error = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            load_dict(desc, base_dir=request["dir"])
+        except OclgiError as exc:
+            error = exc
+    for w in caught:
+        print(f"oclgi: warning: {_one_line(w.message)}", file=sys.stderr)
+    if error is not None:
+        print(f"oclgi: error: {_one_line(error)}", file=sys.stderr)
         return 2
     return 0
 
