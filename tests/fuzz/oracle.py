@@ -336,7 +336,7 @@ def judge(case: Case, raw: dict, folder: Path, before: set) -> Outcome:
         return out
 
     if raw.get("hang"):
-        return fail("hang", f"no answer in the time limit", case.argv[0] if case.argv else "load_dict")
+        return fail("hang", "no answer in the time limit", case.argv[0] if case.argv else "load_dict")
     if "died" in raw:
         rc = raw["died"]
         name = signal.Signals(-rc).name if rc < 0 and -rc in signal.Signals._value2member_map_ else f"exit {rc}"

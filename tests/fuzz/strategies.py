@@ -17,7 +17,6 @@ frames) is never drawn, a value the engine must refuse (16385 pixels) is.
 from __future__ import annotations
 
 import copy
-import math
 import tomllib
 from pathlib import Path
 
@@ -257,7 +256,9 @@ def text_mutation(draw, text: str) -> bytes:
         depth = draw(st.sampled_from([50, 500, 1000, 3000, 100000]))
         kind = draw(st.sampled_from(["array", "table"]))
         deep = "[" * depth + "1" + "]" * depth if kind == "array" else "{a = " * depth + "1" + "}" * depth
-        return f"fov = {deep}\n".encode() + data if draw(st.booleans()) else data.replace(b"fov = ", f"fov = {deep}\n#".encode(), 1)
+        if draw(st.booleans()):
+            return f"fov = {deep}\n".encode() + data
+        return data.replace(b"fov = ", f"fov = {deep}\n#".encode(), 1)
     if op == "bytes":
         at = draw(st.integers(0, len(data)))
         return data[:at] + draw(st.binary(min_size=1, max_size=8)) + data[at:]
@@ -448,8 +449,9 @@ GLTF_EDITS = [
     (("bufferViews", 0, "byteStride"), st.sampled_from([0, 1, 4, 12, 13, 256, -4])),
     (("bufferViews", 1, "byteLength"), st.integers(-4, 1000)),
     (("buffers", 0, "byteLength"), st.integers(-4, 1000)),
-    (("buffers", 0, "uri"), st.sampled_from(["missing.bin", "../scene.toml", "data:,", "data:application/octet-stream;base64,@@@",
-                                             "", "cornell-box", "http://example.invalid/x.bin"])),
+    (("buffers", 0, "uri"), st.sampled_from(["missing.bin", "../scene.toml", "data:,", "", "cornell-box",
+                                             "data:application/octet-stream;base64,@@@",
+                                             "http://example.invalid/x.bin"])),
     (("nodes", 0, "matrix"), st.lists(floats, min_size=0, max_size=17)),
     (("nodes", 0, "scale"), st.lists(floats, min_size=3, max_size=3)),
     (("nodes", 0, "children"), st.sampled_from([[0], [1], [-1], [0, 0]])),
