@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh Debian/Ubuntu machine:
 #   make render   set up (OpenCL, venv, package) and render the default scene to out/
 #   make test     set up and run the test suite
+#   make fuzz     the long fuzzing campaign (bench/fuzz.py; CASES=2000 SEED=0)
 # Every step is idempotent: a second run only does what is missing.
 
 VENV   ?= .venv
@@ -8,7 +9,10 @@ PYTHON ?= python3
 PY     := $(VENV)/bin/python
 SCENE  ?= scenes/cornell_box.toml
 
-.PHONY: render test bench setup opencl warm clean
+CASES  ?= 2000
+SEED   ?= 0
+
+.PHONY: render test bench fuzz setup opencl warm clean
 
 render: setup $(VENV)/.warm
 	$(VENV)/bin/oclgi render $(SCENE) -o out/$(basename $(notdir $(SCENE))).exr
@@ -18,6 +22,12 @@ test: setup
 
 bench: setup $(VENV)/.bench
 	$(PY) -m pytest bench -q --benchmark-json=bench/results/latest.json
+
+# Generated inputs for every format and command, judged case by case: the
+# summary table is printed and kept in out/fuzz/summary.md, a reproducer of
+# each failure in out/fuzz/reproducers/ (tests/test_fuzz.py runs a small sample).
+fuzz: setup $(VENV)/.warm
+	$(PY) bench/fuzz.py --cases $(CASES) --seed $(SEED) -o out/fuzz
 
 setup: $(VENV)/.installed opencl
 
