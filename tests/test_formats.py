@@ -371,3 +371,14 @@ def test_room_with_huge_ground_plane_runs(tmp_path):
 def test_each_format_loads_a_box(tmp_path, name, export):
     mesh = _load(tmp_path, name, export(trimesh.creation.box()))
     assert mesh.faces.shape == (12, 3) and np.allclose(np.abs(mesh.vertices), 0.5)
+
+
+def test_dict_keys_that_are_not_names_are_refused():
+    """A dict made in Python may have keys TOML cannot: one line, not a
+    TypeError from sorting them with the names."""
+    import oclgi
+    from oclgi.errors import OclgiError
+
+    for desc, message in (({"mesh": {0: 1, "x": 2}}, "got 0"), ({1: 2}, "got 1")):
+        with pytest.raises(OclgiError, match=f"keys must be names \\(strings\\), {message}"):
+            oclgi.load_dict(desc)

@@ -89,9 +89,17 @@ def load_file(path) -> Scene:
 def _check_keys(d, allowed, where):
     if not isinstance(d, dict):
         raise OclgiError(f"{where}: expected a table, got {type(d).__name__}")
+    not_names = [k for k in d if not isinstance(k, str)]
+    if not_names:  # a dict made in Python may have any keys; TOML's are names
+        raise OclgiError(f"{where}: keys must be names (strings), got {_show_key(not_names[0])}")
     unknown = set(d) - allowed
     if unknown:
         raise OclgiError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
+
+
+def _show_key(key) -> str:
+    text = repr(key)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def _show(x: float) -> str:
