@@ -147,6 +147,7 @@ def main(argv=None) -> int:
     unknown = set(formats) - set(FORMATS)
     if unknown:
         ap.error(f"unknown formats {sorted(unknown)}")
+    args.out = args.out.resolve()  # the worker changes into each case's folder
     if args.out.exists():
         shutil.rmtree(args.out)
     args.out.mkdir(parents=True)

@@ -403,6 +403,17 @@ def _run(argv) -> int:
         return exc.exit_code
     except streams.StdoutError as exc:  # the files were written before their "wrote" lines
         return streams.stdout_failed(exc)
+    except OSError as exc:
+        # A file the checks did not foresee failing (a name too long for the
+        # file system, a disk gone): the environment's error, told as one;
+        # outputs are staged under temporary names, so none is left partial.
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"oclgi: error: {_one_line(where + (exc.strerror or str(exc)))}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("oclgi: error: out of memory (the job is larger than this machine's memory; "
+              "use fewer photons, points or pixels)", file=sys.stderr)
+        return 2
     return 0
 
 

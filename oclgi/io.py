@@ -314,6 +314,36 @@ def write_images(images: dict, sync: bool = True) -> list[Path]:
     return paths
 
 
+def read_npy(path, what: str) -> np.ndarray:
+    """A ``.npy`` array of real numbers (points, keyframes, a reference), the
+    one reader of every .npy oclgi takes: the header's shape is checked
+    against the file's size before numpy allocates it (a header may claim
+    terabytes), and every failure names the file and ``what`` it was to hold."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            try:
+                version = np.lib.format.read_magic(f)
+                read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                               (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                if read_header is None:
+                    raise ValueError(f"unknown .npy version {version}")
+                shape, fortran, dtype = read_header(f)
+            except ValueError as exc:
+                raise OclgiError(f"{path}: not a .npy file of {what} ({exc})") from None
+            if dtype.kind not in "iuf" or dtype.hasobject:
+                raise OclgiError(f"{path}: expected {what} as numbers, got an array of {dtype}")
+            count = int(np.prod(shape, dtype=object))  # exact: no overflow for any shape
+            data = os.fstat(f.fileno()).st_size - f.tell()
+            if count * dtype.itemsize != data:
+                raise OclgiError(f"{path}: its header declares shape {shape} ({count * dtype.itemsize:,} bytes), "
+                                 f"the file holds {data:,} bytes of data")
+            a = np.fromfile(f, dtype=dtype, count=count).reshape(shape, order="F" if fortran else "C")
+    except OSError as exc:
+        raise OclgiError(f"cannot read {path}: {exc.strerror or exc}") from None
+    return a
+
+
 def read_image(path) -> np.ndarray:
     import OpenImageIO as oiio
 

@@ -229,15 +229,9 @@ def from_file(path) -> QueryPoints:
         raise OclgiError(f"points file not found: {path}")
     suffix = path.suffix.lower()
     if suffix == ".npy":
-        try:
-            with open(path, "rb") as f:
-                if f.read(6) != b"\x93NUMPY":
-                    raise OclgiError(f"{path}: not a .npy file")
-            a = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise OclgiError(f"{path}: cannot read points ({exc})") from None
-        if not isinstance(a, np.ndarray) or a.dtype.kind not in "iuf":
-            raise OclgiError(f"{path}: expected an array of numbers, got {getattr(a, 'dtype', type(a).__name__)}")
+        from .io import read_npy
+
+        a = read_npy(path, "points")
         a = a.astype(np.float64)
     elif suffix == ".csv":
         a = _read_csv(path)

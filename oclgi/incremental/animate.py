@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
+from ..io import read_npy
 
 
 def _translate_rotate(x, y, z, degrees=0.0) -> np.ndarray:
@@ -84,7 +85,7 @@ def poses(spec: str, frames: int) -> list[np.ndarray]:
         raise OclgiError(f"--path {spec!r}: not line:..., orbit:... or an existing .csv/.npy file")
     try:
         if path.suffix.lower() == ".npy":
-            keys = np.load(path, allow_pickle=False)
+            keys = read_npy(path, "keyframes")
         elif path.suffix.lower() == ".csv":
             keys = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
         else:

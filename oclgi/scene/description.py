@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import OclgiError
 from .. import params
-from .mesh import load_mesh
+from .mesh import is_file, load_mesh
 from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
 
 
@@ -70,7 +70,7 @@ _F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 def load_file(path) -> Scene:
     path = Path(path)
-    if not path.is_file():
+    if not is_file(path, "scene file"):
         raise OclgiError(f"scene file not found: {path}")
     try:
         desc = tomllib.loads(path.read_text(encoding="utf-8"))

@@ -40,11 +40,20 @@ class LoadedMesh:
     materials: dict[str, MtlMaterial]
 
 
+def is_file(path: Path, what: str) -> bool:
+    """``path.is_file()``, with the errors it raises (a name too long for
+    the file system, a permission) as one line naming ``what`` it was."""
+    try:
+        return path.is_file()
+    except OSError as exc:
+        raise OclgiError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+
+
 def load_mesh(path: Path) -> LoadedMesh:
     from . import resolvers  # imports trimesh: only when a mesh needs it
 
     path = Path(path)
-    if not path.is_file():
+    if not is_file(path, "mesh file"):
         raise OclgiError(f"mesh file not found: {path}")
     suffix = path.suffix.lower()
     if suffix == ".zip":

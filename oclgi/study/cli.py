@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
+from ..io import read_npy
 
 DEFAULT_METHODS = ("detp_disc_index", "photon_map", "impact")
 DEFAULT_PHOTON_FRACTIONS = (0.1, 1 / 3, 1.0)  # of the scene's photon count: one decade
@@ -25,11 +26,8 @@ def _reference(spec: str):
     if path.suffix.lower() == ".npy":
         if not path.is_file():
             raise OclgiError(f"reference file not found: {path}")
-        try:
-            values = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise OclgiError(f"{path}: cannot read the reference ({exc})") from None
-        if not isinstance(values, np.ndarray) or values.dtype.kind not in "iuf" or values.ndim not in (1, 2):
+        values = read_npy(path, "reference irradiance")
+        if values.ndim not in (1, 2):
             raise OclgiError(f"{path}: expected an (n, 3) or (n,) array of irradiance values")
         return values.astype(np.float64)
     ref = study_reference.parse(spec)
