@@ -113,7 +113,19 @@ def _shares(total: int, formats: list) -> dict:
 
 
 def replay(folder: Path, subprocess: bool) -> int:
-    """Run a saved reproducer again (in a copy of its folder) and print what it did."""
+    """Run a saved reproducer again (in a copy of its folder) and print what
+    it did; given a folder of reproducers (out/fuzz/reproducers), every one."""
+    if not (folder / "_fuzz").is_dir():
+        cases = sorted(p.parent for p in folder.rglob("_fuzz") if p.is_dir())
+        if not cases:
+            print(f"no reproducers under {folder}")
+            return 1
+        failed = 0
+        for case in cases:
+            print(f"{case.relative_to(folder)}: ", end="")
+            failed += replay(case, subprocess)
+        print(f"{len(cases) - failed} of {len(cases)} pass")
+        return 1 if failed else 0
     meta = folder / "_fuzz"
     argv = json.loads((meta / "argv.json").read_text())
     desc = pickle.loads((meta / "desc.pickle").read_bytes()) if argv is None else None

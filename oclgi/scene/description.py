@@ -255,6 +255,8 @@ def _inline_arrays(vertices, faces, where):
             return np.asarray(value, dtype=np.float64).reshape(-1, 3)
         except (TypeError, ValueError):
             raise OclgiError(f"{where}.{name}: expected numbers only") from None
+        except OverflowError:  # an integer past float's range (TOML integers have any size)
+            raise OclgiError(f"{where}.{name}: a number is too large (beyond 1e308)") from None
 
     v = rows(vertices, "vertices")
     f = rows(faces, "faces")
