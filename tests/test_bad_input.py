@@ -440,8 +440,9 @@ def _npy(tmp_path, array, **kw):
     (INP, lambda d: _npy(d, np.zeros((2, 5))), r"expected n rows of 6 columns .*\(2, 5\)"),
     (INP, lambda d: _npy(d, np.zeros(6)), r"expected n rows of 6 columns .*\(6,\)"),
     (INP, lambda d: _npy(d, np.zeros((0, 6))), r"p\.npy: no points"),
-    (INP, lambda d: _npy(d, np.array([["a"] * 6])), r"expected an array of numbers"),
-    (INP, lambda d: _npy(d, np.array([[0, 0.01, 0, 0, 1, 0]], dtype=object), allow_pickle=True), "cannot read points"),
+    (INP, lambda d: _npy(d, np.array([["a"] * 6])), r"p\.npy: expected points as numbers, got an array of <U1"),
+    (INP, lambda d: _npy(d, np.array([[0, 0.01, 0, 0, 1, 0]], dtype=object), allow_pickle=True),
+     r"p\.npy: expected points as numbers, got an array of object"),
     (INP, lambda d: (d / "p.npy").write_bytes(bytes(range(200))), r"p\.npy: not a \.npy file"),
 ])
 def test_bad_points_npy(fails_cleanly, sub, scene, tmp_path, make, match):
