@@ -3,34 +3,11 @@
 import numpy as np
 import pytest
 from cli_run import run
+from small_scene import MOVING_BLOCK as SCENE
 
 from oclgi.incremental.animate import poses
 from oclgi.errors import OclgiError
 
-SCENE = """
-[[mesh]]
-vertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]
-faces = [[0, 2, 1], [0, 3, 2]]
-
-[[mesh]]
-name = "block"
-movable = true
-vertices = [[-0.1, 0, -0.1], [0.1, 0, -0.1], [0.1, 0.2, 0.1], [-0.1, 0.2, 0.1]]
-faces = [[0, 1, 2], [0, 2, 3]]
-
-[[point_light]]
-position = [0, 1, 0]
-intensity = [1, 1, 1]
-
-[camera]
-position = [0, 1, 2]
-look_at = [0, 0, 0]
-width = 8
-height = 8
-
-[photons]
-count = 2000
-"""
 
 
 

@@ -20,7 +20,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from cli_run import run
+from cli_run import in_process, run
 from small_scene import BOX_OBJ
 
 from oclgi.errors import OclgiError
@@ -69,19 +69,7 @@ INP = False  # run it in-process
 @pytest.fixture
 def run_inproc(monkeypatch, capsys):
     """``oclgi.cli.main(args)`` in ``cwd``, as a CompletedProcess."""
-    from oclgi.cli import main
-
-    def run_(cwd, *args):
-        monkeypatch.chdir(cwd)
-        capsys.readouterr()
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as exc:  # argparse
-            rc = exc.code
-        out, err = capsys.readouterr()
-        return subprocess.CompletedProcess(args, rc, out, err)
-
-    return run_
+    return lambda cwd, *args: in_process(monkeypatch, capsys, cwd, *args)
 
 
 @pytest.fixture

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_run import run
-from small_scene import BOX_OBJ
+from cli_run import in_process, run
+from small_scene import BOX_OBJ, MOVING_BLOCK as MOVING
 
 from oclgi import io, tempfiles
 from oclgi.errors import OclgiError
@@ -44,30 +44,6 @@ count = 2000
 radius = 0.1
 """
 POINTS = "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0.5,0.01,0.5,0,1,0\n"
-# A floor and a movable block (for animate).
-MOVING = """[[mesh]]
-vertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]
-faces = [[0, 2, 1], [0, 3, 2]]
-
-[[mesh]]
-name = "block"
-movable = true
-vertices = [[-0.1, 0, -0.1], [0.1, 0, -0.1], [0.1, 0.2, 0.1], [-0.1, 0.2, 0.1]]
-faces = [[0, 1, 2], [0, 2, 3]]
-
-[[point_light]]
-position = [0, 1, 0]
-intensity = [1, 1, 1]
-
-[camera]
-position = [0, 1, 2]
-look_at = [0, 0, 0]
-width = 8
-height = 8
-
-[photons]
-count = 2000
-"""
 
 
 def write_scene(d: Path, name="s.toml") -> Path:
@@ -86,17 +62,9 @@ def scene(tmp_path):
 @pytest.fixture
 def oclgi(monkeypatch, capsys):
     """``oclgi ARGS`` in-process in ``cwd``: (exit status, stdout, stderr)."""
-    from oclgi.cli import main
-
     def run_(cwd, *args):
-        monkeypatch.chdir(cwd)
-        capsys.readouterr()
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as exc:  # argparse
-            rc = exc.code
-        out, err = capsys.readouterr()
-        return rc, out, err
+        done = in_process(monkeypatch, capsys, cwd, *args)
+        return done.returncode, done.stdout, done.stderr
 
     return run_
 
