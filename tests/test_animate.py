@@ -66,3 +66,28 @@ def test_animate_bad_input(tmp_path, args, message):
     assert r.returncode == 2
     assert message in r.stderr and "Traceback" not in r.stderr
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_poses_beyond_float32_coordinates_are_refused_before_any_work():
+    """`orbit:1e300` (found by the fuzz campaign) made NaN instance boxes and
+    a ValueError traceback in the dynamic view; a pose must stay within the
+    coordinates the device holds."""
+    with pytest.raises(OclgiError, match=r"frame 1's pose moves the object beyond 1e\+18"):
+        poses("orbit:1e300", 2)
+    with pytest.raises(OclgiError, match="beyond 1e\\+18"):
+        poses("line:0,2e18,0", 3)
+    assert len(poses("orbit:1e17", 2)) == 2
+
+
+def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
+    import oclgi
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    engine = oclgi.Engine(oclgi.load_file(scene), progress=False)
+    far = np.eye(4)
+    far[0, 3] = 1e300
+    before = engine.compiled.instances_host.tobytes()
+    with pytest.raises(OclgiError, match="places object 'block' beyond 1e\\+18"):
+        engine.move("block", far)
+    assert engine.compiled.instances_host.tobytes() == before  # a refused move changes nothing

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import OclgiError
 from ..io import read_npy
+from ..params import MAX_LENGTH
 
 
 def _translate_rotate(x, y, z, degrees=0.0) -> np.ndarray:
@@ -64,7 +65,17 @@ def output_names(frames: int, write_exr: bool = False) -> list[str]:
 
 
 def poses(spec: str, frames: int) -> list[np.ndarray]:
-    """The object's 4x4 pose at each of ``frames`` frames."""
+    """The object's 4x4 pose at each of ``frames`` frames, each within the
+    coordinates the device holds (float32, to 1e18)."""
+    out = _poses(spec, frames)
+    for f, m in enumerate(out):
+        if np.abs(m).max() > MAX_LENGTH:
+            raise OclgiError(f"--path {spec}: frame {f}'s pose moves the object beyond {MAX_LENGTH:.0e}, "
+                             f"past what the device's float32 coordinates hold")
+    return out
+
+
+def _poses(spec: str, frames: int) -> list[np.ndarray]:
     if frames < 1:
         raise OclgiError(f"--frames must be at least 1, got {frames}")
     s = np.linspace(0.0, 1.0, frames) if frames > 1 else np.zeros(1)

@@ -15,6 +15,7 @@ import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
 from ..cl.constants import BVH_STACK_SIZE, FIXED_BITS
+from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
@@ -140,13 +141,16 @@ class CompiledScene:
 
     def _place(self, k: int, m: np.ndarray):
         """Set object k's transform (4x4, world from object) in the host record."""
+        lo, hi = self.object_boxes[k]
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        world = corners @ m[:3, :3].T + m[:3, 3]
+        if not np.isfinite(world).all() or np.abs(world).max() > MAX_LENGTH:  # checked before any change
+            raise OclgiError(f"the transform places object {self.scene.objects[k].name!r} beyond "
+                             f"{MAX_LENGTH:.0e} of the origin, past what the device's float32 coordinates hold")
         inv = np.linalg.inv(m)
         inst = self.instances_host[k]
         inst["world_from_object"] = m[:3]
         inst["object_from_world"] = inv[:3]
-        lo, hi = self.object_boxes[k]
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        world = corners @ m[:3, :3].T + m[:3, 3]
         # The world box only culls; pad it for float rounding of the transform.
         pad = 1e-6 * (np.abs(world).max() + np.abs(hi - lo).max())
         inst["lo"], inst["hi"] = world.min(axis=0) - pad, world.max(axis=0) + pad
