@@ -60,7 +60,7 @@ def _scan(op, a: np.ndarray, reverse: bool = False) -> np.ndarray:
     return out
 
 
-def _best_splits(seg, cen, lo, hi, cmin, cmax, m, n_bins):
+def _best_splits(seg, sizes, cen, lo, hi, cmin, cmax, m, n_bins):
     """For each of m nodes: (cost, axis, bin) of the cheapest split, and the
     bin of every primitive along every axis. A split (axis, b) puts bins
     0..b on the left. Cost is inf where no boundary separates the centroids.
@@ -68,7 +68,10 @@ def _best_splits(seg, cen, lo, hi, cmin, cmax, m, n_bins):
     that every pass runs along contiguous memory."""
     ext = cmax - cmin
     scale = np.where(ext > 0, n_bins / np.where(ext > 0, ext, 1.0), 0.0).astype(np.float32)
-    bins = np.minimum(((cen - cmin[:, seg]) * scale[:, seg]).astype(np.int32), n_bins - 1)
+    # per-node values spread over the node's rows: np.repeat (rows are node
+    # by node) is ~5x faster than indexing a (3, m) array with seg
+    bins = np.minimum(((cen - np.repeat(cmin, sizes, axis=1)) * np.repeat(scale, sizes, axis=1)).astype(np.int32),
+                      n_bins - 1)
     best_cost = np.full(m, np.inf, np.float32)
     best_axis = np.zeros(m, np.int64)
     best_bin = np.zeros(m, np.int64)
@@ -136,7 +139,7 @@ def build_sah(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> Bvh
         # Fewer bins where nodes are small: the per-bin arrays stay about the
         # size of the working set (a node of k primitives has k-1 cuts at most).
         n_bins = int(min(BINS, max(4, 1 << int(np.ceil(np.log2(rows / m))))))
-        cost, axis, split_bin, bins = _best_splits(seg, cen, lo, hi, cmin, cmax, m, n_bins)
+        cost, axis, split_bin, bins = _best_splits(seg, sizes, cen, lo, hi, cmin, cmax, m, n_bins)
         left = np.take_along_axis(bins, axis[seg][None], 0)[0] <= split_bin[seg]
         halve = ~np.isfinite(cost) | (level >= MEDIAN_DEPTH)
         if halve.any():
@@ -164,7 +167,9 @@ def build_sah(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> Bvh
         done = leaf[child]
         order[(starts[seg] + in_seg)[done]] = gid[src[done]]
         keep = src[~done]
-        cen, lo, hi, gid = cen[:, keep], lo[:, keep], hi[:, keep], gid[keep]
+        # np.take along an axis: ~4x faster than a[:, keep] on (3, rows) arrays
+        cen, lo, hi = (np.take(a, keep, axis=1) for a in (cen, lo, hi))
+        gid = gid[keep]
         sizes, starts = child_size[~leaf], child_start[~leaf]
         level += 1
     return flatten(first, count, order, box_lo, box_hi)
