@@ -157,12 +157,7 @@ class Engine:
         its instance record."""
         if not isinstance(name, str):
             raise OclgiError(f"move: the object's name must be a string, got {name!r}")
-        obj = self.scene.object_id(name)
-        try:
-            np.asarray(matrix, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise OclgiError(f"move: the matrix must be a 4x4 or 3x4 array of numbers, got {matrix!r}") from None
-        self.compiled.set_transform(self.queue, obj, matrix)
+        self.compiled.set_transform(self.queue, self.scene.object_id(name), matrix)
 
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
@@ -182,22 +177,7 @@ class Engine:
             raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
         width = None if width is None else params.image_size(width, "width")
         height = None if height is None else params.image_size(height, "height")
-        # a Camera made in Python has not been through the scene file's readers
-        vectors = {}
-        for key in ("position", "look_at", "up"):
-            v = getattr(cam, key)
-            try:
-                a = np.asarray(v)
-            except ValueError:
-                a = np.asarray(None)
-            if a.shape != (3,) or a.dtype.kind not in "iuf" or not (np.abs(a) <= queries.MAX_COORDINATE).all():
-                raise OclgiError(f"camera.{key}: expected 3 finite numbers, got {v!r}")
-            vectors[key] = tuple(float(x) for x in a)
-        cam = replace(cam, **vectors, fov=params.float32_real(cam.fov, "camera.fov", 0.0, 180.0),
-                      width=width or params.image_size(cam.width, "camera.width"),
-                      height=height or params.image_size(cam.height, "camera.height"))
-        validate_camera(cam)
-        return cam
+        return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))
 
     def view_points(self, cam: Camera, rect, instances=None) -> queries.QueryPoints:
         """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
@@ -239,7 +219,6 @@ class Engine:
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         method, photons, radius, seed, max_depth = r.method, r.photons, r.radius, r.seed, r.max_depth
         count_work = params.flag(count_work, "count_work")
-        self._check_points(points)
         budget.check(budget.irradiance_need(len(points), method, photons, max_depth, self.batch_bytes,
                                             options.get("k")), self.queue.device)
 

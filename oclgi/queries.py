@@ -28,9 +28,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import OclgiError
+from .params import MAX_LENGTH
 
-# Coordinates the device squares in float32 (as the scene's vertices: oclgi/scene/scene.py).
-MAX_COORDINATE = 1e18
+# Coordinates the device squares in float32 (as the scene's vertices: params.MAX_LENGTH).
+MAX_COORDINATE = MAX_LENGTH
 # How far from 1 a normal's length may be: the kernels take normals as unit
 # vectors (DETP's disc plane, the side a point faces); float32 rounding of a
 # normalised vector is far inside this.

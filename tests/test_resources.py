@@ -230,7 +230,7 @@ def test_long_run_gives_a_time_estimate(scene, monkeypatch):
         engine.irradiance(XYZN, photons=10 * batch)
     notes = [str(w.message) for w in caught if issubclass(w.category, oclgi.OclgiWarning)]
     assert len(notes) == 1, notes
-    assert re.fullmatch(rf"{10 * batch:,} photon paths will take about \d+ seconds on this device \(from the first "
+    assert re.fullmatch(rf"{10 * batch:,} photon paths will take about \d+ (seconds|minutes|hours|days) on this device \(from the first "
                         rf"{batch:,} in [\d.]+s\); use fewer photons for a quicker run", notes[0]), notes[0]
     with warnings.catch_warnings(record=True) as caught:  # one batch: nothing to extrapolate
         warnings.simplefilter("always")

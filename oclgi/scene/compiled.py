@@ -38,7 +38,10 @@ def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
 
 def as_transform(matrix) -> np.ndarray:
     """A validated affine 4x4 float64 matrix from a 4x4 or 3x4 one."""
-    m = np.asarray(matrix, dtype=np.float64)
+    try:
+        m = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise OclgiError(f"a transform must be a 4x4 or 3x4 array of numbers, got {matrix!r}") from None
     if m.shape == (3, 4):
         m = np.vstack([m, [0, 0, 0, 1]])
     if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):

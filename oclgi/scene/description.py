@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -318,7 +319,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
             width=_number(c.get("width", 256), "camera.width", int),
             height=_number(c.get("height", 256), "camera.height", int),
         )
-        validate_camera(camera)
+        camera = validate_camera(camera)
 
     tables = {"photons": desc.get("photons", {}), "estimator": desc.get("estimator", {})}
     _check_keys(tables["photons"], _PHOTONS, "photons")
@@ -369,11 +370,25 @@ def _table_list(value, name):
     return value
 
 
-def validate_camera(c: Camera) -> None:
-    if not (0 < c.fov < 180):
-        raise OclgiError(f"camera.fov must be in (0, 180) degrees, got {c.fov}")
-    if not (1 <= c.width <= 16384 and 1 <= c.height <= 16384):
-        raise OclgiError(f"camera size must be 1..16384 pixels, got {c.width} x {c.height}")
+def validate_camera(c: Camera) -> Camera:
+    """``c`` checked as the device takes it (one check for the scene file's
+    cameras, the API's and Mitsuba's), with its numbers as plain floats and ints."""
+    vectors = {}
+    for key in ("position", "look_at", "up"):  # a Camera made in Python has not been through _vec3
+        v = getattr(c, key)
+        try:
+            a = np.asarray(v)
+        except ValueError:
+            a = np.asarray(None)
+        if a.shape != (3,) or a.dtype.kind not in "iuf" or not (np.abs(a) <= MAX_COORDINATE).all():
+            raise OclgiError(f"camera.{key}: expected 3 finite numbers, got {v!r}")
+        vectors[key] = tuple(float(x) for x in a)
+    fov = params.float32_real(c.fov, "camera.fov", 0.0, 180.0)
+    if not (0 < fov < 180):
+        raise OclgiError(f"camera.fov must be in (0, 180) degrees, got {fov}")
+    c = replace(c, **vectors, fov=fov, width=params.image_size(c.width, "camera.width"),
+                height=params.image_size(c.height, "camera.height"))
     fwd = np.subtract(c.look_at, c.position)
     if np.linalg.norm(fwd) == 0 or np.linalg.norm(np.cross(fwd, c.up)) == 0:
         raise OclgiError("camera: look_at must differ from position and not be along 'up'")
+    return c

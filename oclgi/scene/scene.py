@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import OclgiError
-from ..params import RunParams
+from ..params import MAX_LENGTH, RunParams
 from .degenerate import degenerate_triangles
 
 
@@ -75,7 +75,7 @@ class Camera:
         return eye, fwd, right * half_w, up * half_h
 
 
-MAX_COORDINATE = 1e18  # squared lengths stay finite in float32
+MAX_COORDINATE = MAX_LENGTH  # squared lengths stay finite in float32 (params.MAX_LENGTH)
 
 
 @dataclass

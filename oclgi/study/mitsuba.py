@@ -201,7 +201,7 @@ def render(scene, camera=None, width=None, height=None, spp=256, seed=0, max_dep
         raise OclgiError(f"{sc.name}: no [camera] in the scene")
     if width or height:
         cam = Camera(cam.position, cam.look_at, cam.up, cam.fov, width or cam.width, height or cam.height)
-    validate_camera(cam)
+    cam = validate_camera(cam)
     spp, seed = sample_count(spp), _check_seed(seed)
     mi = load_mitsuba(variant)
     d = scene_dict(mi, scene)
