@@ -19,6 +19,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from cli_run import in_process
 from small_scene import BOX_OBJ
 
 import oclgi
@@ -56,17 +57,10 @@ def cli(monkeypatch, capsys):
     """``oclgi.cli.main(args)`` in ``cwd``: checks a clean failure (exit 2, one
     error line, after warnings if any, nothing on stdout, no file written)
     and returns the error line."""
-    from oclgi.cli import main
-
     def fail(cwd, *args):
-        monkeypatch.chdir(cwd)
         before = files_under(cwd)
-        capsys.readouterr()
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as exc:  # argparse
-            rc = exc.code
-        out, err = capsys.readouterr()
+        done = in_process(monkeypatch, capsys, cwd, *args)
+        rc, out, err = done.returncode, done.stdout, done.stderr
         assert rc == 2, err
         lines = err.splitlines()
         assert lines and lines[-1].startswith("oclgi: error: "), err

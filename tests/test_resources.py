@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 import pytest
+from cli_run import in_process
 from small_scene import BOX_OBJ
 
 import oclgi
@@ -74,17 +75,10 @@ def files_under(d):
 @pytest.fixture
 def cli(monkeypatch, capsys):
     """``oclgi.cli.main`` in the scene's folder: exit 2, one error line, no file; returns the line."""
-    from oclgi.cli import main
-
     def fail(cwd, *args):
-        monkeypatch.chdir(cwd)
         before = files_under(cwd)
-        capsys.readouterr()
-        try:
-            rc = main([str(a) for a in args])
-        except SystemExit as exc:
-            rc = exc.code
-        out, err = capsys.readouterr()
+        done = in_process(monkeypatch, capsys, cwd, *args)
+        rc, out, err = done.returncode, done.stdout, done.stderr
         assert rc == 2, err
         lines = err.splitlines()
         assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), err
