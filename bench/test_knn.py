@@ -112,10 +112,9 @@ class KnnData:
         est = engine.estimator(dummy, params)
         batch = 1 << 17
         tracer = PhotonTracer(engine.queue, engine.compiled, SEED, MAX_DEPTH, batch, engine.local_size)
-        scale = engine.compiled.fixed_scale(total)
         paths = 0
         while est.n_impacts < n and paths < total:
-            est.accumulate(tracer.trace(paths, batch, total), scale)
+            est.accumulate(tracer.trace(paths, batch))
             paths += batch
         assert est.n_impacts >= n, f"{paths:,} paths made only {est.n_impacts:,} impacts"
         pos, dirs, _ = est.impacts()
@@ -221,7 +220,7 @@ def test_knn_search(benchmark, knn_data, cores_used, scene, index, front_only):
     r2 = cl.Buffer(ctx, mf.READ_WRITE, n * 4)
 
     def search():
-        knn.search(*bufs, n, K, front_only, False, 1.0, acc, r2, local_size=data.engine.local_size)
+        knn.search(*bufs, n, K, front_only, False, acc, r2, local_size=data.engine.local_size)
         queue.finish()
 
     ckd_seconds = []

@@ -36,7 +36,7 @@ def trace_all(engine, tracer, lens, n_paths):
     segments = 0
     for offset in range(0, n_paths, tracer.batch_paths):
         n = min(tracer.batch_paths, n_paths - offset)
-        batch = tracer.trace(offset, n, n_paths)
+        batch = tracer.trace(offset, n)
         cl.enqueue_copy(engine.queue, lens[:n], batch.path_len)  # waits for the trace
         segments += int(lens[:n].sum())
     return segments

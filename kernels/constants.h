@@ -16,6 +16,9 @@
 #error "oclgi's shared constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 
+/* One photon's largest power in fixed-point units (segment.h). */
+#define OCLGI_FIXED_ONE ((float)(1L << OCLGI_FIXED_BITS))
+
 /* The lanes are float8, int8 and uint8 vectors. */
 #if OCLGI_LANES != 8
 #error "OCLGI_LANES must be 8"

@@ -24,7 +24,7 @@
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
                          int n_points, __global const Segment *segments, int n_paths,
                          int max_depth, int count_emitted, float radius2, float ext,
-                         float scale, __global long *acc, __global ulong *work)
+                         __global long *acc, __global ulong *work)
 {
     int base = get_global_id(0) * OCLGI_LANES;
     if (base >= n_points) return;
@@ -57,7 +57,7 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             int8 hit;
             DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, radius2);
             if (any(hit)) {
-                long3 q = segment_fixed_power(path + b, scale);
+                long3 q = segment_fixed_power(path + b);
                 long4 m0 = convert_long4(hit.lo) & 1, m1 = convert_long4(hit.hi) & 1;
                 sr0 += m0 * q.x; sr1 += m1 * q.x;
                 sg0 += m0 * q.y; sg1 += m1 * q.y;

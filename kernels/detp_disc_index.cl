@@ -30,7 +30,7 @@
 
 __kernel void detp_disc_index(__global const BvhNode *nodes, __global const DiscBlock *discs,
                               __global const Segment *segments, int n_paths, int max_depth,
-                              int count_emitted, float radius2, float ext, float scale,
+                              int count_emitted, float radius2, float ext,
                               __global long *acc, __global ulong *work)
 {
     int p = get_global_id(0);
@@ -45,7 +45,7 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const Disc
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        disc_index_segment(nodes, discs, path + b, &s, radius2, ext, scale, acc, &visited, &tests);
+        disc_index_segment(nodes, discs, path + b, &s, radius2, ext, acc, &visited, &tests);
     }
     WORK_U(tests);
     WORK_NODE(visited);

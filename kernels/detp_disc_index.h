@@ -14,7 +14,7 @@
  * 8 discs at a time. */
 inline void disc_index_segment(__global const BvhNode *nodes, __global const DiscBlock *discs,
                                __global const Segment *slot, const SegmentView *s, float radius2, float ext,
-                               float scale, __global long *acc, uint *visited, ulong *tests)
+                               __global long *acc, uint *visited, ulong *tests)
 {
     float3 o = s->o, w = s->w;
     float tmax = s->t_end + ext; /* exactly as detp_plain */
@@ -35,7 +35,7 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const Dis
                       tmax, radius2);
             if (!any(hit)) continue;
             if (!have_q) { /* quantised once per segment, as detp_plain does */
-                q = segment_fixed_power(slot, scale);
+                q = segment_fixed_power(slot);
                 have_q = 1;
             }
             int ids[OCLGI_LANES], h[OCLGI_LANES];

@@ -33,7 +33,7 @@
 
 __kernel void detp_ray_map(__global const BvhNode *nodes, __global const PieceBlock *blocks,
                            __global const RayMapDisc *discs, int n_discs, __global const Segment *segments,
-                           float radius2, float ext, float scale, __global long *acc,
+                           float radius2, float ext, __global long *acc,
                            __global ulong *work)
 {
     int i = get_global_id(0);
@@ -71,7 +71,7 @@ __kernel void detp_ray_map(__global const BvhNode *nodes, __global const PieceBl
             vstore8(b->slot, 0, slots);
             vstore8(hit, 0, h);
             for (int k = 0; k < OCLGI_LANES; ++k)
-                if (h[k]) sum += segment_fixed_power(segments + slots[k], scale);
+                if (h[k]) sum += segment_fixed_power(segments + slots[k]);
         }
     }
     int id = disc->id;

@@ -179,7 +179,7 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
                       __global const int *runs, int run_base, int n_launch, __global int *run_done,
                       __global const ScRecord *rec0, __global const int *slot0, int first, int n0,
                       __global const Segment *segments, __global const float *radii, int levels,
-                      float radius, float radius2, float scale, __global ScRecord *srec, __global int *sslot,
+                      float radius, float radius2, __global ScRecord *srec, __global int *sslot,
                       int cap, __global long *acc, volatile __global int *status, __global ulong *work)
 {
     int g = get_global_id(0);
@@ -262,7 +262,7 @@ __kernel void sc_runs(__global const float4 *positions, __global const float4 *n
             int hit;
             DETP_TEST(float, hit, x.x, x.y, x.z, n.x, n.y, n.z, a.x, a.y, a.z, b.x, b.y, b.z, a.w, radius2);
             if (hit) {
-                long3 p = segment_fixed_power(segments + is[j], scale); /* as detp.cl */
+                long3 p = segment_fixed_power(segments + is[j]); /* as detp.cl */
                 sr += p.x;
                 sg += p.y;
                 sb += p.z;

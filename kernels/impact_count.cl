@@ -14,7 +14,7 @@
 #include "segment.h"
 
 __kernel void impact_count_accumulate(__global const Segment *segments, int n_slots,
-                                      int max_depth, int count_emitted, float scale,
+                                      int max_depth, int count_emitted,
                                       __global long *acc)
 {
     int s = get_global_id(0);
@@ -22,7 +22,7 @@ __kernel void impact_count_accumulate(__global const Segment *segments, int n_sl
     __global const Segment *slot = &segments[s];
     if (!segment_impact(slot) || !segment_counted(s % max_depth, count_emitted)) return;
     int t = slot->tri;
-    long3 q = segment_fixed_power(slot, scale);
+    long3 q = segment_fixed_power(slot);
     atom_add(&acc[3 * t + 0], q.x);
     atom_add(&acc[3 * t + 1], q.y);
     atom_add(&acc[3 * t + 2], q.z);

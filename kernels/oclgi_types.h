@@ -6,16 +6,21 @@
  * (OpenCL pads it to 16 bytes): float[3] + a 4-byte field, read with vload3;
  * the device's blocks (at the end) are whole vectors.
  *
- * Fixed-point sums (DESIGN.md section 2): every contribution is a power
- * (watts, per channel) quantised once as convert_long_rte(power * scale)
- * (segment_quantise, segment.h), then added with 64-bit integer atomics, so
- * sums are order-independent. The host picks scale = 2^OCLGI_FIXED_BITS /
- * phi_max (OCLGI_FIXED_BITS = 24), phi_max the largest per-photon power of
- * any channel. Russian roulette survives with the max
- * albedo, so no segment carries more than phi_max: one contribution is at
- * most 2^24, and a sum over n_paths * max_depth contributions stays below
- * 2^(24 + 30 + 8) = 2^62 < 2^63 for 10^9 photons and max_depth <= 256 (the
- * host enforces both limits). Resolution: 2^-24 of a photon's power.
+ * Fixed-point sums (DESIGN.md section 2): a photon carries its power in
+ * units of phi_max, the largest power an emitter gives one photon path (the
+ * host divides the emitters' records by it, oclgi/scene/compiled.py), and
+ * every contribution is quantised once as convert_long_rte(power *
+ * 2^OCLGI_FIXED_BITS) (segment_quantise, segment.h; OCLGI_FIXED_BITS = 24),
+ * then added with 64-bit integer atomics, so sums are order-independent.
+ * Neither depends on the photon count: 1/n is applied only when sums are
+ * resolved into watts (the resolve kernels' factor), so the sums of
+ * disjoint path ranges (batches, resumed runs, MPI ranks) add up exactly.
+ * Russian roulette survives with the max albedo, so no segment carries more
+ * than phi_max: one contribution is at most 2^24, and a sum over n_paths *
+ * max_depth contributions stays below 2^(24 + 30 + 8) = 2^62 < 2^63 for
+ * 10^9 photons and max_depth <= 256 (the host enforces both limits, for
+ * the whole of a run however it is split or extended). Resolution: 2^-24
+ * of a photon's power.
  */
 #ifndef OCLGI_TYPES_H
 #define OCLGI_TYPES_H

@@ -38,7 +38,7 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
                               __global const float *r2, __global const Segment *segments, int max_depth,
                               __global const int *paths, __global const int *starts, int n_list,
                               int count_emitted, int front_only, int mark, int include_kth, float sign,
-                              float scale, __global long *acc, __global int *marks, __global int *list,
+                              __global long *acc, __global int *marks, __global int *list,
                               __global int *n_listed)
 {
     int k = get_global_id(0);
@@ -69,7 +69,7 @@ __kernel void pm_update_balls(__global const BvhNode *nodes, __global const int 
                 }
                 if (r == INFINITY || !(d2 < r || (include_kth && d2 == r))) continue;
                 if (!have_q) { /* quantised once per impact, as pm_finish does */
-                    q = segment_fixed_power(path + b, scale);
+                    q = segment_fixed_power(path + b);
                     if (sign < 0.0f) q = -q;
                     have_q = 1;
                 }

@@ -17,7 +17,9 @@
  * Emission: emitter chosen from a CDF proportional to power; area lights
  * emit from a uniform point of the triangle with a cosine-distributed
  * direction about its normal (one-sided); point lights emit uniformly over
- * the sphere. Each photon carries emitter.power / n_total.
+ * the sphere. Each photon carries emitter.power, in units of the largest
+ * power any emitter gives a photon (oclgi_types.h): the same for a path
+ * whatever the run's photon count, which only its resolve divides by.
  * Scattering: Lambertian (cosine about the normal on the incoming side),
  * Russian roulette with survival = max albedo, so power never grows.
  */
@@ -28,9 +30,9 @@
 #define TRACE_ARGS __global const float4 *tri_normals, __global const int *tri_material,     \
                    __global const Material *materials, __global const Emitter *emitters,   \
                    __global const float *emitter_cdf, int n_emitters, uint seed_lo,        \
-                   uint seed_hi, float inv_n_total, int max_depth, float eps
+                   uint seed_hi, int max_depth, float eps
 #define TRACE_PASS tri_normals, tri_material, materials, emitters, emitter_cdf, n_emitters, \
-                   seed_lo, seed_hi, inv_n_total, max_depth, eps
+                   seed_lo, seed_hi, max_depth, eps
 
 typedef struct {
     float3 o, d, power; /* the next segment's origin, direction and power */
@@ -63,7 +65,7 @@ inline PathState path_emit(TRACE_ARGS, uint path)
         s.o = vload3(0, em->p);
         s.d = sample_sphere(r0.y, r0.z);
     }
-    s.power = vload3(0, em->power) * inv_n_total;
+    s.power = vload3(0, em->power);
     return s;
 }
 

@@ -23,7 +23,7 @@
  */
 #include "point_index.h"
 
-inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int include_kth, float scale,
+inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int include_kth,
                       __global long *acc, __global float *r2, int write_ids,
                       __global int *ids, __global float *d2s)
 {
@@ -33,7 +33,7 @@ inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int includ
         r = h->d2[0];
         /* heap slot 0 is the K-th nearest: the K-1 estimator leaves it out */
         for (int j = include_kth ? 0 : 1; j < PM_K; ++j)
-            s += segment_quantise(power[h->id[j]].xyz, scale);
+            s += segment_quantise(power[h->id[j]].xyz);
     }
     acc[3 * i + 0] = s.x;
     acc[3 * i + 1] = s.y;
@@ -66,7 +66,7 @@ __kernel void pm_knn_bvh(__global const BvhNode *nodes, __global const float *so
                          __global const int *iids, __global const float4 *ipower,
                          __global const float4 *qpos, __global const float4 *qnrm,
                          __global const int *order, int n_points, int front_only, int include_kth,
-                         float scale, __global long *acc, __global float *r2, int write_ids,
+                         __global long *acc, __global float *r2, int write_ids,
                          __global int *ids, __global float *d2s, __global ulong *work)
 {
     int t = get_global_id(0);
@@ -108,7 +108,7 @@ __kernel void pm_knn_bvh(__global const BvhNode *nodes, __global const float *so
             node = stack[--sp];
         }
     }
-    pm_finish(&h, ipower, i, include_kth, scale, acc, r2, write_ids, ids, d2s);
+    pm_finish(&h, ipower, i, include_kth, acc, r2, write_ids, ids, d2s);
     WORK_FLUSH(work);
 }
 
@@ -136,7 +136,7 @@ __kernel void pm_knn_grid(__global const ulong *keys, __global const int2 *cells
                           __global const float4 *ipower,
                           __global const float4 *qpos, __global const float4 *qnrm,
                           __global const int *order, int n_points, int front_only, int include_kth,
-                          float scale, __global long *acc, __global float *r2, int write_ids,
+                          __global long *acc, __global float *r2, int write_ids,
                           __global int *ids, __global float *d2s, __global ulong *work)
 {
     int t = get_global_id(0);
@@ -202,6 +202,6 @@ __kernel void pm_knn_grid(__global const ulong *keys, __global const int2 *cells
             }
         }
     }
-    pm_finish(&h, ipower, i, include_kth, scale, acc, r2, write_ids, ids, d2s);
+    pm_finish(&h, ipower, i, include_kth, acc, r2, write_ids, ids, d2s);
     WORK_FLUSH(work);
 }

@@ -27,9 +27,12 @@
  * so their float4s are aligned.
  *
  * Fixed point: every estimator quantises a power once, as
- * convert_long3_rte(power * scale) (segment_quantise; oclgi_types.h says why
- * the 64-bit sums cannot overflow), so equal segments give equal sums in
- * every kernel, and -q is exact (rounding to nearest even is symmetric).
+ * convert_long3_rte(power * 2^OCLGI_FIXED_BITS) (segment_quantise;
+ * oclgi_types.h says why the 64-bit sums cannot overflow), so equal
+ * segments give equal sums in every kernel, and -q is exact (rounding to
+ * nearest even is symmetric). Powers are stored in units of the largest
+ * photon power, whatever the photon count: the quantisation does not depend
+ * on the run, so the sums of disjoint path ranges add up exactly.
  */
 #ifndef OCLGI_SEGMENT_H
 #define OCLGI_SEGMENT_H
@@ -106,14 +109,14 @@ inline float3 segment_power(__global const Segment *slot)
 }
 
 /* The one quantisation of a power into fixed-point units (header). */
-inline long3 segment_quantise(float3 power, float scale)
+inline long3 segment_quantise(float3 power)
 {
-    return convert_long3_rte(power * scale);
+    return convert_long3_rte(power * OCLGI_FIXED_ONE);
 }
 
-inline long3 segment_fixed_power(__global const Segment *slot, float scale)
+inline long3 segment_fixed_power(__global const Segment *slot)
 {
-    return segment_quantise(segment_power(slot), scale);
+    return segment_quantise(segment_power(slot));
 }
 
 /* Writing: a traced segment, the empty slots past a path's end (all zeros

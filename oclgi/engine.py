@@ -28,6 +28,7 @@ from .cl.programs import launch, programs
 from .errors import OclgiError
 from .estimators import ESTIMATORS, check_options
 from .tracing.photon_trace import PhotonTracer
+from .tracing.run import PathRange, Run
 from .accel.bvh_build import QUALITIES
 from .scene.compiled import BVH_QUALITY, CompiledScene
 from .params import RunParams, flag, radius as read_radius
@@ -215,49 +216,24 @@ class Engine:
         in ``Estimate.work``); ``options`` go to the estimator (its own
         parameters, e.g. the sphere cache's ``q``).
         """
+        run = self.run(points, method, photons, radius, seed, max_depth, extension, count_emitted,
+                       count_work=count_work, **options)
+        return run.complete(self.progress)
+
+    def run(self, points, method: str | None = None, photons: int | None = None, radius: float | None = None,
+            seed: int | None = None, max_depth: int | None = None, extension: float | None = None,
+            count_emitted: bool | None = None, count_work: bool = False, paths: PathRange | None = None,
+            **options) -> Run:
+        """The run ``irradiance`` makes, not yet traced (oclgi/tracing/run.py):
+        step it, save and resume its state, extend it, finish it. ``paths``:
+        the range of path ids this run traces (default: all of them)."""
         points = as_query_points(points)
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
-        method, photons, radius, seed, max_depth = r.method, r.photons, r.radius, r.seed, r.max_depth
         count_work = params.flag(count_work, "count_work")
-        budget.check(budget.irradiance_need(len(points), method, photons, max_depth, self.batch_bytes,
+        budget.check(budget.irradiance_need(len(points), r.method, r.photons, r.max_depth, self.batch_bytes,
                                             options.get("k")), self.queue.device)
-
-        stats = Stats(photons=int(photons), points=len(points), method=method, radius=float(radius))
-        t0 = time.perf_counter()
         est = self.estimator(points, r, count_work=count_work, **options)
-        batch_paths = max(1, min(photons, self.batch_bytes // (max_depth * 48)))
-        tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, batch_paths, self.local_size)
-        scale = self.compiled.fixed_scale(photons)
-        from .progress import Progress
-
-        bar = Progress(f"{method}", photons, self.progress)
-        t_trace = t_est = 0.0
-        lens = np.empty(batch_paths, np.int32)
-        t_run = time.perf_counter()
-        for offset in range(0, photons, batch_paths):
-            n = min(batch_paths, photons - offset)
-            ta = time.perf_counter()
-            batch = tracer.trace(offset, n, photons)
-            cl.enqueue_copy(self.queue, lens[:n], batch.path_len)  # also waits for the trace
-            stats.segments += int(lens[:n].sum())
-            tb = time.perf_counter()
-            est.accumulate(batch, scale)
-            self.queue.finish()
-            tc = time.perf_counter()
-            t_trace += tb - ta
-            t_est += tc - tb
-            bar.update(n)
-            if offset == 0:  # a long run says so, with its time from the first batch
-                notice = budget.time_notice(n, tc - t_run, photons)
-                if notice:
-                    warnings.warn(notice, OclgiWarning, stacklevel=2)
-        bar.close()
-        irr_buf = est.resolve(scale)
-        irr = np.empty((len(points), 4), np.float32)
-        cl.enqueue_copy(self.queue, irr, irr_buf)
-        stats.seconds = {"setup": self.setup_seconds, "trace": t_trace, "estimate": t_est,
-                         "total": time.perf_counter() - t0}
-        return Estimate(irr[:, :3], est.accumulators(), scale, stats, points, est.work(), est)
+        return Run(self, est, r, paths)
 
     def run_params(self, method=None, photons=None, radius=None, seed=None, max_depth=None, extension=None,
                    count_emitted=None) -> RunParams:
@@ -317,8 +293,11 @@ class Engine:
 
         Returns (segments, path_len): a ``Segment`` structured array of
         photons * max_depth slots, path-major (empty slots are zeros), and the
-        number of segments of each path. For inspection and studies; the
-        estimators stream batches instead of keeping every segment.
+        number of segments of each path. Powers are in watts per channel, as
+        the run's ``photons`` paths share the emitters' power (the device
+        stores them in units of the largest photon power, scaled here by
+        ``photon_watts``). For inspection and studies; the estimators stream
+        batches instead of keeping every segment.
         """
         given = dict(photons=photons, seed=seed, max_depth=max_depth)
         run = RunParams.read({k: v for k, v in given.items() if v is not None}, base=self.scene.settings)
@@ -327,8 +306,16 @@ class Engine:
             raise OclgiError(f"{photons:,} paths of up to {max_depth} segments do not fit one batch "
                              f"({self.batch_bytes >> 20} MiB); trace fewer")
         tracer = PhotonTracer(self.queue, self.compiled, seed, max_depth, photons, self.local_size)
-        batch = tracer.trace(0, photons, photons)
-        return batch.read_segments(self.queue), batch.read_path_len(self.queue)
+        batch = tracer.trace(0, photons)
+        segments = batch.read_segments(self.queue)
+        segments["power"] *= self.photon_watts(photons)
+        return segments, batch.read_path_len(self.queue)
+
+    def photon_watts(self, photons: int) -> np.float32:
+        """Watts of one device unit of power (the largest power a photon
+        carries) in a run of ``photons`` paths: the device's powers (stored
+        segments, a Photon Map's impacts) times this are watts."""
+        return np.float32(self.compiled.photon_power_max / params.photons(photons))
 
     # -- images -----------------------------------------------------------------
     def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,

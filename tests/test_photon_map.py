@@ -27,7 +27,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import oclgi
-from oclgi.cl.constants import FRONT_COS_EPS
+from oclgi.cl.constants import FIXED_ONE, FRONT_COS_EPS
 from oclgi.errors import OclgiError
 from oclgi.estimators import photon_map as pm
 from oclgi.accel.point_index import KnnIndex
@@ -153,13 +153,13 @@ def test_neighbours_cornell_impacts(cornell):
         # ids are canonical; the tree numbers the front subset
         assert_same_as_kdtree(np.searchsorted(front, ids[rows]), d2[rows], pos[front], qp[rows], k)
     # the estimate is built from exactly these neighbours
-    scale = est.scale
-    q = np.rint(power.astype(np.float32) * np.float32(scale)).astype(np.int64)
+    # impacts carry power in units of the largest photon power: 2^24 fixed-point units
+    q = np.rint(power.astype(np.float32) * np.float32(FIXED_ONE)).astype(np.int64)
     kth = ref_ids[:, -1]
     expect = q[ref_ids].sum(axis=1) - q[kth]
     assert np.array_equal(est.accumulators, expect)
     r2 = ref_d2[:, -1].astype(np.float64)
-    np.testing.assert_allclose(est.irradiance, expect / scale / (math.pi * r2[:, None]), rtol=1e-5)
+    np.testing.assert_allclose(est.irradiance, expect / est.scale / (math.pi * r2[:, None]), rtol=1e-5)
 
 
 def test_impacts_are_segment_ends(cornell):
@@ -177,7 +177,8 @@ def test_impacts_are_segment_ends(cornell):
         s = seg[keep]
         end = s["org"] + s["t_end"][:, None] * s["dir"]
         assert np.array_equal(pos, end.astype(np.float32))
-        assert np.array_equal(dirs, s["dir"]) and np.array_equal(power, s["power"])
+        assert np.array_equal(dirs, s["dir"])
+        assert np.array_equal(power * cornell.photon_watts(photons), s["power"])  # impacts in device units
 
 
 def _run_bits(engine, pts, **kw):

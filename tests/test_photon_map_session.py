@@ -21,6 +21,7 @@ import pyopencl as cl
 import pytest
 
 import oclgi
+from oclgi.cl.constants import FIXED_ONE
 from oclgi.errors import OclgiError
 from test_session import _moves, _points, _scene
 
@@ -74,14 +75,14 @@ def _r2(session):
     return out
 
 
-def _quantised(power, scale):
-    """convert_long3_rte(power * scale) in float32, as the kernels quantise."""
-    return np.rint(power.astype(np.float32) * np.float32(scale)).astype(np.int64)
+def _quantised(power):
+    """convert_long3_rte(power * 2^FIXED_BITS) in float32, as the kernels quantise."""
+    return np.rint(power.astype(np.float32) * np.float32(FIXED_ONE)).astype(np.int64)
 
 
-def _fixed_radius_sums(pos, dirs, pw, scale, qp, qn, r2):
+def _fixed_radius_sums(pos, dirs, pw, qp, qn, r2):
     """Sum of the quantised powers of the front-side impacts with d2 < r2, per point (float32 as the kernels)."""
-    qpow = _quantised(pw, scale)
+    qpow = _quantised(pw)
     out = np.zeros((len(qp), 3), np.int64)
     for i, (q, n, r) in enumerate(zip(qp, qn, r2)):
         d = pos - q
@@ -119,7 +120,7 @@ def test_practical_update(engine, points):
     acc = session.accumulators()
     assert np.array_equal(session.radii()[:n_room], first[1][:n_room])
     pos, dirs, pw = est.impacts()
-    brute = _fixed_radius_sums(pos, dirs, pw, session.scale, pts.positions[:n_room, :3],
+    brute = _fixed_radius_sums(pos, dirs, pw, pts.positions[:n_room, :3],
                                pts.normals[:n_room, :3], r2_first[:n_room])
     assert np.array_equal(acc[:n_room], brute)
     changed = (acc[:n_room] != first[0][:n_room]).any(axis=1)

@@ -13,7 +13,7 @@ from test_instances import _rigid, _scene
 
 def _store(engine, photons, seed=3, depth=8):
     tracer = PhotonTracer(engine.queue, engine.compiled, seed, depth, photons)
-    batch = tracer.trace(0, photons, photons)
+    batch = tracer.trace(0, photons)
     return tracer, batch
 
 
@@ -21,12 +21,12 @@ def _read(engine, batch):
     return batch.read_segments(engine.queue), batch.read_path_len(engine.queue)
 
 
-def _retrace(engine, tracer, batch, n_total, paths, starts):
+def _retrace(engine, tracer, batch, paths, starts):
     ctx = engine.ctx
     mf = cl.mem_flags
     pb = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.asarray(paths, np.int32))
     sb = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.asarray(starts, np.int32))
-    tracer.retrace(batch, n_total, pb, sb, len(paths))
+    tracer.retrace(batch, pb, sb, len(paths))
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +47,7 @@ def test_suffix_retrace_reproduces_the_path(cornell, rng):
         wrecked[p, b:]["power"] = -1.0
     cl.enqueue_copy(cornell.queue, batch.segments, wrecked.ravel())
     cl.enqueue_copy(cornell.queue, batch.path_len, np.zeros(photons, np.int32))
-    _retrace(cornell, tracer, batch, photons, paths, starts)
+    _retrace(cornell, tracer, batch, paths, starts)
     again, lens2 = _read(cornell, batch)
     assert again.tobytes() == np.where(np.isin(np.arange(photons), paths)[:, None], segs.reshape(photons, -1),
                                        wrecked).tobytes()
@@ -71,7 +71,7 @@ def test_retrace_after_move_equals_fresh_trace(scenes_dir, rng):
     changed = np.nonzero(differs.any(axis=1))[0]
     first = differs[changed].argmax(axis=1)
     assert 0 < len(changed) < photons
-    _retrace(engine, tracer, batch, photons, changed, first)
+    _retrace(engine, tracer, batch, changed, first)
     got, got_len = _read(engine, batch)
     assert got.tobytes() == want.tobytes()
     assert np.array_equal(got_len, want_len)

@@ -140,13 +140,13 @@ class KnnIndex:
         return prog.pm_knn_bvh if self.index == "bvh" else prog.pm_knn_grid
 
     def search(self, qpos: cl.Buffer, qnrm: cl.Buffer, order: cl.Buffer, n_points: int, k: int,
-               front_only: bool, include_kth: bool, scale: float, acc: cl.Buffer, r2: cl.Buffer,
+               front_only: bool, include_kth: bool, acc: cl.Buffer, r2: cl.Buffer,
                ids: cl.Buffer | None = None, d2: cl.Buffer | None = None, local_size: int | None = None):
         """Run the search: acc (n, 3) int64 sums, r2 (n,) float32; ids/d2 (n, k) when given."""
         write = ids is not None
         dummy = ids if write else acc
         common = (self.soa, self.stride, self.ids, self.ipower, qpos, qnrm, order, n_points,
-                  int(bool(front_only)), int(bool(include_kth)), scale, acc, r2,
+                  int(bool(front_only)), int(bool(include_kth)), acc, r2,
                   int(write), dummy, d2 if write else dummy, self.work_buf)
         if self.index == "bvh":
             args = (self.nodes, *common)
@@ -169,7 +169,7 @@ class KnnIndex:
         r2 = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, max(n * 4, 4))
         ids = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, max(n * k * 4, 4))
         d2 = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, max(n * k * 4, 4))
-        self.search(*bufs, n, k, front_only, True, 1.0, acc, r2, ids, d2)
+        self.search(*bufs, n, k, front_only, True, acc, r2, ids, d2)
         out_ids = np.empty((n, k), np.int32)
         out_d2 = np.empty((n, k), np.float32)
         cl.enqueue_copy(self.queue, out_ids, ids)

@@ -33,10 +33,11 @@ BOX_BVH_STACK = 64
 # tree on 63-bit codes: 95 levels at most.
 POINT_BVH_STACK = 96
 
-# Fixed-point sums: the host's scale gives one photon's largest power 2^24
-# units (kernels/oclgi_types.h has the overflow bound): resolution 2^-24 of
-# a photon, and 64-bit sums with room for every photon of a run.
+# Fixed-point sums: one photon's largest power is 2^24 units, whatever the
+# photon count (kernels/oclgi_types.h has the overflow bound): resolution
+# 2^-24 of a photon, and 64-bit sums with room for every photon of a run.
 FIXED_BITS = 24
+FIXED_ONE = float(2**FIXED_BITS)  # kernels/constants.h OCLGI_FIXED_ONE
 
 # A direction w arrives on a surface's front side (normal n) when
 # w.n < -FRONT_COS_EPS, for DETP's discs and the Photon Map's impacts alike:

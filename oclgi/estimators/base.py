@@ -15,6 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..cl.programs import launch, programs
+from ..errors import OclgiError
 
 
 class Estimator:
@@ -73,7 +74,7 @@ class Estimator:
         acc[index] = values
         cl.enqueue_copy(self.queue, self.acc, np.ascontiguousarray(acc))
 
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         raise NotImplementedError
 
     def resolve(self, scale: float) -> cl.Buffer:
@@ -81,6 +82,28 @@ class Estimator:
 
     def accumulators(self) -> np.ndarray:
         raise NotImplementedError
+
+    # -- a run's state (oclgi/tracing/run.py) --------------------------------
+    def state(self) -> dict:
+        """What the sums of the paths accumulated so far are, on the host:
+        the int64 accumulators and the work counters. ``restore`` of it
+        gives an estimator that goes on as this one would."""
+        work = np.empty(3, np.uint64)
+        cl.enqueue_copy(self.queue, work, self.work_buf)
+        return {"acc": self.accumulators(), "work": work}
+
+    def restore(self, state: dict) -> None:
+        """Take the sums of ``state`` (from ``state()`` of an estimator of
+        the same kind over the same points)."""
+        self._restore_array(state, "acc", self.accumulators(), self.acc)
+        self._restore_array(state, "work", np.zeros(3, np.uint64), self.work_buf)
+
+    def _restore_array(self, state: dict, key: str, like: np.ndarray, buf: cl.Buffer) -> None:
+        a = state.get(key)
+        if not isinstance(a, np.ndarray) or a.dtype != like.dtype or a.shape != like.shape:
+            got = "nothing" if a is None else f"{getattr(a, 'dtype', type(a).__name__)} {getattr(a, 'shape', '')}"
+            raise OclgiError(f"run state: {self.name} expects {key!r} as {like.dtype} {like.shape}, got {got}")
+        cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(a))
 
 
 class DetpEstimator(Estimator):

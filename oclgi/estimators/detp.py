@@ -28,7 +28,7 @@ class Detp(DetpEstimator):
         super().__init__(queue, compiled, points, radius, **kw)
         self.k_plain = self.program("detp").detp_plain
 
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         # Each work-item loops over every path of the batch: sliced by
         # work-item, one slice would still hold all the paths (seconds at a
         # few thousand points). The batch is run in pieces of paths instead
@@ -46,6 +46,6 @@ class Detp(DetpEstimator):
                 self.queue, self.k_plain, (self.n + LANES - 1) // LANES,
                 self.positions, self.normals, self.n, segments, count,
                 batch.max_depth, self.count_emitted, self.radius**2,
-                self.ext, scale, self.acc, self.work_buf,
+                self.ext, self.acc, self.work_buf,
                 local_size=self.local_size,
             )

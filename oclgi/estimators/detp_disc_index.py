@@ -113,13 +113,13 @@ class DetpDiscIndex(DetpEstimator):
         """Points moved (a camera session's dynamic points): index them again."""
         self.build_index()
 
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         if self.nodes is None:
             return
         launch(
             self.queue, self.k_walk, batch.n_paths,
             self.nodes, self.blocks, batch.segments, batch.n_paths, batch.max_depth,
             self.count_emitted, self.radius**2, self.ext,
-            scale, self.acc, self.work_buf,
+            self.acc, self.work_buf,
             local_size=self.local_size,
         )

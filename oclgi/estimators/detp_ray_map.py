@@ -205,7 +205,7 @@ class DetpRayMap(DetpEstimator):
         blocks.view(np.float32).reshape(n_blocks, nf, LANES)[:] = lanes.reshape(n_blocks, LANES, nf).transpose(0, 2, 1)
         return self.upload(nodes), self.upload(blocks), n
 
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         if not self.n_active:
             return
         t0 = time.perf_counter()
@@ -218,7 +218,7 @@ class DetpRayMap(DetpEstimator):
         launch(
             self.queue, self.k_query, self.n_active,
             nodes, blocks, self.discs, self.n_active, batch.segments, self.radius**2,
-            self.ext, scale, self.acc, self.work_buf,
+            self.ext, self.acc, self.work_buf,
             local_size=self.local_size,
         )
         self.queue.finish()  # the tree's buffers are released when this returns

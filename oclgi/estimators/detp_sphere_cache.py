@@ -204,7 +204,7 @@ class DetpSphereCache(DetpEstimator):
         return st
 
     # -- the estimator ------------------------------------------------------------
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         q = self.queue
         rec0 = self._buffer("_rec0", batch.n_slots * ScRecord.itemsize)
         slot0 = self._buffer("_slot0", batch.n_slots * 4)
@@ -247,7 +247,7 @@ class DetpSphereCache(DetpEstimator):
                            self.n, self.run_length, runs, base,
                            min(wave, n_pending - base), self.run_done, rec0, slot0, first,
                            count, batch.segments, self.radii_buf, self.levels,
-                           self.radius, self.radius**2, scale, srec, sslot,
+                           self.radius, self.radius**2, srec, sslot,
                            cap, self.acc, self.status, self.work_buf, local_size=self.run_local_size)
                 st = self._read_status()
                 peak = max(peak, st[2] / count)

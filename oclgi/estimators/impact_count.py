@@ -71,9 +71,9 @@ class ImpactCount(Estimator):
         cl.enqueue_copy(self.queue, self.positions, self.points.positions)
         cl.enqueue_copy(self.queue, self.barys, self.points.barys)
 
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         launch(self.queue, self.k_acc, batch.n_slots, batch.segments, batch.n_slots,
-               batch.max_depth, self.count_emitted, scale, self.acc,
+               batch.max_depth, self.count_emitted, self.acc,
                local_size=self.local_size)
 
     def resolve(self, scale: float) -> cl.Buffer:

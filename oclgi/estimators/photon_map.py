@@ -160,7 +160,7 @@ class PhotonMap(Estimator):
         self.knn: KnnIndex | None = None
 
     # -- gathering ---------------------------------------------------------
-    def accumulate(self, batch, scale: float):
+    def accumulate(self, batch):
         n_paths = batch.n_paths
         counts_buf = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, n_paths * 4)
         args = (batch.segments, n_paths, batch.max_depth, int(self.count_emitted))
@@ -188,6 +188,25 @@ class PhotonMap(Estimator):
         self.chunks.append(tuple(host))
         self.n_impacts += m
 
+    def state(self) -> dict:
+        """A Photon Map's state is its impacts (the sums come at the search)."""
+        pos, dirs, power = self.impacts()
+        return {"impact_positions": pos, "impact_directions": dirs, "impact_powers": power}
+
+    def restore(self, state: dict) -> None:
+        got = []
+        for key in ("impact_positions", "impact_directions", "impact_powers"):
+            a = state.get(key)
+            if not isinstance(a, np.ndarray) or a.dtype != np.float32 or a.ndim != 2 or a.shape[1] != 3:
+                raise OclgiError(f"run state: photon_map expects {key!r} as float32 (m, 3)")
+            got.append(np.ascontiguousarray(a))
+        if len({len(a) for a in got}) != 1:
+            raise OclgiError("run state: photon_map's impact arrays differ in length")
+        if len(got[0]) > self.limit:
+            raise OclgiError(f"run state: {len(got[0]):,} impacts, more than this device holds ({self.limit:,})")
+        self.chunks = [tuple(got)] if len(got[0]) else []
+        self.n_impacts, self.knn = len(got[0]), None
+
     def clear_impacts(self):
         """Forget the gathered impacts and their index (a session gathers its
         store again after a move); the sums and radii stay."""
@@ -213,7 +232,7 @@ class PhotonMap(Estimator):
                                 count_work=self.count_work)
         return self.knn
 
-    def search(self, scale: float, ids: np.ndarray | None = None):
+    def search(self, ids: np.ndarray | None = None):
         """The k-nearest search for every point, or for points ``ids`` only
         (their sums and radii are overwritten, the others keep theirs)."""
         knn = self.build_index()
@@ -224,7 +243,7 @@ class PhotonMap(Estimator):
             ids = np.asarray(ids, np.int32)  # searched in Morton order, for locality only
             order, n = self.upload(ids[query_order(self.points.positions[ids])]), len(ids)
         knn.search(self.positions, self.normals, order, n, self.k, self.front_only,
-                   self.estimator == "k", scale, self.acc, self.r2, local_size=self.local_size)
+                   self.estimator == "k", self.acc, self.r2, local_size=self.local_size)
 
     def irradiance_buffer(self, scale: float) -> cl.Buffer:
         """E = acc / (scale pi r_k^2) from the current sums and radii (float4 per point, on the device)."""
@@ -234,7 +253,7 @@ class PhotonMap(Estimator):
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi r_k^2)."""
-        self.search(scale)
+        self.search()
         return self.irradiance_buffer(scale)
 
     def replace_points(self, index: np.ndarray, new) -> None:

@@ -134,7 +134,7 @@ class PhotonMapSession:
         self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
         self.scale = self.store.scale
         self._gather()
-        self.map.search(self.scale)
+        self.map.search()
         self.attached = self._attach()
         self.balls = self._balls()
         prog = programs(engine.ctx).get("photon_map_update")
@@ -150,7 +150,7 @@ class PhotonMapSession:
     def _gather(self):
         """The map: every impact of the store, in canonical order (its index is built when searched)."""
         self.map.clear_impacts()
-        self.map.accumulate(self.store.batch, self.scale)
+        self.map.accumulate(self.store.batch)
         self.map_current = True
 
     def _attach(self) -> dict:
@@ -254,7 +254,7 @@ class PhotonMapSession:
             t5 = time.perf_counter()
             if not self.map_current:
                 self._gather()
-            self.map.search(self.scale, search)  # builds the index first
+            self.map.search(search)  # builds the index first
             q.finish()
             t6 = time.perf_counter()
             self.balls = self._balls()  # the searched points' balls changed
@@ -272,7 +272,7 @@ class PhotonMapSession:
         launch(self.queue, self.k_update, len(affected), b.nodes, b.balls, m.positions, m.normals, m.r2,
                s.batch.segments, s.max_depth, affected.paths_buf, affected.starts_buf,
                len(affected), m.count_emitted, m.front_only, mark,
-               m.estimator == "k", sign, self.scale, m.acc, self.marks,
+               m.estimator == "k", sign, m.acc, self.marks,
                self.listed, self.n_listed, local_size=self.engine.local_size)
 
     def _listed(self) -> np.ndarray:

@@ -82,7 +82,7 @@ class SegmentStore:
         self.nbytes = nbytes
         self.scale = engine.compiled.fixed_scale(self.photons)
         self.tracer = PhotonTracer(self.queue, engine.compiled, seed, max_depth, self.photons, engine.local_size)
-        self.batch = self.tracer.trace(0, self.photons, self.photons)
+        self.batch = self.tracer.trace(0, self.photons)
         prog = programs(engine.ctx).get("update")
         self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
         self.k_cells, self.k_candidates = prog.update_path_cells, prog.update_candidates
@@ -182,11 +182,11 @@ class SegmentStore:
             args = (*engine.compiled.scene_args, obj, self.batch.segments, listed, n, self.max_depth, self.first)
             if not fused:
                 launch(q, self.k_first, n, *args, None, None, 0, 0, 0,
-                       0, None, None, local_size=engine.local_size)
+                       None, None, local_size=engine.local_size)
             else:
                 k = programs(engine.ctx).get("update", **discs.defines).update_first_affected
                 launch(q, k, n, *args, discs.nodes, discs.blocks, discs.count_emitted,
-                       discs.radius ** 2, discs.ext, self.scale, discs.acc,
+                       discs.radius ** 2, discs.ext, discs.acc,
                        discs.work_buf, local_size=engine.local_size)
             cl.enqueue_copy(q, self.first_host[:n], self.first)
         hit = np.nonzero(self.first_host[:n] >= 0)[0]
@@ -221,5 +221,5 @@ class SegmentStore:
     def retrace(self, affected: Affected):
         """Re-trace the affected suffixes in place (the scene already moved)
         and bring their cell masks up to date."""
-        self.tracer.retrace(self.batch, self.photons, affected.paths_buf, affected.starts_buf, len(affected))
+        self.tracer.retrace(self.batch, affected.paths_buf, affected.starts_buf, len(affected))
         self._mark_cells(affected.paths_buf, len(affected))

@@ -101,12 +101,12 @@ class Session:
         t0 = time.perf_counter()
         self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
         self.scale = self.store.scale
-        self.estimator.accumulate(self.store.batch, self.scale)
+        self.estimator.accumulate(self.store.batch)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:
             self._new_dynamic()
             if self.dyn_est is not None:
-                self.dyn_est.accumulate(self.store.batch, self.scale)
+                self.dyn_est.accumulate(self.store.batch)
                 self.dynamic_work = self.dyn_est.work()
         self.queue.finish()
         self.setup_seconds = time.perf_counter() - t0
@@ -175,7 +175,7 @@ class Session:
             stats.segments_removed = self.store.suffix_segments(affected)
             old = self.store.suffixes(affected, -1.0)
             for est in estimators:
-                est.accumulate(old, self.scale)
+                est.accumulate(old)
             q.finish()  # honest per-stage times
             t3 = time.perf_counter()
             self.store.retrace(affected)
@@ -183,14 +183,14 @@ class Session:
             t4 = time.perf_counter()
             new = self.store.suffixes(affected, 1.0)
             for est in estimators:
-                est.accumulate(new, self.scale)
+                est.accumulate(new)
             q.finish()
             stats.segments_added = self.store.suffix_segments(affected)
             t5 = time.perf_counter()
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
         if self.dyn_est is not None and not fused:
             t6 = time.perf_counter()
-            self.dyn_est.accumulate(self.store.batch, self.scale)
+            self.dyn_est.accumulate(self.store.batch)
             q.finish()
             seconds["points"] += time.perf_counter() - t6
         if self.dyn_est is not None:

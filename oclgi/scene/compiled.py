@@ -8,13 +8,14 @@ of a run carries about the same power and the fixed-point scale follows.
 
 from __future__ import annotations
 
+import hashlib
 import time
 
 import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
-from ..cl.constants import BVH_STACK_SIZE, FIXED_BITS
+from ..cl.constants import BVH_STACK_SIZE, FIXED_ONE
 from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
@@ -81,14 +82,18 @@ class CompiledScene:
         em = np.zeros(len(kind), dtype=Emitter)
         em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = kind, tri, p, e1, e2
         keep = prob > 0
-        em["power"][keep] = power[keep] / prob[keep, None]
+        photon_power = np.zeros_like(power)
+        photon_power[keep] = power[keep] / prob[keep, None]  # watts a photon path carries, times n_paths
         self.n_emitters = len(em)
         self.total_power = power.sum(axis=0)  # RGB watts
-        # Largest power any photon carries, times n_paths (fixed-point scale).
-        self.photon_power_max = float(em["power"].max())
-        if not (np.isfinite(em["power"]).all() and self.photon_power_max > 0):
+        # phi_max, the largest power any photon path carries (times n_paths):
+        # the device's unit of power (kernels/oclgi_types.h), so that a
+        # photon's fixed-point power does not depend on the run's count.
+        self.photon_power_max = float(photon_power.max())
+        if not (np.isfinite(photon_power).all() and self.photon_power_max > 0):
             raise OclgiError(f"{scene.name}: the emitters' power ({weight.sum():.3g} W) is out of float32's range "
                              "on the device; scale the emission or intensity")
+        em["power"] = photon_power / self.photon_power_max
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)
@@ -102,8 +107,21 @@ class CompiledScene:
         self.tri_areas = _buffer(ctx, self.areas)
         self.faces = _buffer(ctx, scene.faces.astype(np.int32))
         self.materials_host = mats
+        self.emitters_host, self.emitter_cdf_host = em, cdf.astype(np.float32)
         # scene scale for ray offsets and the DETP tolerance
         self.eps = 1e-5 * scene.diagonal
+
+    def fingerprint(self) -> str:
+        """A hash of everything a photon path depends on, as the device holds
+        it: the tree and triangles (so the builder too), the poses, the
+        materials, the emitters and the ray offset. Equal fingerprints trace
+        equal paths; a checkpoint records it (oclgi/checkpoint.py)."""
+        h = hashlib.sha256()
+        for a in (self._nodes, self._tris, self.instances_host, self.materials_host, self.emitters_host,
+                  self.emitter_cdf_host, self.scene.tri_material.astype(np.int32),
+                  np.array([self.photon_power_max, self.eps], np.float64)):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()
 
     @property
     def scene_args(self) -> tuple:
@@ -173,9 +191,11 @@ class CompiledScene:
         launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, obj, self.tri_normals)
 
     def fixed_scale(self, n_paths: int) -> float:
-        """Fixed-point units per watt for a run of n_paths: 2^FIXED_BITS per
-        photon's largest power (oclgi/cl/constants.py, oclgi_types.h)."""
-        scale = float(2.0**FIXED_BITS / (self.photon_power_max / n_paths))
+        """Fixed-point units per watt of the sums of a run of n_paths: a
+        photon's largest power, phi_max / n_paths watts, is 2^FIXED_BITS
+        units (oclgi/cl/constants.py, oclgi_types.h). Only resolving divides
+        by it: the sums themselves do not depend on n_paths."""
+        scale = FIXED_ONE * n_paths / self.photon_power_max
         if not scale < F32_MAX:  # the kernels take it as a float32
             raise OclgiError(f"{self.scene.name}: the emitters' power ({self.photon_power_max:.3g} W per photon "
                              f"path) is too small for fixed-point sums of {n_paths:,} paths in float32; "

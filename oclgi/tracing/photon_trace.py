@@ -56,22 +56,24 @@ class PhotonTracer:
         self.segments = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * self.max_depth * Segment.itemsize)
         self.path_len = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * 4)
 
-    def _trace_args(self, n_total: int) -> tuple:
+    def _trace_args(self) -> tuple:
         """TRACE_ARGS of kernels/photon_trace.cl."""
         c = self.compiled
         return (c.tri_normals, c.tri_material, c.materials, c.emitters, c.emitter_cdf, c.n_emitters,
-                self.seed & 0xFFFFFFFF, self.seed >> 32, 1.0 / n_total, self.max_depth, c.eps)
+                self.seed & 0xFFFFFFFF, self.seed >> 32, self.max_depth, c.eps)
 
-    def trace(self, path_offset: int, n_paths: int, n_total: int) -> PathBatch:
+    def trace(self, path_offset: int, n_paths: int) -> PathBatch:
+        """Paths path_offset .. path_offset + n_paths - 1 (global ids); a
+        path's segments do not depend on the batch or the run's total."""
         assert 0 < n_paths <= self.batch_paths
-        launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(n_total),
+        launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(),
                path_offset, n_paths, self.segments, self.path_len,
                local_size=self.local_size)
         return PathBatch(self.segments, self.path_len, path_offset, n_paths, self.max_depth)
 
-    def retrace(self, batch: PathBatch, n_total: int, paths: cl.Buffer, starts: cl.Buffer, n_list: int):
+    def retrace(self, batch: PathBatch, paths: cl.Buffer, starts: cl.Buffer, n_list: int):
         """Re-trace the suffixes of listed paths of ``batch`` in place: path
         ``paths[k]`` (an index into the batch) from bounce ``starts[k]`` on."""
-        launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(n_total),
+        launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(),
                batch.path_offset, paths, starts, n_list, batch.segments, batch.path_len,
                local_size=self.local_size)
