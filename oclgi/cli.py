@@ -1,7 +1,8 @@
 """The ``oclgi`` command.
 
     oclgi render SCENE [--method detp|impact] [--photons N] [--radius D] [-o FILE] [--no-png|--no-exr] [--force]
-    oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv
+                       [--checkpoint FILE.npz | --resume FILE.npz [--more N]] [--progressive N]
+    oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv [--checkpoint FILE.npz | --resume ...]
     oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
@@ -30,7 +31,8 @@ interrupt.keep_ignored()
 try:
     import numpy as np
 
-    from . import budget, params
+    from . import budget, params, resumable
+    from .checkpoint import StopRequested
     from .params import METHODS
 except KeyboardInterrupt:
     interrupt.exit_interrupted()
@@ -161,11 +163,13 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--height", type=_param(params.image_size, "--height"),
                    help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
+    resumable.add_arguments(r, progressive=True)
 
     i = sub.add_parser("irradiance", help="irradiance at given points (sensors)")
     _estimate_args(i)
     i.add_argument("--points", type=Path, required=True, help=".npy (n, 6) or .csv: x,y,z,nx,ny,nz")
     i.add_argument("-o", "--output", type=Path, required=True, help=".npy (n, 3) or .csv output")
+    resumable.add_arguments(i)
 
     a = sub.add_parser("animate", help="move an object along a path; incremental update and one image per frame")
     _estimate_args(a)
@@ -272,10 +276,22 @@ def cmd_render(args):
     paths = _render_outputs(args)
     for p in paths:
         check_output(p)
+    resumable.check_arguments(args, {args.scene: "the scene file", **{p: "an image output" for p in paths}})
     engine = _engine(args)
-    result = engine.render(width=args.width, height=args.height, exposure=args.exposure, **_est_kwargs(args))
-    # All or none: a failure leaves neither file.
-    write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths})
+
+    def write(run, est):  # all or none: a failure leaves neither file
+        result = engine.render_result(run, est, args.exposure)
+        write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths})
+        return result
+
+    def snapshot(run, est):
+        write(run, est)
+        if not args.quiet:
+            print(f"oclgi: {run.traced:,} photons: wrote {', '.join(map(str, paths))}", file=sys.stderr)
+
+    run, est = resumable.execute(args, engine, lambda **kw: engine.render_run(width=args.width, height=args.height,
+                                                                              **kw), snapshot)
+    result = write(run, est)
     if not args.quiet:
         print(result.stats.summary(), file=sys.stderr)
     for p in paths:
@@ -290,9 +306,11 @@ def cmd_irradiance(args):
         raise OclgiError(f"{args.output}: the output must end in .npy or .csv")
     check_output(args.output)
     check_not_input([args.output], {args.scene: "the scene file", args.points: "the points file (--points)"})
+    resumable.check_arguments(args, {args.scene: "the scene file", args.points: "the points file (--points)",
+                                     args.output: "the output"})
     points = from_file(args.points)
     engine = _engine(args)
-    est = engine.irradiance(points, **_est_kwargs(args))
+    _run, est = resumable.execute(args, engine, lambda **kw: engine.run(points, **kw))
     path = write_array(args.output, est.irradiance, points)
     if not args.quiet:
         print(est.stats.summary(), file=sys.stderr)
@@ -401,6 +419,11 @@ def _run(argv) -> int:
     except OclgiError as exc:
         print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
+    except StopRequested as stop:
+        interrupt.ignore_further()
+        print(f"oclgi: interrupted ({stop}); the run is saved in {stop.path}: continue it with "
+              f"--resume {stop.path}", file=sys.stderr)
+        return interrupt.EXIT_STATUS
     except streams.StdoutError as exc:  # the files were written before their "wrote" lines
         return streams.stdout_failed(exc)
     except OSError as exc:

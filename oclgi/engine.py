@@ -16,8 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pyopencl as cl
@@ -28,29 +27,14 @@ from .cl.programs import launch, programs
 from .errors import OclgiError
 from .estimators import ESTIMATORS, check_options
 from .tracing.photon_trace import PhotonTracer
-from .tracing.run import PathRange, Run
+from .tracing.run import Estimate, PathRange, Run, Stats  # noqa: F401 (Estimate, Stats: the engine's results)
 from .accel.bvh_build import QUALITIES
 from .scene.compiled import BVH_QUALITY, CompiledScene
 from .params import RunParams, flag, radius as read_radius
 from .scene.description import validate_camera
-from .scene.scene import Camera, OclgiWarning, Scene
+from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
-
-
-@dataclass
-class Stats:
-    photons: int = 0
-    segments: int = 0
-    points: int = 0
-    method: str = ""
-    radius: float = 0.0
-    seconds: dict = field(default_factory=dict)
-
-    def summary(self) -> str:
-        t = " ".join(f"{k} {v:.2f}s" for k, v in self.seconds.items())
-        return (f"{self.method}: {self.photons:,} photons, {self.segments:,} segments, "
-                f"{self.points:,} points, radius {self.radius:.4g} | {t}")
 
 
 def as_query_points(points) -> queries.QueryPoints:
@@ -78,17 +62,6 @@ def _check_float32(scene: Scene) -> None:
         for x in np.ravel(np.asarray(light.intensity, dtype=object)):
             params.float32_real(x, f"point light {i}: intensity", 0.0)
             params.float32_real(4 * math.pi * float(x), f"point light {i}: power (4 pi intensity)", 0.0)
-
-
-@dataclass
-class Estimate:
-    irradiance: np.ndarray  # (n, 3) float32, W/m^2 per channel
-    accumulators: np.ndarray  # int64 fixed-point sums (per point for DETP, per triangle for Impact Count)
-    scale: float  # fixed-point units per watt
-    stats: Stats
-    points: queries.QueryPoints
-    work: dict | None = None  # exact work counts (t, u, nodes) when count_work=True
-    estimator: object = None  # the estimator itself (its index, impacts, device buffers), for studies
 
 
 @dataclass
@@ -323,16 +296,27 @@ class Engine:
         """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels.
         ``width``, ``height``: None for the camera's."""
         exposure = params.exposure(exposure, "exposure")
+        run = self.render_run(camera, width, height, **estimate_args)
+        return self.render_result(run, run.complete(self.progress), exposure)
+
+    def render_run(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
+                   paths: PathRange | None = None, **estimate_args) -> Run:
+        """The run ``render`` makes over the camera's visible points, not yet
+        traced (``Engine.run``); ``render_result`` turns its estimate into
+        the image."""
         cam = self.view_camera(camera, width, height)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
         budget.check(budget.render_need(cam.width, cam.height, r.method, r.photons, r.max_depth, self.batch_bytes,
                                         estimate_args.get("k")), self.queue.device)
         t0 = time.perf_counter()
         pts = self.camera_points(cam)
-        t_cam = time.perf_counter() - t0
-        est = self.irradiance(pts, **estimate_args)
-        radiance, pixels = self.shade(pts, est.estimator.irr, exposure)  # resolved in irradiance()
-        est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
+        run = self.run(pts, paths=paths, **estimate_args)
+        run.seconds["camera"] = time.perf_counter() - t0
+        return run
+
+    def render_result(self, run: Run, est: Estimate, exposure: float = 1.0) -> Render:
+        """The image of a render run's estimate (resolved: ``Run.finish``)."""
+        radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure)
         return Render(radiance, pixels, est)
 
     def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0):

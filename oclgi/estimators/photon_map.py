@@ -187,6 +187,7 @@ class PhotonMap(Estimator):
             cl.enqueue_copy(self.queue, h, b)
         self.chunks.append(tuple(host))
         self.n_impacts += m
+        self.knn = None  # indexes the impacts gathered before these
 
     def state(self) -> dict:
         """A Photon Map's state is its impacts (the sums come at the search)."""

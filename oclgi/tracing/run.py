@@ -35,6 +35,32 @@ from .photon_trace import PhotonTracer
 SEGMENT_BYTES = 48  # oclgi/cl/layout.py Segment
 
 
+@dataclass
+class Stats:
+    photons: int = 0
+    segments: int = 0
+    points: int = 0
+    method: str = ""
+    radius: float = 0.0
+    seconds: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        t = " ".join(f"{k} {v:.2f}s" for k, v in self.seconds.items())
+        return (f"{self.method}: {self.photons:,} photons, {self.segments:,} segments, "
+                f"{self.points:,} points, radius {self.radius:.4g} | {t}")
+
+
+@dataclass
+class Estimate:
+    irradiance: np.ndarray  # (n, 3) float32, W/m^2 per channel
+    accumulators: np.ndarray  # int64 fixed-point sums (per point for DETP, per triangle for Impact Count)
+    scale: float  # fixed-point units per watt
+    stats: Stats
+    points: object  # the QueryPoints
+    work: dict | None = None  # exact work counts (t, u, nodes) when count_work=True
+    estimator: object = None  # the estimator itself (its index, impacts, device buffers), for studies
+
+
 @dataclass(frozen=True)
 class PathRange:
     """Global path ids [first, first + count)."""
@@ -98,10 +124,21 @@ class Run:
                              f"{params.photons:,} photons")
         self.next_path = self.paths.first
         self.segments = 0
+        self.marks = None  # batches end on multiples of this many paths (progressive images)
         self.seconds = {"trace": 0.0, "estimate": 0.0}
-        self.batch = batch_paths(engine.batch_bytes, params.max_depth, max(1, self.paths.count))
-        self.tracer = PhotonTracer(engine.queue, engine.compiled, params.seed, params.max_depth, self.batch,
-                                   engine.local_size)
+        self.set_batch(batch_paths(engine.batch_bytes, params.max_depth, max(1, self.paths.count)))
+
+    def set_batch(self, paths: int) -> None:
+        """Trace ``paths`` paths per batch from now on (results do not
+        depend on it; saves, progress and progressive images come between
+        batches)."""
+        self.batch = params_mod.photons(paths, "paths per batch")
+        limit = self.engine.queue.device.max_mem_alloc_size
+        if self.batch * self.params.max_depth * SEGMENT_BYTES > limit:
+            raise OclgiError(f"{self.batch:,} paths of up to {self.params.max_depth} segments per batch need more "
+                             f"than one device buffer holds ({limit / 2**30:.2f} GiB); give fewer")
+        self.tracer = PhotonTracer(self.engine.queue, self.engine.compiled, self.params.seed, self.params.max_depth,
+                                   self.batch, self.engine.local_size)
         self._lens = np.empty(self.batch, np.int32)
 
     # -- stepping -----------------------------------------------------------
@@ -118,6 +155,8 @@ class Run:
         """Trace and accumulate the next batch; returns its number of paths
         (0 once the range is done)."""
         n = min(self.batch, self.paths.end - self.next_path)
+        if self.marks:
+            n = min(n, self.marks - self.traced % self.marks)
         if n <= 0:
             return 0
         queue = self.engine.queue
@@ -144,12 +183,20 @@ class Run:
         """A run that goes on from ``state`` (taken from a run of the same
         scene and parameters, over the same points)."""
         run = cls(engine, estimator, params, state.paths)
-        if not run.paths.first <= state.next_path <= run.paths.end:
-            raise OclgiError(f"run state: next path {state.next_path} is outside paths "
-                             f"{run.paths.first}..{run.paths.end}")
-        estimator.restore(state.sums)
-        run.next_path, run.segments = int(state.next_path), int(state.segments)
+        run.restore(state)
         return run
+
+    def restore(self, state: RunState) -> None:
+        """Go on from ``state``, a state of this run's range (``state()``
+        of a run of the same scene, parameters and points)."""
+        if state.paths != self.paths:
+            raise OclgiError(f"run state: paths {state.paths.first}..{state.paths.end}, this run's are "
+                             f"{self.paths.first}..{self.paths.end}")
+        if not self.paths.first <= state.next_path <= self.paths.end or state.segments < 0:
+            raise OclgiError(f"run state: next path {state.next_path} is outside paths "
+                             f"{self.paths.first}..{self.paths.end}")
+        self.estimator.restore(state.sums)
+        self.next_path, self.segments = int(state.next_path), int(state.segments)
 
     def extend(self, photons: int) -> None:
         """Add ``photons`` paths to the run (and to its range, which must end
@@ -190,7 +237,8 @@ class Run:
         finally:
             bar.close()
         est = self.finish()
-        est.stats.seconds["total"] = time.perf_counter() - t0
+        # a render's camera points were made with the run, before its loop
+        est.stats.seconds["total"] = time.perf_counter() - t0 + self.seconds.get("camera", 0.0)
         return est
 
     # -- result ---------------------------------------------------------------
@@ -198,8 +246,6 @@ class Run:
         """The estimate from the sums of ``photons`` paths (default: the
         run's count; a partial result, e.g. a progressive image, passes the
         paths traced so far)."""
-        from ..engine import Estimate, Stats
-
         n = self.params.photons if photons is None else int(photons)
         if n <= 0:
             raise OclgiError("no photons traced yet")

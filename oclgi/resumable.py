@@ -1,0 +1,135 @@
+"""A command's run that survives being stopped: checkpoints, resume, more
+photons and progressive images (``render`` and ``irradiance``).
+
+    oclgi render scene.toml --photons 1e8 --checkpoint run.npz     # saved every 10 s, at the end, on Ctrl-C
+    oclgi render scene.toml --resume run.npz                       # goes on where it stopped
+    oclgi render scene.toml --resume run.npz --more 5e7            # 1.5e8 photons, as one run of 1.5e8
+
+Resumed and extended runs equal one uninterrupted run bit for bit (the sums
+are integers of path ranges, oclgi/tracing/run.py). A resumed run takes the
+checkpoint's parameters where the command line gives none; one the command
+line gives must agree with it, as must the scene and the query points
+(oclgi/checkpoint.py), or the command stops with exit status 2 before any
+work.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from . import checkpoint, params
+from .errors import OclgiError
+
+# args attribute -> RunParams key, for the parameters the command line may give
+RUN_ARGS = {"method": "method", "photons": "photons", "radius": "radius", "seed": "seed", "max_depth": "max_depth"}
+
+
+def _seconds(text):
+    import argparse
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def add_arguments(p, progressive: bool = False) -> None:
+    g = p.add_argument_group("long runs")
+    g.add_argument("--checkpoint", type=Path, metavar="FILE.npz",
+                   help="save the run's state to FILE every --checkpoint-every seconds, at the end and on "
+                        "Ctrl-C or SIGTERM (then exit 130); continue it with --resume FILE")
+    g.add_argument("--resume", type=Path, metavar="FILE.npz",
+                   help="continue the run saved in FILE (and keep saving to it, unless --checkpoint names "
+                        "another file); parameters not given are the saved run's")
+    g.add_argument("--more", type=lambda t: params.photons(params.number_text(t), "--more"), metavar="N",
+                   help="with --resume: add N photons to the saved run (equal to one run of the sum)")
+    g.add_argument("--checkpoint-every", type=_seconds, default=checkpoint.DEFAULT_EVERY, metavar="SECONDS",
+                   help=f"seconds of work between saves (default {checkpoint.DEFAULT_EVERY:g})")
+    g.add_argument("--batch-paths", type=lambda t: params.photons(params.number_text(t), "--batch-paths"),
+                   metavar="N", help="photon paths per batch (default: as 256 MiB of segments hold; results "
+                                     "do not depend on it, saves and progress come between batches)")
+    if progressive:
+        g.add_argument("--progressive", type=lambda t: params.photons(params.number_text(t), "--progressive"),
+                       metavar="N", help="write the image every N photons as the run goes (and at its end)")
+
+
+def check_arguments(args, inputs: dict) -> None:
+    """Argument combinations, before any work."""
+    from .io import check_not_input, check_output
+
+    if args.more is not None and args.resume is None:
+        raise OclgiError("--more adds photons to a saved run: give --resume FILE too")
+    target = save_path(args)
+    if target is None:
+        return
+    if target.suffix.lower() != checkpoint.SUFFIX:
+        raise OclgiError(f"{target}: a checkpoint file must end in {checkpoint.SUFFIX}")
+    if args.resume is None and target.exists():
+        raise OclgiError(f"{target} exists: continue its run with --resume {target}, or remove it")
+    if args.resume is not None and not args.resume.is_file():
+        raise OclgiError(f"{args.resume}: no such checkpoint file")
+    check_output(target)
+    check_not_input([target], inputs)
+
+
+def save_path(args) -> Path | None:
+    return args.checkpoint or args.resume
+
+
+def run_kwargs(args, saved: dict | None) -> dict:
+    """The run's parameters and options: the command line's, and for a
+    resumed run the saved ones where the command line gives none."""
+    given = {key: getattr(args, attr) for attr, key in RUN_ARGS.items() if getattr(args, attr) is not None}
+    options = dict(args.option)
+    if saved is not None:
+        for key, value in (saved.get("params") or {}).items():
+            if key in params.RUN_KEYS and key not in given and key not in options:
+                given[key] = value
+        if not args.option:
+            options = dict(saved.get("options") or {})
+    return {**given, **options}
+
+
+def execute(args, engine, make_run, snapshot=None):
+    """Make the run (``make_run(**kwargs)``), resume it from ``--resume``
+    and extend it by ``--more``, complete it with saves to the checkpoint
+    file, and return (run, estimate). ``snapshot(run, estimate)`` is called
+    every ``--progressive`` photons with the estimate so far."""
+    saved, state = checkpoint.load(args.resume) if args.resume is not None else (None, None)
+    kwargs = run_kwargs(args, saved)
+    options = {k: v for k, v in kwargs.items() if k not in params.RUN_KEYS}
+    run = make_run(**kwargs)
+    if args.batch_paths is not None:
+        run.set_batch(args.batch_paths)
+    if saved is not None:
+        checkpoint.check(args.resume, saved, checkpoint.record(run, options))
+        run.restore(state)
+        if args.more is not None:
+            run.extend(args.more)
+    target = save_path(args)
+    saver = checkpoint.Saver(target, options, args.checkpoint_every) if target is not None else None
+    every = getattr(args, "progressive", None)
+    run.marks = every  # batches end on its multiples
+
+    def on_batch(r, stop):
+        if saver is not None:
+            saver.on_batch(r)
+        if every is not None and r.traced % every == 0 and not r.done:
+            snapshot(r, r.finish(r.traced))
+        if stop is not None and stop.signum is not None:
+            if saver is not None:
+                saver.save(r)
+            raise checkpoint.StopRequested(stop.signum, saver.path if saver is not None else None)
+
+    progress = None if not args.quiet else False
+    if saver is None:
+        est = run.complete(progress, (lambda r: on_batch(r, None)) if every is not None else None)
+    else:
+        with checkpoint.deferred_stop() as stop:
+            est = run.complete(progress, lambda r: on_batch(r, stop))
+        saver.save(run)  # the finished state: --more extends it
+    return run, est
