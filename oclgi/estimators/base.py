@@ -83,6 +83,11 @@ class Estimator:
     def accumulators(self) -> np.ndarray:
         raise NotImplementedError
 
+    def check_growth(self, paths_done: int, paths_total: int) -> None:
+        """After a run's first batch: refuse a run whose state would outgrow
+        the device, extrapolated from ``paths_done`` of ``paths_total``.
+        Sums kept per point or per triangle do not grow (the default)."""
+
     # -- a run's state (oclgi/tracing/run.py) --------------------------------
     def state(self) -> dict:
         """What the sums of the paths accumulated so far are, on the host:

@@ -189,6 +189,19 @@ class PhotonMap(Estimator):
         self.n_impacts += m
         self.knn = None  # indexes the impacts gathered before these
 
+    def check_growth(self, paths_done: int, paths_total: int) -> None:
+        """The impacts grow with the photons: a run projected (from its first
+        batch) to hold more than ``limit`` stops here, at its start."""
+        if paths_done <= 0 or paths_done >= paths_total:
+            return
+        projected = self.n_impacts / paths_done * paths_total
+        if projected > self.limit:
+            raise OclgiError(
+                f"photon_map: {paths_total:,} photons would make about {projected:,.0f} impacts (from the first "
+                f"{paths_done:,}), more than the {self.limit:,} this device holds for the k-nearest search "
+                f"({BYTES_PER_IMPACT} bytes each); trace fewer photons or use a DETP method, whose memory does not "
+                "grow with the photon count")
+
     def state(self) -> dict:
         """A Photon Map's state is its impacts (the sums come at the search)."""
         pos, dirs, power = self.impacts()

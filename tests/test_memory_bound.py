@@ -1,0 +1,64 @@
+"""Memory is bounded by the batch, not the photon count, for the estimators
+that stream (DETP, Impact Count); Photon Maps keep every impact, and a run
+that would outgrow the device stops after its first batch with the reason.
+
+Peak memory is measured as each run's own process sees it (ru_maxrss), and
+the test checks the measurement can see growth: the Photon Map's peak does
+grow with the photons, by about its impacts' bytes.
+"""
+
+import json
+import subprocess
+import sys
+
+import pytest
+from conftest import ROOT
+
+import oclgi
+from oclgi.errors import OclgiError
+
+SCRIPT = r"""
+import json, resource, sys
+import oclgi
+method, photons = sys.argv[1], int(sys.argv[2])
+engine = oclgi.Engine(oclgi.load_file(sys.argv[3]), batch_bytes=8 << 20, progress=False)
+pts = engine.camera_points(width=16, height=16)
+opts = {"k": 20} if method == "photon_map" else {}
+est = engine.irradiance(pts, method=method, photons=photons, **opts)
+print(json.dumps({"peak_kib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, "segments": est.stats.segments}))
+"""
+
+
+def _peak(method, photons):
+    res = subprocess.run([sys.executable, "-c", SCRIPT, method, str(photons), str(ROOT / "scenes" / "cornell_box.toml")],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    return out["peak_kib"] * 1024, out["segments"]
+
+
+def test_streaming_estimators_peak_memory_does_not_grow_with_photons():
+    small, large = 150_000, 1_500_000
+    for method in ("detp_disc_index", "impact"):
+        (p0, _), (p1, segs) = _peak(method, small), _peak(method, large)
+        # ten times the photons (millions of segments, ~100 MB if kept): the same peak within noise
+        assert p1 - p0 < 24 << 20, f"{method}: peak {p0 / 2**20:.0f} -> {p1 / 2**20:.0f} MiB"
+    # the measurement sees growth where there is some: the Photon Map keeps every impact (36 bytes)
+    (p0, _), (p1, segs) = _peak("photon_map", small), _peak("photon_map", large)
+    assert p1 - p0 > 0.5 * segs * 36, f"photon_map: peak {p0 / 2**20:.0f} -> {p1 / 2**20:.0f} MiB"
+
+
+def test_photon_map_that_would_outgrow_the_device_stops_after_its_first_batch(scenes_dir):
+    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
+    pts = engine.camera_points(width=8, height=8)
+    run = engine.run(pts, method="photon_map", photons=200_000, k=10)
+    run.set_batch(10_000)
+    run.estimator.limit = 100_000  # as a device with room for 10^5 impacts; the run makes about 4 x 10^5
+    with pytest.raises(OclgiError, match=r"200,000 photons would make about [\d,]+ impacts .* more than the "
+                                         r"100,000 this device holds"):
+        run.complete(False)
+    assert run.traced == 10_000  # stopped at its start
+    # under the limit the same run completes
+    run = engine.run(pts, method="photon_map", photons=20_000, k=10)
+    run.estimator.limit = 100_000
+    assert run.complete(False).stats.photons == 20_000
