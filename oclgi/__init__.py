@@ -3,7 +3,7 @@
     import oclgi
     scene = oclgi.load_file("scenes/cornell_box.toml")
     engine = oclgi.Engine(scene)                      # PoCL CPU device by default
-    result = engine.render(method="detp", photons=100_000)
+    result = engine.render(photons=100_000)         # DETP with disc indexing by default
     oclgi.save_render(result, "out/cornell_box.exr")  # EXR + PNG
     est = engine.irradiance(points_and_normals)       # (n, 6) array -> (n, 3) irradiance
 """

@@ -129,7 +129,7 @@ def _method_list(text):
 def _estimate_args(p):
     p.add_argument("scene", type=Path, help="scene file (TOML)")
     p.add_argument("--method", type=_param(params.method, "--method"), choices=METHODS,
-                   help="estimator (default: the scene's, else detp)")
+                   help="estimator (default: the scene's, else detp_disc_index)")
     p.add_argument("--photons", type=_param(params.photons, "--photons"),
                    help="number of photon paths (default: the scene's)")
     p.add_argument("--radius", type=_param(params.radius, "--radius"), help="DETP disc radius (default: the scene's)")

@@ -83,10 +83,11 @@ class Estimator:
     def accumulators(self) -> np.ndarray:
         raise NotImplementedError
 
-    def check_growth(self, paths_done: int, paths_total: int) -> None:
-        """After a run's first batch: refuse a run whose state would outgrow
-        the device, extrapolated from ``paths_done`` of ``paths_total``.
-        Sums kept per point or per triangle do not grow (the default)."""
+    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
+        """After a run's first batch (``paths_done`` of ``paths_total``
+        paths, ``segments`` segments): refuse a run whose state would
+        outgrow the device, or warn of one that will be mostly noise.
+        Nothing by default: sums kept per point or triangle do not grow."""
 
     # -- a run's state (oclgi/tracing/run.py) --------------------------------
     def state(self) -> dict:
@@ -141,6 +142,28 @@ class DetpEstimator(Estimator):
         cl.enqueue_copy(self.queue, self.positions, self.points.positions)
         cl.enqueue_copy(self.queue, self.normals, self.points.normals)
         self.points_changed()
+
+    # Fewer segments than this per disc, on average, and most discs catch
+    # none: the estimate is noise (relative standard error about 1/sqrt(count)).
+    FEW_SEGMENTS = 2
+
+    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
+        """Warn when the discs are too small for the photons: segments end
+        on surfaces about uniformly over the scene's area A, so a disc of
+        area pi d^2 catches about (segments of the run) pi d^2 / A."""
+        area = float(np.sum(self.compiled.areas, dtype=np.float64))
+        if paths_done <= 0 or not area > 0:
+            return
+        expected = segments / paths_done * paths_total * math.pi * self.radius**2 / area
+        if expected < self.FEW_SEGMENTS:
+            import warnings
+
+            from ..scene.scene import OclgiWarning
+
+            warnings.warn(f"radius {self.radius:.3g}: each disc catches about {expected:.1f} segments of this run "
+                          f"on average, so the estimates will be mostly noise; use a larger radius or more "
+                          f"photons (about {self.FEW_SEGMENTS / max(expected, 1e-9):.3g} times)", OclgiWarning,
+                          stacklevel=4)
 
     def points_changed(self) -> None:
         """Rebuild whatever the variant built over the points (default: nothing)."""

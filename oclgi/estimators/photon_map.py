@@ -189,7 +189,7 @@ class PhotonMap(Estimator):
         self.n_impacts += m
         self.knn = None  # indexes the impacts gathered before these
 
-    def check_growth(self, paths_done: int, paths_total: int) -> None:
+    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
         """The impacts grow with the photons: a run projected (from its first
         batch) to hold more than ``limit`` stops here, at its start."""
         if paths_done <= 0 or paths_done >= paths_total:

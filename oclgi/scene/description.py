@@ -28,7 +28,7 @@
     max_depth = 16
 
     [estimator]
-    method = "detp"                 # detp | impact
+    method = "detp_disc_index"      # the default; detp (the plain oracle), detp_ray_map, ..., impact, photon_map
     radius = 0.04                   # disc radius; default 1% of the scene diagonal
     extension = 0.0                 # DETP extension e past the hit point
     count_emitted = true            # segments leaving the lights count (direct light)

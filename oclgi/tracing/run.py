@@ -229,7 +229,7 @@ class Run:
                 bar.update(n)
                 if first:  # a long run says so, with its time from the first batch
                     first = False
-                    self.estimator.check_growth(self.traced, self.paths.count)
+                    self.estimator.first_batch(self.traced, self.paths.count, self.segments)
                     notice = budget.time_notice(n, time.perf_counter() - t0, self.paths.end - self.next_path + n)
                     if notice:
                         warnings.warn(notice, OclgiWarning, stacklevel=3)
