@@ -146,7 +146,10 @@ def _estimate_args(p):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     ap = _Parser(prog="oclgi", description="Global illumination by density estimation on OpenCL.")
+    ap.add_argument("--version", action="version", version=f"oclgi {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("render", help="render the scene's camera to EXR (linear) and PNG (sRGB)")

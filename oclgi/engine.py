@@ -74,6 +74,12 @@ class Render:
     def stats(self) -> Stats:
         return self.estimate.stats
 
+    def _repr_png_(self) -> bytes:
+        """The tone-mapped image, shown inline by Jupyter and IPython."""
+        from .io import png_bytes
+
+        return png_bytes(self.pixels)
+
 
 class Engine:
     """A scene compiled for one OpenCL device.

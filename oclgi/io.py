@@ -314,6 +314,26 @@ def write_images(images: dict, sync: bool = True) -> list[Path]:
     return paths
 
 
+def png_bytes(pixels: np.ndarray) -> bytes:
+    """An (H, W, 4) uint8 RGBA image as PNG bytes, in memory (for notebooks:
+    no file, no image library): one IDAT of unfiltered rows."""
+    import struct
+    import zlib
+
+    a = np.ascontiguousarray(pixels, np.uint8)
+    if a.ndim != 3 or a.shape[2] != 4:
+        raise OclgiError(f"png_bytes: expected (H, W, 4) pixels, got shape {a.shape}")
+    h, w = a.shape[:2]
+    rows = np.concatenate([np.zeros((h, 1), np.uint8), a.reshape(h, w * 4)], axis=1)  # filter byte 0 per row
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0)  # 8 bits, RGBA, deflate, no filter, no interlace
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
+            + chunk(b"IEND", b""))
+
+
 def read_npy(path, what: str) -> np.ndarray:
     """A ``.npy`` array of real numbers (points, keyframes, a reference), the
     one reader of every .npy oclgi takes: the header's shape is checked

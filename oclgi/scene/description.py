@@ -40,6 +40,7 @@ In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -187,9 +188,12 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     if not isinstance(overrides, dict):
         raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
     if "path" in desc:
-        if not isinstance(desc["path"], str) or not desc["path"].strip():
+        given = desc["path"]
+        if isinstance(given, os.PathLike):  # pathlib.Path from Python
+            given = os.fspath(given)
+        if not isinstance(given, str) or not given.strip():
             raise OclgiError(f"{where}.path: expected a file name, got {desc['path']!r}")
-        path = Path(desc["path"])
+        path = Path(given)
         if not path.is_absolute() and base_dir is not None:
             path = base_dir / path
         loaded = load_mesh(path)
