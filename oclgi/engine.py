@@ -31,7 +31,8 @@ from .tracing.run import Estimate, PathRange, Run, Stats  # noqa: F401 (Estimate
 from .accel.bvh_build import QUALITIES
 from .scene.compiled import BVH_QUALITY, CompiledScene
 from .params import RunParams, flag, radius as read_radius
-from .scene.description import validate_camera
+from .scene.description import load_dict, validate_camera
+from .scene.mesh import is_trimesh
 from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
@@ -95,8 +96,11 @@ class Engine:
 
     def __init__(self, scene: Scene, device: str | None = None, local_size: int | None = None,
                  batch_bytes: int = DEFAULT_BATCH_BYTES, progress: bool | None = None, bvh: str = BVH_QUALITY):
+        if is_trimesh(scene):  # a trimesh Trimesh or Scene: its meshes, materials and emission
+            scene = load_dict({"name": "trimesh", "mesh": [{"trimesh": scene}]})
         if not isinstance(scene, Scene):
-            raise OclgiError(f"Engine takes a Scene (oclgi.load_file, oclgi.Scene), got {type(scene).__name__}")
+            raise OclgiError(f"Engine takes a Scene (oclgi.load_file, oclgi.load_dict) or a trimesh Trimesh or "
+                             f"Scene, got {type(scene).__name__}")
         if device is not None and not isinstance(device, str):
             raise OclgiError(f"device must be a spec such as '0:0' or a name substring, got {device!r}")
         if progress is not None:

@@ -5,6 +5,7 @@ import pathlib
 import tomllib
 
 import numpy as np
+import pytest
 from cli_run import in_process
 from small_scene import MOVING_BLOCK
 
@@ -32,3 +33,50 @@ def test_a_render_shows_inline_as_the_png_it_writes(tmp_path):
 def test_version(tmp_path, monkeypatch, capsys):
     res = in_process(monkeypatch, capsys, tmp_path, "--version")
     assert res.returncode == 0 and res.stdout.strip() == f"oclgi {oclgi.__version__}"
+
+
+# A floor and a small emissive quad above it, facing down.
+V = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1],
+              [-0.2, 1, -0.2], [0.2, 1, -0.2], [0.2, 1, 0.2], [-0.2, 1, 0.2]], np.float64)
+F = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7]])
+
+
+def _trimesh_scene():
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    floor = trimesh.Trimesh(V[:4], F[:2], process=False)
+    light = trimesh.Trimesh(V[4:], F[2:] - 4, process=False)
+    floor.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[204, 51, 51, 255]))
+    light.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 1, 1]))
+    return trimesh.Scene({"floor": floor, "light": light})
+
+
+def _sums(engine):
+    pts = oclgi.query_points(np.array([[x, 0.0, z] for x in (-0.5, 0.0, 0.5) for z in (-0.5, 0.5)]),
+                             np.tile([0.0, 1.0, 0.0], (6, 1)))
+    return engine.irradiance(pts, photons=20_000, radius=0.1).accumulators
+
+
+def test_trimesh_objects_and_face_arrays_give_the_file_scenes_bits(tmp_path):
+    scene = _trimesh_scene()
+    scene.export(tmp_path / "s.glb")
+    (tmp_path / "s.toml").write_text('[[mesh]]\npath = "s.glb"\n')
+    from_file = _sums(oclgi.Engine(oclgi.load_file(tmp_path / "s.toml")))
+    assert from_file[:, 0].sum() > 0
+    assert np.array_equal(_sums(oclgi.Engine(scene)), from_file)  # a trimesh Scene straight in
+    as_dict = oclgi.load_dict({"mesh": [{"trimesh": scene}]})
+    assert np.array_equal(_sums(oclgi.Engine(as_dict)), from_file)
+    arrays = oclgi.load_dict({"mesh": [{"vertices": V, "faces": F,
+                                        "face_albedo": [[0.8, 0.2, 0.2]] * 2 + [[0.0, 0.0, 0.0]] * 2,
+                                        "face_emission": [[0.0, 0.0, 0.0]] * 2 + [[1.0, 1.0, 1.0]] * 2}]})
+    assert [m.name for m in arrays.materials] == ["mesh[0].default", "mesh[0]:#0", "mesh[0]:#1"]
+    assert np.array_equal(_sums(oclgi.Engine(arrays)), from_file)
+
+
+def test_face_arrays_are_checked():
+    with pytest.raises(oclgi.OclgiError, match=r"face_albedo: expected an \(4, 3\) array"):
+        oclgi.load_dict({"mesh": [{"vertices": V, "faces": F, "face_albedo": [[0.5, 0.5, 0.5]]}]})
+    with pytest.raises(oclgi.OclgiError, match=r"expected a trimesh Trimesh or Scene, got str"):
+        oclgi.load_dict({"mesh": [{"trimesh": "box"}]})

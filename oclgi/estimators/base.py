@@ -145,7 +145,7 @@ class DetpEstimator(Estimator):
 
     # Fewer segments than this per disc, on average, and most discs catch
     # none: the estimate is noise (relative standard error about 1/sqrt(count)).
-    FEW_SEGMENTS = 2
+    FEW_SEGMENTS = 0.25
 
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
         """Warn when the discs are too small for the photons: segments end

@@ -49,12 +49,14 @@ import numpy as np
 
 from ..errors import OclgiError
 from .. import params
-from .mesh import is_file, load_mesh
+from .mesh import from_trimesh, is_file, load_mesh
+from .obj import MtlMaterial
 from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
-_MESH = {"path", "vertices", "faces", "albedo", "emission", "materials", "transform", "movable", "name"}
+_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "materials",
+         "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 # The run parameters a scene file sets: (table, key) -> RunParams field.
@@ -200,11 +202,19 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         vertices, faces, fmat, names, file_mats = (
             loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
         label = path.name
+    elif "trimesh" in desc:
+        loaded = from_trimesh(desc["trimesh"], where + ".trimesh")
+        vertices, faces, fmat, names, file_mats = (
+            loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
+        label = desc.get("name", where)
     elif "vertices" in desc and "faces" in desc:
         vertices, faces = _inline_arrays(desc["vertices"], desc["faces"], where)
-        fmat, names, file_mats, label = np.zeros(len(faces), np.int64), [""], {}, where
+        fmat, names, file_mats = _face_materials(desc, len(faces), where)
+        label = where
     else:
-        raise OclgiError(f"{where}: give either 'path' or 'vertices' and 'faces'")
+        raise OclgiError(f"{where}: give 'path', 'trimesh', or 'vertices' and 'faces'")
+    if ("face_albedo" in desc or "face_emission" in desc) and not ("vertices" in desc and "faces" in desc):
+        raise OclgiError(f"{where}: face_albedo and face_emission go with 'vertices' and 'faces'")
     unknown = set(overrides) - set(names)
     if unknown:
         raise OclgiError(f"{where}.materials: {sorted(unknown)} not in the mesh's materials {sorted(n for n in names if n)}")
@@ -241,6 +251,37 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         m, shift = _transform(desc["transform"], where + ".transform")
         vertices = vertices @ m.T + shift
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
+
+
+def _face_materials(desc, n_faces: int, where: str):
+    """Per-face ``face_albedo`` / ``face_emission`` ((F, 3) arrays) as one
+    material per distinct (albedo, emission) pair, named ``#0``, ``#1``, ...
+    in order of first use; faces without them take the mesh's material."""
+    per_face = {}
+    for key in ("face_albedo", "face_emission"):
+        if key in desc:
+            a = np.asarray(desc[key])
+            if a.shape != (n_faces, 3) or a.dtype.kind not in "iuf":
+                raise OclgiError(f"{where}.{key}: expected an ({n_faces}, 3) array of numbers (one row per face), "
+                                 f"got {a.dtype} {a.shape}")
+            per_face[key] = a.astype(np.float64)
+    if not per_face:
+        return np.zeros(n_faces, np.int64), [""], {}
+    cols = [per_face.get("face_albedo"), per_face.get("face_emission")]
+    table = np.concatenate([c if c is not None else np.full((n_faces, 3), np.nan) for c in cols], axis=1)
+    _, first, inverse = np.unique(table, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # materials numbered by first use, not by value
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    fmat = rank[inverse.ravel()] + 1
+    names, mats = [""], {}
+    for k, face in enumerate(first[order]):
+        albedo = (tuple(_vec3([float(x) for x in table[face, :3]], f"{where}.face_albedo[{face}]"))
+                  if cols[0] is not None else None)
+        emission = tuple(float(x) for x in table[face, 3:]) if cols[1] is not None else None
+        names.append(f"#{k}")
+        mats[f"#{k}"] = MtlMaterial(albedo=albedo, emission=emission)
+    return fmat.astype(np.int64), names, mats
 
 
 def _inline_arrays(vertices, faces, where):

@@ -129,6 +129,26 @@ def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
     finally:
         log.removeHandler(hush)
         log.propagate = propagate
+    return from_trimesh(loaded, str(path))
+
+
+def is_trimesh(obj) -> bool:
+    """A trimesh ``Trimesh`` or ``Scene`` (told by type, without importing trimesh)."""
+    return type(obj).__module__.startswith("trimesh.") and type(obj).__name__ in ("Trimesh", "Scene")
+
+
+def from_trimesh(loaded, label: str) -> LoadedMesh:
+    """A trimesh ``Scene`` (or ``Trimesh``) as oclgi's mesh: every
+    geometry at each node that instances it, in world space, with its PBR
+    material's base colour and emission (glTF's ``baseColorFactor`` and
+    ``emissiveFactor``) where it has one."""
+    if not is_trimesh(loaded):
+        raise OclgiError(f"{label}: expected a trimesh Trimesh or Scene, got {type(loaded).__name__}")
+    if type(loaded).__name__ == "Trimesh":
+        import trimesh
+
+        loaded = trimesh.Scene(loaded)
+    path = label
     verts, faces, fmat, names, mats = [], [], [], [""], {}
     offset = 0
     for name, geom in loaded.geometry.items():
