@@ -132,7 +132,9 @@ def _estimate_args(p):
                    help="estimator (default: the scene's, else detp_disc_index)")
     p.add_argument("--photons", type=_param(params.photons, "--photons"),
                    help="number of photon paths (default: the scene's)")
-    p.add_argument("--radius", type=_param(params.radius, "--radius"), help="DETP disc radius (default: the scene's)")
+    p.add_argument("--radius", type=_param(params.radius, "--radius"),
+                   help="DETP disc radius (default: the scene's, else 1%% of its diagonal): a larger disc is less "
+                        "noisy and blurs shadows and edges over about its radius")
     p.add_argument("--seed", type=_param(params.seed, "--seed"), help="random seed (default: the scene's)")
     p.add_argument("--max-depth", type=_param(params.max_depth, "--max-depth"),
                    help="maximum path length in segments")

@@ -342,3 +342,21 @@ def test_cli_bad_input_subprocess(scene, tmp_path):
     # --image needs the scene's camera: refused before any work, nothing written
     assert res.returncode == 2 and "no [camera]" in res.stderr and res.stdout == ""
     assert not (tmp_path / "out3").exists()
+
+
+def test_writing_plots_leaves_the_users_matplotlib_alone(plane_study, tmp_path):
+    """A notebook's backend and open figures are the user's: the study draws
+    on figures of its own (it used to switch the global backend to Agg)."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    before = matplotlib.get_backend()
+    fig = plt.figure()  # the user's figure, open
+    try:
+        matplotlib.use("svg")
+        plane_study.write(tmp_path / "report")
+        assert matplotlib.get_backend() == "svg"
+        assert plt.get_fignums() == [fig.number]
+    finally:
+        plt.close(fig)
+        matplotlib.use(before)

@@ -3,7 +3,9 @@ configuration and photon count), a JSON form, and two log-log plots
 (relative RMSE against time; variance of L_hat against photons, with each
 configuration's bound as a dashed line of the same colour).
 
-matplotlib is imported only when plotting, with the Agg backend (no display).
+matplotlib is imported only when plotting; figures are drawn on their own
+``Figure`` with an Agg canvas, so the user's pyplot backend and figures
+(a notebook's inline plots) are left alone.
 Files are written all or nothing (oclgi/io.py).
 """
 
@@ -139,15 +141,16 @@ def json_dict(result) -> dict:
 # -- plots ---------------------------------------------------------------------------
 
 
-def _pyplot():
+def _figure():
+    """A figure of its own, outside pyplot's state."""
     try:
-        import matplotlib
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
     except ImportError:
         raise OclgiError("plots need matplotlib (pip install oclgi[study])") from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=(6.4, 4.6))
+    FigureCanvasAgg(fig)
+    return fig, fig.add_subplot()
 
 
 def _loglog(x, y):
@@ -165,8 +168,7 @@ def _log_axes(ax):
 
 
 def plot_error_vs_time(result, path) -> None:
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    fig, ax = _figure()
     for label, rows in result.families().items():
         t, e = _loglog([r.summary["time_s"] for r in rows], [r.summary["nrmse"] for r in rows])
         if len(t):
@@ -176,8 +178,7 @@ def plot_error_vs_time(result, path) -> None:
 
 
 def plot_variance_vs_photons(result, path) -> None:
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    fig, ax = _figure()
     for i, (label, rows) in enumerate(result.families().items()):
         color = f"C{i % 10}"
         n = [r.photons for r in rows]
@@ -200,13 +201,8 @@ def _finish(fig, ax, xlabel, ylabel, title, path) -> None:
 
 
 def _save(fig, path) -> None:
-    import matplotlib.pyplot as plt
-
-    try:
-        fig.tight_layout()
-        fig.savefig(path, format="png", dpi=110)
-    finally:
-        plt.close(fig)
+    fig.tight_layout()
+    fig.savefig(path, format="png", dpi=110)
 
 
 # -- all files ----------------------------------------------------------------------------
