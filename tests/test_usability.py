@@ -80,3 +80,13 @@ def test_face_arrays_are_checked():
         oclgi.load_dict({"mesh": [{"vertices": V, "faces": F, "face_albedo": [[0.5, 0.5, 0.5]]}]})
     with pytest.raises(oclgi.OclgiError, match=r"expected a trimesh Trimesh or Scene, got str"):
         oclgi.load_dict({"mesh": [{"trimesh": "box"}]})
+
+
+def test_the_summary_stages_add_up_to_the_total(scenes_dir):
+    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
+    assert engine.scene.load_seconds > 0
+    for method in ("detp_disc_index", "photon_map"):
+        s = engine.render(method=method, photons=50_000, width=16, height=16).stats.seconds
+        assert list(s) == ["load", "setup", "camera", "trace", "estimate", "resolve", "total"]
+        parts = s["camera"] + s["trace"] + s["estimate"] + s["resolve"]
+        assert parts <= s["total"] and s["total"] - parts < 0.05 + 0.05 * s["total"], s

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -73,6 +74,7 @@ _F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 
 def load_file(path) -> Scene:
+    t0 = time.perf_counter()
     path = Path(path)
     if not is_file(path, "scene file"):
         raise OclgiError(f"scene file not found: {path}")
@@ -87,7 +89,9 @@ def load_file(path) -> Scene:
     except OSError as exc:
         raise OclgiError(f"cannot read scene file {path}: {exc.strerror or exc}") from None
     desc.setdefault("name", path.stem)
-    return load_dict(desc, base_dir=path.parent)
+    scene = load_dict(desc, base_dir=path.parent)
+    scene.load_seconds = time.perf_counter() - t0
+    return scene
 
 
 def _check_keys(d, allowed, where):

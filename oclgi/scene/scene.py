@@ -90,6 +90,7 @@ class Scene:
     name: str = "scene"
     tri_object: np.ndarray | None = None  # (F,) int64 into objects; None: one static object
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
+    load_seconds: float = 0.0  # reading the scene and its meshes (load_file, load_dict)
 
     def __post_init__(self):
         if self.tri_object is None:

@@ -33,6 +33,7 @@ from ..errors import OclgiError
 from .photon_trace import PhotonTracer
 
 SEGMENT_BYTES = 48  # oclgi/cl/layout.py Segment
+ENGINE_STAGES = ("load", "setup")  # Stats.seconds of the engine, not of one run
 
 
 @dataclass
@@ -45,9 +46,12 @@ class Stats:
     seconds: dict = field(default_factory=dict)
 
     def summary(self) -> str:
-        t = " ".join(f"{k} {v:.2f}s" for k, v in self.seconds.items())
+        """One line: the run, then the engine's stages (load, setup) and the
+        run's (camera, trace, estimate, resolve: they add up to its total)."""
+        engine = [f"{k} {v:.2f}s" for k, v in self.seconds.items() if k in ENGINE_STAGES]
+        run = [f"{k} {v:.2f}s" for k, v in self.seconds.items() if k not in ENGINE_STAGES]
         return (f"{self.method}: {self.photons:,} photons, {self.segments:,} segments, "
-                f"{self.points:,} points, radius {self.radius:.4g} | {t}")
+                f"{self.points:,} points, radius {self.radius:.4g} | {' '.join(engine)} | {' '.join(run)}")
 
 
 @dataclass
@@ -238,7 +242,7 @@ class Run:
         finally:
             bar.close()
         est = self.finish()
-        # a render's camera points were made with the run, before its loop
+        # the run's stages (camera points, made with the run, to resolve): load and setup are the engine's
         est.stats.seconds["total"] = time.perf_counter() - t0 + self.seconds.get("camera", 0.0)
         return est
 
@@ -256,8 +260,11 @@ class Run:
         irr_buf = est.resolve(scale)
         irr = np.empty((est.n, 4), np.float32)
         cl.enqueue_copy(self.engine.queue, irr, irr_buf)
-        self.seconds["estimate"] += time.perf_counter() - t0
+        resolve = time.perf_counter() - t0  # a Photon Map's k-nearest search is here
         p = self.params
         stats = Stats(photons=n, segments=self.segments, points=est.n, method=p.method, radius=float(p.radius))
-        stats.seconds = {"setup": self.engine.setup_seconds, **self.seconds}
+        # the engine's own stages (reading the scene, building its trees), then the run's
+        stats.seconds = {"load": self.engine.scene.load_seconds, "setup": self.engine.setup_seconds,
+                         **{k: self.seconds[k] for k in ("camera", "trace", "estimate") if k in self.seconds},
+                         "resolve": resolve}
         return Estimate(irr[:, :3], est.accumulators(), scale, stats, est.points, est.work(), est)
