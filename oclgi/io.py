@@ -334,6 +334,51 @@ def png_bytes(pixels: np.ndarray) -> bytes:
             + chunk(b"IEND", b""))
 
 
+def read_csv(path, what: str, widths: tuple, columns: str) -> np.ndarray:
+    """A table of numbers, the one CSV reader of the command line (points,
+    keyframes): fields separated by commas (or whitespace); blank lines and
+    lines starting with ``#`` skipped; a first line that is not numbers is a
+    header; every row has the same number of fields, one of ``widths``. A
+    malformed line is an error naming it and ``columns`` (what the fields are)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise OclgiError(f"{path}: not a text (CSV) file") from None
+    except OSError as exc:
+        raise OclgiError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    rows, first, width = [], True, None
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = [x.strip() for x in line.split(",")] if "," in line else line.split()
+        try:
+            values = [float(x) for x in fields]
+        except ValueError:
+            if first and not any(_is_number(x) for x in fields):  # a header
+                first = False
+                continue
+            raise OclgiError(f"{path}:{lineno}: expected numbers ({columns}), got {line!r}") from None
+        first = False
+        if len(values) not in widths or (width is not None and len(values) != width):
+            want = width if width is not None else " or ".join(map(str, widths))
+            raise OclgiError(f"{path}:{lineno}: expected {want} columns ({columns}), got {len(values)}")
+        width = len(values)
+        rows.append(values)
+    if not rows:
+        raise OclgiError(f"{path}: no {what}")
+    return np.array(rows, dtype=np.float64)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
 def read_npy(path, what: str) -> np.ndarray:
     """A ``.npy`` array of real numbers (points, keyframes, a reference), the
     one reader of every .npy oclgi takes: the header's shape is checked

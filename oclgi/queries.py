@@ -235,7 +235,9 @@ def from_file(path) -> QueryPoints:
         a = read_npy(path, "points")
         a = a.astype(np.float64)
     elif suffix == ".csv":
-        a = _read_csv(path)
+        from .io import read_csv
+
+        a = read_csv(path, "points", (6,), "x,y,z,nx,ny,nz")
     else:
         raise OclgiError(f"{path}: points must be a .npy or .csv file")
     if a.ndim != 2 or a.shape[1] != 6:
@@ -243,50 +245,6 @@ def from_file(path) -> QueryPoints:
     if len(a) == 0:
         raise OclgiError(f"{path}: no points")
     return from_arrays(a[:, :3], a[:, 3:])
-
-
-def _read_csv(path) -> np.ndarray:
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise OclgiError(f"{path}: not a text (CSV) file") from None
-    except OSError as exc:
-        raise OclgiError(f"{path}: cannot read points ({exc.strerror or exc})") from None
-    rows = []
-    first = True
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        fields = _fields(line)
-        try:
-            values = [float(x) for x in fields]
-        except ValueError:
-            if first and not any(_is_number(x) for x in fields):  # a header
-                first = False
-                continue
-            raise OclgiError(f"{path}:{lineno}: expected 6 numbers (x,y,z,nx,ny,nz), got {raw.strip()!r}") from None
-        first = False
-        if len(values) != 6:
-            raise OclgiError(f"{path}:{lineno}: expected 6 columns (x,y,z,nx,ny,nz), got {len(values)}")
-        rows.append(values)
-    if not rows:
-        raise OclgiError(f"{path}: no points")
-    return np.array(rows, dtype=np.float64)
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
-
-
-def _fields(line: str) -> list[str]:
-    if "," in line:
-        return [x.strip() for x in line.split(",")]
-    return line.split()
 
 
 def vertex_points(scene) -> QueryPoints:

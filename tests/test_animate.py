@@ -33,7 +33,14 @@ def test_keyframe_file(tmp_path):
     np.testing.assert_allclose(p[2][:3, :3], [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
     bad = tmp_path / "bad.csv"
     bad.write_text("0,0\n")
-    with pytest.raises(OclgiError, match="rows of 3, 4 or 16"):
+    with pytest.raises(OclgiError, match=r"bad.csv:1: expected 3 or 4 or 16 columns"):
+        poses(str(bad), 3)
+    # the points files' rules: a header, comments, whitespace-separated fields
+    same = tmp_path / "same.csv"
+    same.write_text("# a path\nx y z angle\n0 0 0 0\n\n1 0 0 90\n")
+    assert all(np.array_equal(a, b) for a, b in zip(poses(str(same), 3), p))
+    bad.write_text("0,0,0\n1,0,0,90\n")
+    with pytest.raises(OclgiError, match=r"bad.csv:2: expected 3 columns"):
         poses(str(bad), 3)
 
 

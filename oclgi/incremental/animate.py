@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
-from ..io import read_npy
+from ..io import read_csv, read_npy
 from ..params import MAX_LENGTH
 
 
@@ -98,7 +98,7 @@ def _poses(spec: str, frames: int) -> list[np.ndarray]:
         if path.suffix.lower() == ".npy":
             keys = read_npy(path, "keyframes")
         elif path.suffix.lower() == ".csv":
-            keys = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+            keys = read_csv(path, "keyframes", (3, 4, 16), "x,y,z[,angle] or a 4x4 matrix's 16 numbers")
         else:
             raise OclgiError(f"--path {path}: keyframes must be a .csv or .npy file")
     except ValueError as exc:
