@@ -359,7 +359,8 @@ def read_csv(path, what: str, widths: tuple, columns: str) -> np.ndarray:
             if first and not any(_is_number(x) for x in fields):  # a header
                 first = False
                 continue
-            raise OclgiError(f"{path}:{lineno}: expected numbers ({columns}), got {line!r}") from None
+            want = width if width is not None else " or ".join(map(str, widths))
+            raise OclgiError(f"{path}:{lineno}: expected {want} numbers ({columns}), got {line!r}") from None
         first = False
         if len(values) not in widths or (width is not None and len(values) != width):
             want = width if width is not None else " or ".join(map(str, widths))
