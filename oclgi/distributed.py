@@ -137,7 +137,7 @@ def _phase(comm):
         _agree(comm, error)
     except OclgiError:
         if unexpected is not None:
-            raise unexpected
+            raise unexpected from None  # its own traceback, not the exchange's
         raise
 
 
@@ -334,9 +334,9 @@ class Session:
     as for oclgi.Session. ``move`` is collective and applies rank 0's move on
     every rank. After each move every rank sends rank 0 only the rows of its
     accumulators that the move changed (row id and int64 delta), which rank 0
-    adds to its totals: ``frame_bytes`` (rank 0) says how many bytes the
-    other ranks sent for the last move, ``full_bytes`` what a reduction of
-    every row would send.
+    adds to its totals, or, when most rows changed, a Reduce of every row's
+    delta: ``frame_bytes`` (rank 0) says how many bytes the other ranks sent
+    for the last move, ``full_bytes`` what a Reduce of every row sends.
     ``accumulators()`` and ``irradiance()`` answer on rank 0 (None
     elsewhere), equal bit for bit to a one-process session's.
     """
@@ -388,37 +388,47 @@ class Session:
         with _phase(comm):
             stats = self.local.move(name, matrix)
         t0 = time.perf_counter()
-        rows = delta = None
+        acc = rows = None
         with _phase(comm):
             acc = self.local.accumulators()
             rows = np.nonzero((acc != self.last).any(axis=1))[0].astype(np.int64)
-            delta = acc[rows] - self.last[rows]  # int64, wrapping as the device's sums do
-            self.last = acc
         with _collective(comm):
-            got = self._gather_changes(rows, delta)
-        if got is not None:
-            all_rows, all_delta, counts = got
-            np.add.at(self.total, all_rows, all_delta)
-            self.frame_rows = len(all_rows)
-            self.frame_bytes = sum(counts[1:]) * (all_rows.itemsize + all_delta.itemsize * all_delta.shape[1])
+            self._reduce_changes(acc, rows)
+        self.last = acc
         stats.seconds["reduce"] = time.perf_counter() - t0
         return stats
 
-    def _gather_changes(self, rows, delta):
-        """Every rank's changed rows and deltas, on rank 0, in rank order."""
+    def _reduce_changes(self, acc, rows):
+        """Add every rank's change of its sums to rank 0's totals: the changed
+        rows (id and delta, gathered in rank order), or a Reduce of every
+        row's delta when that sends fewer bytes (every rank knows the counts,
+        so all make the same choice)."""
+        from mpi4py import MPI
+
         comm = self.comm
-        counts = comm.gather(len(rows), root=0)
-        width = delta.shape[1]
+        counts = comm.allgather(len(rows))
+        row_bytes = 8 + acc.itemsize * acc.shape[1]  # an int64 row id and the row's deltas
+        sparse = sum(counts[1:]) * row_bytes
+        if sparse >= self.full_bytes:
+            delta = acc - self.last  # int64, wrapping as the device's sums do
+            recv = np.empty_like(delta) if comm.rank == 0 else None
+            comm.Reduce(delta, recv, op=MPI.SUM, root=0)
+            if comm.rank == 0:
+                self.total += recv
+            self.frame_rows, self.frame_bytes = acc.shape[0], self.full_bytes
+            return
+        delta = np.ascontiguousarray(acc[rows] - self.last[rows])
+        width = acc.shape[1]
         if comm.rank != 0:
             comm.Gatherv(rows, None, root=0)
-            comm.Gatherv(np.ascontiguousarray(delta), None, root=0)
-            return None
-        n = sum(counts)
-        all_rows = np.empty(n, np.int64)
-        all_delta = np.empty((n, width), np.int64)
+            comm.Gatherv(delta, None, root=0)
+            return
+        all_rows = np.empty(sum(counts), np.int64)
+        all_delta = np.empty((sum(counts), width), np.int64)
         comm.Gatherv(rows, (all_rows, counts), root=0)
-        comm.Gatherv(np.ascontiguousarray(delta), (all_delta, [c * width for c in counts]), root=0)
-        return all_rows, all_delta, counts
+        comm.Gatherv(delta, (all_delta, [c * width for c in counts]), root=0)
+        np.add.at(self.total, all_rows, all_delta)
+        self.frame_rows, self.frame_bytes = len(all_rows), sparse
 
     def accumulators(self):
         """The sums of all ranks' paths (rank 0; None elsewhere)."""
