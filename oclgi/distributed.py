@@ -409,7 +409,7 @@ class Session:
         counts = comm.allgather(len(rows))
         row_bytes = 8 + acc.itemsize * acc.shape[1]  # an int64 row id and the row's deltas
         sparse = sum(counts[1:]) * row_bytes
-        if sparse >= self.full_bytes:
+        if sparse > self.full_bytes:
             delta = acc - self.last  # int64, wrapping as the device's sums do
             recv = np.empty_like(delta) if comm.rank == 0 else None
             comm.Reduce(delta, recv, op=MPI.SUM, root=0)
