@@ -19,8 +19,10 @@ are taken from rank 0 and broadcast, so other ranks may pass None).
   rows a rank's move changed travel to rank 0 (row id and delta).
 
 The scene: every rank builds its own Engine. :func:`load_scene` loads the
-scene on rank 0 and broadcasts it (other ranks need no access to its files);
-a program may instead load the same file on every rank. Either way the ranks'
+scene on rank 0 and broadcasts it (other ranks need no access to its files),
+:func:`engine` also builds each rank's Engine; a program may instead load the
+same file on every rank. :func:`on_root` and :func:`everywhere` run any
+other step (reading points on rank 0, say) with its errors agreed. Either way the ranks'
 compiled scenes are compared (``CompiledScene.fingerprint``) and the run's
 parameters too, and a difference is an error before any work.
 
@@ -157,16 +159,41 @@ def share(comm, value):
         return comm.bcast(value, root=0)
 
 
+def on_root(comm, make, *args, **kwargs):
+    """``make(*args, **kwargs)`` called on rank 0 only (e.g. reading a file
+    of points only rank 0 can see), its value broadcast to every rank; an
+    error in it ends every rank (as every call here)."""
+    value = None
+    with _phase(comm):
+        if comm.rank == 0:
+            value = make(*args, **kwargs)
+    return share(comm, value)
+
+
+def everywhere(comm, make, *args, **kwargs):
+    """``make(*args, **kwargs)`` on every rank, its errors agreed: what may
+    fail on one rank only (e.g. ``oclgi.Engine``, which opens the rank's
+    OpenCL device) without leaving the others waiting."""
+    value = None
+    with _phase(comm):
+        value = make(*args, **kwargs)
+    return value
+
+
 def load_scene(comm, path):
     """The scene file ``path`` loaded on rank 0 and broadcast (the other
     ranks may pass None and need no access to its files)."""
     from .scene.description import load_file
 
-    scene = None
-    with _phase(comm):
-        if comm.rank == 0:
-            scene = load_file(path)
-    return share(comm, scene)
+    return on_root(comm, load_file, path)
+
+
+def engine(comm, path, **engine_args):
+    """An Engine on every rank for the scene file ``path`` (rank 0's,
+    loaded there and broadcast); ``engine_args`` as oclgi.Engine takes them."""
+    from .engine import Engine
+
+    return everywhere(comm, Engine, load_scene(comm, path), **engine_args)
 
 
 def _check_same(comm, engine, what: str, key: str):

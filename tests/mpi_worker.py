@@ -3,7 +3,8 @@ runs through oclgi.distributed, rank 0 writing the results as .npy files.
 
     python mpi_worker.py irradiance OUT      every estimator on the Cornell box's camera points
     python mpi_worker.py session OUT MOVES   every incremental method, the moves of MOVES (.npy)
-    python mpi_worker.py fail OUT RANK WHAT  rank RANK alone is given something else (WHAT)
+    python mpi_worker.py fail OUT RANK WHAT  rank RANK alone is given something else (WHAT:
+                                             method, photons, device, bug, collective)
 
 Errors end the way the command line ends them: one line from rank 0
 (``oclgi: error: ...``), exit status 2 on every rank.
@@ -93,9 +94,10 @@ def session(comm, out, moves_file):
 
 def fail(comm, out, rank, what):
     """Every rank runs the same except rank ``rank``: another parameter, or an exception of its own."""
-    engine = oclgi.Engine(distributed.load_scene(comm, SCENES / "cornell_box.toml"))
-    args = dict(method="detp", photons=PHOTONS, radius=RADIUS)
     mine = comm.rank == rank
+    device = "no such device" if mine and what == "device" else None
+    engine = distributed.engine(comm, SCENES / "cornell_box.toml", device=device)
+    args = dict(method="detp", photons=PHOTONS, radius=RADIUS)
     if mine and what == "method":
         args["method"] = "no_such_method"
     elif mine and what == "photons":

@@ -130,6 +130,7 @@ def _error_lines(proc):
 @pytest.mark.parametrize("what, message", [
     ("method", "rank 1 of 3: method: unknown method 'no_such_method'"),
     ("photons", "rank 1 of 3 was given another scene or other parameters than rank 0"),
+    ("device", "rank 1 of 3: "),  # its Engine finds no such OpenCL device
 ])
 def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, message):
     proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
