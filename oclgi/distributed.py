@@ -212,8 +212,9 @@ def _check_same(comm, engine, what: str, key: str):
 # -- one run over the ranks ------------------------------------------------------
 
 
-def _trace(run, progress):
-    """Run.complete without its resolve: a rank's partial sums are reduced first."""
+def _trace(run, progress, notice: bool):
+    """Run.complete without its resolve (a rank's partial sums are reduced
+    first); ``notice``: say so when the run looks long (rank 0 only)."""
     from . import budget
     from .progress import Progress
     from .scene.scene import OclgiWarning
@@ -225,11 +226,11 @@ def _trace(run, progress):
         while not run.done:
             n = run.step()
             bar.update(n)
-            if first:
+            if first and notice:
                 first = False
-                notice = budget.time_notice(n, time.perf_counter() - t0, run.paths.end - run.next_path + n)
-                if notice:
-                    warnings.warn(notice, OclgiWarning, stacklevel=4)
+                line = budget.time_notice(n, time.perf_counter() - t0, run.paths.end - run.next_path + n)
+                if line:
+                    warnings.warn(line, OclgiWarning, stacklevel=4)
     finally:
         bar.close()
 
@@ -265,7 +266,8 @@ def irradiance(engine, points, comm, method: str | None = None, photons: int | N
     """``engine.irradiance`` over the ranks of ``comm``: the Estimate on rank
     0 (equal bit for bit to one process's), None on the others. ``points``
     are rank 0's (broadcast). ``comm`` None: one process, ``engine.irradiance``.
-    ``progress`` is shown by rank 0 only, for its own part of the paths."""
+    ``progress`` (default: the engine's) is shown by rank 0 only, for its
+    own part of the paths."""
     args = dict(method=method, photons=photons, radius=radius, seed=seed, max_depth=max_depth,
                 extension=extension, count_emitted=count_emitted)
     if comm is None:
@@ -297,7 +299,8 @@ class _Distributed:
             part = PathRange(0, params.photons).split(comm.size, comm.rank)
             run = engine.run(points, **self.args, count_work=self.count_work, paths=part, **self.options)
         with _phase(comm):
-            _trace(run, progress if comm.rank == 0 else False)
+            shown = engine.progress if progress is None else progress  # as Engine.irradiance shows it
+            _trace(run, shown if comm.rank == 0 else False, comm.rank == 0)
         t1 = time.perf_counter()
         state = None
         with _phase(comm):
@@ -314,7 +317,6 @@ class _Distributed:
                 run.seconds["reduce"] = time.perf_counter() - t1
                 est = run.finish()
                 est.stats.seconds["total"] = time.perf_counter() - t0
-                est.stats.ranks = comm.size
         return est
 
 

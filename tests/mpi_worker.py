@@ -31,6 +31,7 @@ RADIUS = 0.1
 VIEW = (8, 8)  # camera points of the Cornell box: 64
 SESSION_RADIUS = 0.15
 SESSION_POINTS = 64
+WORK_KEYS = ("t", "u", "nodes")
 
 
 def cornell_points(engine):
@@ -65,6 +66,11 @@ def irradiance(comm, out):
             _save(out, f"{m}_acc", est.accumulators)
             _save(out, f"{m}_irr", est.irradiance)
             _save(out, f"{m}_segments", est.stats.segments)
+    # the exact work counters are summed too (uint64)
+    est = distributed.irradiance(engine, pts, comm, method="detp_disc_index", photons=PHOTONS, radius=RADIUS,
+                                 count_work=True)
+    if root:
+        _save(out, "work", [est.work[k] for k in WORK_KEYS])
     result = distributed.render(engine, comm, width=VIEW[0], height=VIEW[1], method="detp_disc_index",
                                 photons=PHOTONS, radius=RADIUS)
     if root:

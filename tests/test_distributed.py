@@ -58,11 +58,14 @@ def _same(a, b):
 
 @pytest.fixture(scope="module")
 def single():
-    """Every estimator and the render, in this process."""
+    """Every estimator, a work count and the render, in this process."""
     engine = oclgi.Engine(oclgi.load_file(worker.SCENES / "cornell_box.toml"))
     pts = worker.cornell_points(engine)
     out = {m: engine.irradiance(pts, method=m, photons=worker.PHOTONS, radius=worker.RADIUS)
            for m in worker.METHODS}
+    work = engine.irradiance(pts, method="detp_disc_index", photons=worker.PHOTONS, radius=worker.RADIUS,
+                             count_work=True).work
+    out["work"] = [work[k] for k in worker.WORK_KEYS]
     out["render"] = engine.render(width=worker.VIEW[0], height=worker.VIEW[1], method="detp_disc_index",
                                   photons=worker.PHOTONS, radius=worker.RADIUS)
     return out
@@ -102,6 +105,7 @@ def test_every_estimator_equals_one_process(tmp_path, single, ranks):
         assert _same(np.load(tmp_path / f"{m}_acc.npy"), one.accumulators), m
         assert _same(np.load(tmp_path / f"{m}_irr.npy"), one.irradiance), m
         assert int(np.load(tmp_path / f"{m}_segments.npy")) == one.stats.segments, m
+    assert any(single["work"]) and np.load(tmp_path / "work.npy").tolist() == single["work"]
     assert _same(np.load(tmp_path / "render_radiance.npy"), single["render"].radiance)
     assert _same(np.load(tmp_path / "render_pixels.npy"), single["render"].pixels)
 
