@@ -30,8 +30,8 @@ Errors: every phase ends in an exchange of each rank's outcome (an
 allgather of an error message or None), so an error on any rank ends every
 rank with the same message: rank 0 raises OclgiError, the other ranks raise
 :class:`PeerError` (an OclgiError a command line exits on without printing,
-so the message is printed once). An exception that is not an OclgiError is
-also exchanged, then re-raised on its rank with its traceback. What fails
+so the message is printed once). An exception that is not an OclgiError (a
+bug, Ctrl-C) is also exchanged, then re-raised on its rank as it was. What fails
 inside a collective call itself aborts the whole job (``comm.Abort``), the
 one way out that cannot hang.
 """
@@ -132,7 +132,9 @@ def _phase(comm):
         error = str(exc)
     except OclgiError as exc:
         error = str(exc)
-    except Exception as exc:  # noqa: BLE001 - a bug: still end every rank, then show it here
+    except KeyboardInterrupt as exc:  # Ctrl-C (mpiexec passes it to every rank)
+        unexpected, error = exc, "interrupted"
+    except BaseException as exc:  # noqa: BLE001 - a bug, or an exit: still end every rank, then go on here
         unexpected = exc
         error = f"unexpected {type(exc).__name__}: {exc}"
     try:

@@ -4,7 +4,8 @@ runs through oclgi.distributed, rank 0 writing the results as .npy files.
     python mpi_worker.py irradiance OUT      every estimator on the Cornell box's camera points
     python mpi_worker.py session OUT MOVES   every incremental method, the moves of MOVES (.npy)
     python mpi_worker.py fail OUT RANK WHAT  rank RANK alone is given something else (WHAT:
-                                             method, photons, device, bug, collective)
+                                             method, photons, device, bug, interrupt,
+                                             collective)
 
 Errors end the way the command line ends them: one line from rank 0
 (``oclgi: error: ...``), exit status 2 on every rank.
@@ -112,6 +113,10 @@ def fail(comm, out, rank, what):
         def broken(*a, **k):
             raise RuntimeError("a bug in the run")
         engine.run = broken
+    elif mine and what == "interrupt":  # Ctrl-C reaching one rank
+        def interrupted(*a, **k):
+            raise KeyboardInterrupt
+        engine.run = interrupted
     elif mine and what == "collective":  # a failure inside an MPI exchange: the job is aborted
         def broken(*a, **k):
             raise RuntimeError("an exchange broke")

@@ -145,12 +145,16 @@ def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, m
     assert not (tmp_path / "finished.npy").exists()
 
 
-def test_a_bug_on_one_rank_ends_every_rank(tmp_path):
+@pytest.mark.parametrize("what, message, raised", [
+    ("bug", "unexpected RuntimeError: a bug in the run", "RuntimeError: a bug in the run"),
+    ("interrupt", "interrupted", "KeyboardInterrupt"),
+])
+def test_a_bug_or_an_interrupt_on_one_rank_ends_every_rank(tmp_path, what, message, raised):
     """Rank 0 says which rank failed and how; that rank shows its traceback."""
-    proc = mpiexec(3, "fail", tmp_path, 1, "bug", timeout=60)
+    proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
     assert proc.returncode != 0
-    assert _error_lines(proc) == ["oclgi: error: rank 1 of 3: unexpected RuntimeError: a bug in the run"]
-    assert proc.stderr.count("Traceback") == 1 and "RuntimeError: a bug in the run" in proc.stderr
+    assert _error_lines(proc) == [f"oclgi: error: rank 1 of 3: {message}"], proc.stdout + proc.stderr
+    assert proc.stderr.count("Traceback") == 1 and raised in proc.stderr
     assert not (tmp_path / "finished.npy").exists()
 
 
