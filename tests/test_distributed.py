@@ -80,7 +80,8 @@ def moves(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def single_sessions(moves):
-    """Each incremental method's session in this process: sums and irradiance after the moves, and the first frame's sums."""
+    """Each incremental method's session in this process: after the moves, its sums and
+    irradiance; the first frame's sums; the paths the moves touched."""
     engine = oclgi.Engine(worker.block_scene())
     out = {}
     for m in worker.INCREMENTAL:
