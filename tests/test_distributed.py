@@ -125,6 +125,25 @@ def test_session_after_20_moves_equals_one_process(tmp_path, moves, single_sessi
             assert 0 < frame_bytes.sum() < full_bytes.sum() / 2, m
 
 
+def test_session_ranges_add_up_in_one_process(moves):
+    """What the ranks of a distributed session hold, without MPI: sessions
+    over the parts of the paths sum to the whole session's sums, after moves."""
+    from oclgi.tracing.run import PathRange
+
+    engine = oclgi.Engine(worker.block_scene())
+    for m in ("detp", "impact"):
+        engine.move("block", np.eye(4))
+        args = dict(method=m, photons=worker.PHOTONS, radius=worker.SESSION_RADIUS)
+        whole = oclgi.Session(engine, worker.floor_points(), **args)
+        parts = [oclgi.Session(engine, worker.floor_points(), **args, paths=PathRange(0, worker.PHOTONS).split(3, r))
+                 for r in range(3)]
+        for mv in np.load(moves)[:5]:
+            for s in [whole, *parts]:
+                s.move("block", mv)
+        assert np.array_equal(sum(s.accumulators() for s in parts), whole.accumulators()), m
+        assert sum(len(s.segments()[1]) for s in parts) == worker.PHOTONS
+
+
 # -- errors -------------------------------------------------------------------------
 
 
