@@ -21,19 +21,28 @@ are taken from rank 0 and broadcast, so other ranks may pass None).
 The scene: every rank builds its own Engine. :func:`load_scene` loads the
 scene on rank 0 and broadcasts it (other ranks need no access to its files),
 :func:`engine` also builds each rank's Engine; a program may instead load the
-same file on every rank. :func:`on_root` and :func:`everywhere` run any
-other step (reading points on rank 0, say) with its errors agreed. Either way the ranks'
-compiled scenes are compared (``CompiledScene.fingerprint``) and the run's
-parameters too, and a difference is an error before any work.
+same file on every rank. Either way the ranks' compiled scenes are compared
+(``CompiledScene.fingerprint``), and the run's parameters too: a difference
+is an error before any work. :func:`on_root` and :func:`everywhere` run any
+other step (reading points on rank 0, say) with its errors agreed.
+
+A program (``mpirun -n 4 python render.py``)::
+
+    comm = distributed.world()                      # None in a plain process
+    engine = distributed.engine(comm, "scenes/cornell_box.toml") if comm else oclgi.Engine(...)
+    result = distributed.render(engine, comm, photons=10**8)
+    if distributed.is_root(comm):                   # rank 0 writes the outputs
+        oclgi.save_render(result, "out/cornell_box.exr")
 
 Errors: every phase ends in an exchange of each rank's outcome (an
 allgather of an error message or None), so an error on any rank ends every
 rank with the same message: rank 0 raises OclgiError, the other ranks raise
 :class:`PeerError` (an OclgiError a command line exits on without printing,
 so the message is printed once). An exception that is not an OclgiError (a
-bug, Ctrl-C) is also exchanged, then re-raised on its rank as it was. What fails
-inside a collective call itself aborts the whole job (``comm.Abort``), the
-one way out that cannot hang.
+bug, Ctrl-C) is also exchanged, then re-raised on its rank as it was. What
+fails inside a collective call itself aborts the whole job (``comm.Abort``),
+the one way out that cannot hang. A rank that stops responding (a device
+that hangs) still holds the others in the next exchange, as in any MPI job.
 """
 
 from __future__ import annotations
