@@ -11,8 +11,9 @@ prints, from rank 0:
    threads (every rank uses every core, so ranks compete for them) and with
    one PoCL thread per rank (ranks as the only parallelism: the shape of K
    machines);
-2. a distributed session (the Cornell box with a movable bunny): per move,
-   the bytes the other ranks send rank 0 (changed rows only, as
+2. a distributed session (the Cornell box with a movable bunny), for jumps
+   (the bunny anywhere in the room) and a drag (1 cm a move): per move, the
+   bytes the other ranks send rank 0 (changed rows only, as
    ``distributed.Session`` does, and what a Reduce of every row would send)
    against the move's compute time.
 
@@ -91,7 +92,7 @@ def worker_scaling(photons: int, side: int) -> dict:
             "estimate_s": est.stats.seconds["estimate"], "reduced_bytes": int(est.accumulators.nbytes)}
 
 
-def worker_session(photons: int, side: int, moves: int) -> dict:
+def worker_session(photons: int, side: int, moves: int, drag: bool) -> dict:
     import oclgi
     from oclgi import distributed
 
@@ -104,9 +105,13 @@ def worker_session(photons: int, side: int, moves: int) -> dict:
     setup = time.perf_counter() - t0
     rng = np.random.default_rng(5)
     frames = []
-    for _ in range(moves):
-        m = _rigid(rng, 0.5)
-        m[1, 3] = abs(m[1, 3])  # keep it in the room's upper half more often than not
+    for i in range(moves):
+        if drag:  # an interactive drag: 1 cm a frame across the floor
+            m = np.eye(4)
+            m[0, 3] = -0.01 * (i + 1)
+        else:  # jumps: anywhere in the room, any orientation
+            m = _rigid(rng, 0.5)
+            m[1, 3] = abs(m[1, 3])
         comm.Barrier()
         t1 = time.perf_counter()
         stats = session.move("bunny", m)
@@ -124,7 +129,7 @@ def worker(argv):
     if what == "scaling":
         out = worker_scaling(int(argv[1]), int(argv[2]))
     else:
-        out = worker_session(int(argv[1]), int(argv[2]), int(argv[3]))
+        out = worker_session(int(argv[1]), int(argv[2]), int(argv[3]), argv[4] == "drag")
     if out:
         print("RESULT " + json.dumps(out), flush=True)
 
@@ -134,8 +139,8 @@ def worker(argv):
 
 def launch(ranks: int, *args, threads: int | None = None) -> dict:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    if threads:
-        env["POCL_MAX_PTHREAD_COUNT"] = str(threads)
+    if threads:  # PoCL 3's name and PoCL 4's
+        env["POCL_MAX_PTHREAD_COUNT"] = env["POCL_CPU_MAX_CU_COUNT"] = str(threads)
     mpiexec = Path(sys.executable).parent / "mpiexec"
     proc = subprocess.run([str(mpiexec), "-n", str(ranks), sys.executable, __file__, "--worker", *map(str, args)],
                           env=env, capture_output=True, text=True, timeout=3600)
@@ -154,12 +159,23 @@ def main():
     ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--session-photons", type=int, default=200_000)
     ap.add_argument("--moves", type=int, default=20)
+    ap.add_argument("--only", choices=["scaling", "session"], help="one part only")
     ap.add_argument("--json", type=Path)
     a = ap.parse_args()
     load = os.getloadavg()[0]
     print(f"{os.cpu_count()} cores, load average {load:.2f} at the start\n")
 
     results = {"scaling": [], "session": []}
+    if a.only != "session":
+        scaling(a, results)
+    if a.only != "scaling":
+        session(a, results)
+    print(f"\nload average {os.getloadavg()[0]:.2f} at the end")
+    if a.json:
+        a.json.write_text(json.dumps(results, indent=1))
+
+
+def scaling(a, results):
     print(f"Strong scaling: detp_disc_index, Cornell box, {a.photons:,} photons, {a.side}x{a.side} points")
     print("| PoCL threads per rank | ranks | wall s | speed-up | trace s (rank 0) | reduce s |")
     print("|---|---|---|---|---|---|")
@@ -169,25 +185,27 @@ def main():
             r = launch(k, "scaling", a.photons, a.side, threads=threads)
             r["threads"] = threads or "default"
             results["scaling"].append(r)
-            base = base or r["wall_s"] * a.ranks[0]
-            print(f"| {r['threads']} | {k} | {r['wall_s']:.2f} | {base / r['wall_s'] / a.ranks[0]:.2f} | "
+            base = base or r["wall_s"]  # the first count of ranks' time
+            print(f"| {r['threads']} | {k} | {r['wall_s']:.2f} | {base / r['wall_s']:.2f} | "
                   f"{r['trace_s']:.2f} | {r['reduce_s']:.4f} |")
 
+
+def session(a, results):
     print(f"\nDistributed session: Cornell box and bunny, {a.session_photons:,} photons, "
-          f"{a.side}x{a.side} fixed points, {a.moves} moves")
-    print("| ranks | move wall s (median) | reduce s (median) | bytes sent per move (median, max) | "
-          "a full Reduce's bytes | changed rows (median) |")
-    print("|---|---|---|---|---|---|")
-    for k in a.ranks:
-        r = launch(k, "session", a.session_photons, a.side, a.moves)
-        results["session"].append(r)
-        f = r["frames"]
-        med = lambda key: float(np.median([x[key] for x in f]))  # noqa: E731
-        print(f"| {k} | {med('wall_s'):.3f} | {med('reduce_s'):.4f} | {med('bytes'):,.0f}, "
-              f"{max(x['bytes'] for x in f):,} | {r['full_bytes']:,} | {med('rows'):,.0f} |")
-    print(f"\nload average {os.getloadavg()[0]:.2f} at the end")
-    if a.json:
-        a.json.write_text(json.dumps(results, indent=1))
+          f"{a.side}x{a.side} fixed points, {a.moves} moves (changed rows: all ranks')")
+    print("| moves | ranks | move wall s (median) | reduce s (median) | bytes sent per move (median, max) | "
+          "a full Reduce's bytes | changed rows (median) | paths re-traced by rank 0 (median) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for kind in ("jumps", "drag"):
+        for k in a.ranks:
+            r = launch(k, "session", a.session_photons, a.side, a.moves, kind)
+            r["moves"] = kind
+            results["session"].append(r)
+            f = r["frames"]
+            med = lambda key: float(np.median([x[key] for x in f]))  # noqa: E731,B023
+            print(f"| {kind} | {k} | {med('wall_s'):.3f} | {med('reduce_s'):.4f} | {med('bytes'):,.0f}, "
+                  f"{max(x['bytes'] for x in f):,} | {r['full_bytes']:,} | {med('rows'):,.0f} | "
+                  f"{med('paths'):,.0f} |")
 
 
 if __name__ == "__main__":
