@@ -67,12 +67,19 @@ class Affected:
 
 
 class SegmentStore:
-    """``photons`` paths traced with ``seed`` and ``max_depth`` on the engine's scene."""
+    """``photons`` paths traced with ``seed`` and ``max_depth`` on the engine's scene.
 
-    def __init__(self, engine, photons: int, seed: int, max_depth: int):
+    ``first``: the global id of the first stored path (a rank of a
+    distributed session stores ids first .. first + photons - 1; path k of
+    the store is global path first + k). ``total``: the run's photon count,
+    which fixes the scale of the sums (default ``photons``)."""
+
+    def __init__(self, engine, photons: int, seed: int, max_depth: int, first: int = 0, total: int | None = None):
         self.engine = engine
         self.queue = engine.queue
         self.photons, self.max_depth = int(photons), int(max_depth)
+        self.first_path = int(first)
+        self.total = self.photons if total is None else int(total)
         nbytes = self.photons * self.max_depth * Segment.itemsize
         limit = engine.queue.device.max_mem_alloc_size
         if nbytes > limit:
@@ -80,9 +87,10 @@ class SegmentStore:
                              f"need {nbytes / 2**30:.2f} GiB, more than one device allocation "
                              f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
         self.nbytes = nbytes
-        self.scale = engine.compiled.fixed_scale(self.photons)
+        self.scale = engine.compiled.fixed_scale(self.total)
         self.tracer = PhotonTracer(self.queue, engine.compiled, seed, max_depth, self.photons, engine.local_size)
-        self.batch = self.tracer.trace(0, self.photons)
+        # retrace() finds a path's random numbers by the batch's path_offset
+        self.batch = self.tracer.trace(self.first_path, self.photons)
         prog = programs(engine.ctx).get("update")
         self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
         self.k_cells, self.k_candidates = prog.update_path_cells, prog.update_candidates

@@ -61,12 +61,17 @@ class Session:
     variant that recomputes a camera session's dynamic points (default
     ``detp_disc_index``). Every segment of every path stays on the device:
     memory is photons x max_depth x 48 bytes.
+
+    ``paths``: a PathRange of the run's path ids to store and update instead
+    of all of them (a rank's part, oclgi/distributed.py): the sums are then
+    that range's, in the scale of the whole run's ``photons``.
     """
 
     fuse_find = True  # False: dynamic points summed over the new store in a pass of their own (benchmarks)
 
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
-                 extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, **options):
+                 extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, paths=None,
+                 **options):
         from ..estimators import ESTIMATORS
 
         self.engine = engine
@@ -99,7 +104,14 @@ class Session:
                              f"got {self.dynamic!r}")
         self.estimator = engine.estimator(est_points, p, **self.options)
         t0 = time.perf_counter()
-        self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+        if paths is None:
+            self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+        else:
+            if not (0 <= paths.first and 0 < paths.count and paths.end <= p.photons):
+                raise OclgiError(f"paths {paths.first}..{paths.end} are not a non-empty part of the session's "
+                                 f"{p.photons:,} photons")
+            self.store = SegmentStore(engine, paths.count, p.seed, p.max_depth, first=paths.first,
+                                      total=p.photons)
         self.scale = self.store.scale
         self.estimator.accumulate(self.store.batch)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None

@@ -1,0 +1,210 @@
+"""Runs over MPI ranks (oclgi/distributed.py) equal one process bit for bit.
+
+Each test launches ``mpiexec -n 2`` and ``-n 3`` (3 ranks oversubscribe a
+small machine, which MPICH allows) on tests/mpi_worker.py, whose rank 0
+writes its results as .npy files, and compares them with the same
+computation made here in one process: the accumulators and irradiance of
+every estimator, a render, and the sums of every incremental method after
+20 moves. An error on one rank must end every rank, with one message.
+"""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mpi_worker as worker
+import oclgi
+from oclgi import distributed
+from test_session import _moves
+
+HERE = Path(__file__).resolve().parent
+WORKER = HERE / "mpi_worker.py"
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+TIMEOUT = 120  # seconds: a hung rank fails the test instead of the suite
+N_MOVES = 20
+
+
+def _env():
+    """This tree's package and kernels, and the suite's private kernel cache
+    (conftest.py set POCL_CACHE_DIR), for every rank; no launcher variables
+    of an MPI job this test itself might run in."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "OMPI_", "PMIX_"))}
+    env["PYTHONPATH"] = os.pathsep.join([str(HERE.parent), str(HERE), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    env.setdefault("OCLGI_KERNEL_DIR", str(HERE.parent / "kernels"))
+    return env
+
+
+def mpiexec(ranks, *args, timeout=TIMEOUT):
+    return subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable, str(WORKER), *map(str, args)],
+                          cwd=HERE, env=_env(), capture_output=True, text=True, timeout=timeout)
+
+
+def _ran(proc):
+    assert proc.returncode == 0, f"mpiexec failed ({proc.returncode}):\n{proc.stdout}\n{proc.stderr}"
+
+
+def _same(a, b):
+    """Equal bit for bit: same dtype, shape and bytes."""
+    a, b = np.asarray(a), np.asarray(b)
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+# -- one process --------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def single():
+    """Every estimator, a work count and the render, in this process."""
+    engine = oclgi.Engine(oclgi.load_file(worker.SCENES / "cornell_box.toml"))
+    pts = worker.cornell_points(engine)
+    out = {m: engine.irradiance(pts, method=m, photons=worker.PHOTONS, radius=worker.RADIUS)
+           for m in worker.METHODS}
+    work = engine.irradiance(pts, method="detp_disc_index", photons=worker.PHOTONS, radius=worker.RADIUS,
+                             count_work=True).work
+    out["work"] = [work[k] for k in worker.WORK_KEYS]
+    out["render"] = engine.render(width=worker.VIEW[0], height=worker.VIEW[1], method="detp_disc_index",
+                                  photons=worker.PHOTONS, radius=worker.RADIUS)
+    return out
+
+
+@pytest.fixture(scope="module")
+def moves(tmp_path_factory):
+    path = tmp_path_factory.mktemp("moves") / "moves.npy"
+    np.save(path, np.array(_moves(np.random.default_rng(3), N_MOVES)))
+    return path
+
+
+@pytest.fixture(scope="module")
+def single_sessions(moves):
+    """Each incremental method's session in this process: after the moves, its sums and
+    irradiance; the first frame's sums; the paths the moves touched."""
+    engine = oclgi.Engine(worker.block_scene())
+    out = {}
+    for m in worker.INCREMENTAL:
+        engine.move("block", np.eye(4))
+        s = oclgi.Session(engine, worker.floor_points(), method=m, photons=worker.PHOTONS,
+                          radius=worker.SESSION_RADIUS)
+        first = s.accumulators()
+        touched = sum(s.move("block", mv).paths for mv in np.load(moves))
+        out[m] = (s.accumulators(), s.irradiance(), first, touched)
+    return out
+
+
+# -- over 2 and 3 ranks --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_every_estimator_equals_one_process(tmp_path, single, ranks):
+    _ran(mpiexec(ranks, "irradiance", tmp_path))
+    for m in worker.METHODS:
+        one = single[m]
+        assert np.count_nonzero(one.accumulators) > one.accumulators.size // 2, "the test must reach the points"
+        assert _same(np.load(tmp_path / f"{m}_acc.npy"), one.accumulators), m
+        assert _same(np.load(tmp_path / f"{m}_irr.npy"), one.irradiance), m
+        assert int(np.load(tmp_path / f"{m}_segments.npy")) == one.stats.segments, m
+    assert any(single["work"]) and np.load(tmp_path / "work.npy").tolist() == single["work"]
+    assert _same(np.load(tmp_path / "render_radiance.npy"), single["render"].radiance)
+    assert _same(np.load(tmp_path / "render_pixels.npy"), single["render"].pixels)
+
+
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_session_after_20_moves_equals_one_process(tmp_path, moves, single_sessions, ranks):
+    _ran(mpiexec(ranks, "session", tmp_path, moves))
+    for m in worker.INCREMENTAL:
+        acc, irr, first, touched = single_sessions[m]
+        assert touched > 0 and not np.array_equal(acc, first), "the moves must change the sums"
+        assert _same(np.load(tmp_path / f"{m}_acc.npy"), acc), m
+        assert _same(np.load(tmp_path / f"{m}_irr.npy"), irr), m
+        frame_bytes, full_bytes = np.load(tmp_path / f"{m}_bytes.npy")
+        assert (frame_bytes <= full_bytes).all(), m
+        if m.startswith("detp"):  # a move changes a few of the points' sums: only those travel
+            assert 0 < frame_bytes.sum() < full_bytes.sum() / 2, m
+
+
+def test_session_ranges_add_up_in_one_process(moves):
+    """What the ranks of a distributed session hold, without MPI: sessions
+    over the parts of the paths sum to the whole session's sums, after moves."""
+    from oclgi.tracing.run import PathRange
+
+    engine = oclgi.Engine(worker.block_scene())
+    for m in ("detp", "impact"):
+        engine.move("block", np.eye(4))
+        args = dict(method=m, photons=worker.PHOTONS, radius=worker.SESSION_RADIUS)
+        whole = oclgi.Session(engine, worker.floor_points(), **args)
+        parts = [oclgi.Session(engine, worker.floor_points(), **args, paths=PathRange(0, worker.PHOTONS).split(3, r))
+                 for r in range(3)]
+        for mv in np.load(moves)[:5]:
+            for s in [whole, *parts]:
+                s.move("block", mv)
+        assert np.array_equal(sum(s.accumulators() for s in parts), whole.accumulators()), m
+        assert sum(len(s.segments()[1]) for s in parts) == worker.PHOTONS
+
+
+# -- errors -------------------------------------------------------------------------
+
+
+def _error_lines(proc):
+    return [line for line in (proc.stdout + proc.stderr).splitlines() if line.startswith("oclgi: error:")]
+
+
+@pytest.mark.parametrize("what, message", [
+    ("method", "rank 1 of 3: method: unknown method 'no_such_method'"),
+    ("photons", "rank 1 of 3 was given another scene or other parameters than rank 0"),
+    ("device", "rank 1 of 3: "),  # its Engine finds no such OpenCL device
+])
+def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, message):
+    proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
+    assert proc.returncode != 0
+    lines = _error_lines(proc)
+    assert len(lines) == 1 and lines[0].startswith(f"oclgi: error: {message}"), proc.stdout + proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "finished.npy").exists()
+
+
+@pytest.mark.parametrize("what, message, raised", [
+    ("bug", "unexpected RuntimeError: a bug in the run", "RuntimeError: a bug in the run"),
+    ("interrupt", "interrupted", "KeyboardInterrupt"),
+])
+def test_a_bug_or_an_interrupt_on_one_rank_ends_every_rank(tmp_path, what, message, raised):
+    """Rank 0 says which rank failed and how; that rank shows its traceback."""
+    proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
+    assert proc.returncode != 0
+    assert _error_lines(proc) == [f"oclgi: error: rank 1 of 3: {message}"], proc.stdout + proc.stderr
+    assert proc.stderr.count("Traceback") == 1 and raised in proc.stderr
+    assert not (tmp_path / "finished.npy").exists()
+
+
+def test_a_failure_inside_an_exchange_aborts_the_job(tmp_path):
+    proc = mpiexec(3, "fail", tmp_path, 1, "collective", timeout=60)
+    assert proc.returncode != 0
+    assert "oclgi: error: rank 1 of 3 failed in an MPI exchange: RuntimeError: an exchange broke" in proc.stderr
+    assert not (tmp_path / "finished.npy").exists()
+
+
+# -- without MPI --------------------------------------------------------------------
+
+
+def test_one_process_has_no_world_and_never_loads_mpi():
+    code = "import sys; from oclgi import distributed; print(distributed.world(), 'mpi4py' in sys.modules)"
+    proc = subprocess.run([sys.executable, "-c", code], env=_env(), capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["None", "False"]
+
+
+def test_mpirun_without_mpi4py_names_the_extra(monkeypatch):
+    monkeypatch.setenv("PMI_SIZE", "2")
+    monkeypatch.setitem(sys.modules, "mpi4py", None)  # as if not installed: importing it fails
+    with pytest.raises(oclgi.OclgiError, match=r"one of 2 ranks, but mpi4py is not installed: "
+                                                r"pip install 'oclgi\[mpi\]'"):
+        distributed.world()
+
+
+def test_without_a_communicator_it_is_one_process(single):
+    engine = oclgi.Engine(oclgi.load_file(worker.SCENES / "cornell_box.toml"))
+    est = distributed.irradiance(engine, worker.cornell_points(engine), None, method="detp",
+                                 photons=worker.PHOTONS, radius=worker.RADIUS)
+    assert _same(est.accumulators, single["detp"].accumulators)
