@@ -42,8 +42,19 @@ class _Parser(argparse.ArgumentParser):
     """argparse with oclgi's error format: one line on stderr, exit status 2."""
 
     def error(self, message):
-        print(f"oclgi: error: {message} (see `{self.prog} --help`)", file=sys.stderr)
+        if not _other_rank():
+            print(f"oclgi: error: {message} (see `{self.prog} --help`)", file=sys.stderr)
         raise SystemExit(2)
+
+
+def _other_rank() -> bool:
+    """One of several MPI ranks other than rank 0: every rank meets the same
+    argument and input errors, and rank 0 alone says so (errors one rank
+    meets alone reach rank 0 through oclgi.distributed's exchanges)."""
+    for var in ("PMI_RANK", "OMPI_COMM_WORLD_RANK"):
+        if os.environ.get(var, "0").strip() not in ("", "0"):
+            return True
+    return False
 
 
 def _type_error(exc: OclgiError, name: str) -> argparse.ArgumentTypeError:
@@ -275,6 +286,29 @@ def _render_outputs(args) -> list[Path]:
     return paths
 
 
+def _world(args, command: str):
+    """The MPI communicator when the command runs as one of several ranks
+    (``mpirun -n K oclgi ...``), else None. Under MPI, rank 0 writes."""
+    from . import distributed
+
+    comm = distributed.world()
+    if comm is None:
+        return None
+    if command not in ("render", "irradiance"):
+        raise OclgiError(f"{command} does not run over MPI ranks (render and irradiance do): run it in one process")
+    given = [f for f in ("checkpoint", "resume", "more", "progressive") if getattr(args, f, None) is not None]
+    if given:
+        raise OclgiError(f"--{given[0]} does not run over MPI ranks yet: run it in one process")
+    return comm
+
+
+def _mpi_engine(args, comm):
+    from . import distributed
+
+    return distributed.engine(comm, args.scene, device=args.device, local_size=args.local_size,
+                              progress=None if not args.quiet else False)
+
+
 def cmd_render(args):
     from .io import check_output, write_images
 
@@ -282,6 +316,20 @@ def cmd_render(args):
     for p in paths:
         check_output(p)
     resumable.check_arguments(args, {args.scene: "the scene file", **{p: "an image output" for p in paths}})
+    comm = _world(args, "render")
+    if comm is not None:
+        from . import distributed
+
+        engine = _mpi_engine(args, comm)
+        result = distributed.render(engine, comm, width=args.width, height=args.height, exposure=args.exposure,
+                                    **_est_kwargs(args))
+        if distributed.is_root(comm):
+            write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths})
+            if not args.quiet:
+                print(f"{result.stats.summary()} | {comm.size} ranks", file=sys.stderr)
+            for p in paths:
+                print(f"wrote {p}")
+        return
     engine = _engine(args)
 
     def write(run, est):  # all or none: a failure leaves neither file
@@ -313,6 +361,19 @@ def cmd_irradiance(args):
     check_not_input([args.output], {args.scene: "the scene file", args.points: "the points file (--points)"})
     resumable.check_arguments(args, {args.scene: "the scene file", args.points: "the points file (--points)",
                                      args.output: "the output"})
+    comm = _world(args, "irradiance")
+    if comm is not None:
+        from . import distributed
+
+        points = distributed.on_root(comm, from_file, args.points)
+        engine = _mpi_engine(args, comm)
+        est = distributed.irradiance(engine, points, comm, **_est_kwargs(args))
+        if distributed.is_root(comm):
+            path = write_array(args.output, est.irradiance, points)
+            if not args.quiet:
+                print(f"{est.stats.summary()} | {comm.size} ranks", file=sys.stderr)
+            print(f"wrote {path}")
+        return
     points = from_file(args.points)
     engine = _engine(args)
     _run, est = resumable.execute(args, engine, lambda **kw: engine.run(points, **kw))
@@ -419,10 +480,13 @@ def _run(argv) -> int:
 
                 os.environ[COMPILER_OUTPUT_ENV] = "1"
             warnings.showwarning = _show_warning
+            if args.command in ("animate", "study"):
+                _world(args, args.command)  # refused under MPI, before any work
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
              "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)
     except OclgiError as exc:
-        print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
+        if not _other_rank():
+            print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)
         return exc.exit_code
     except StopRequested as stop:
         interrupt.ignore_further()

@@ -208,3 +208,41 @@ def test_without_a_communicator_it_is_one_process(single):
     est = distributed.irradiance(engine, worker.cornell_points(engine), None, method="detp",
                                  photons=worker.PHOTONS, radius=worker.RADIUS)
     assert _same(est.accumulators, single["detp"].accumulators)
+
+
+# -- the command line ---------------------------------------------------------
+
+
+def _oclgi_mpi(ranks, cwd, *args):
+    return subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable, "-m", "oclgi", *map(str, args)],
+                          cwd=cwd, env=_env(), capture_output=True, text=True, timeout=TIMEOUT)
+
+
+def test_mpirun_oclgi_writes_one_process_bytes(tmp_path):
+    """``mpirun -n K oclgi render|irradiance``: rank 0 writes the files one
+    process writes, byte for byte, and says so once."""
+    scene = HERE.parent / "scenes" / "cornell_box.toml"
+    common = ("--photons", 60_000, "--quiet")
+    np.save(tmp_path / "p.npy", np.array([[x, 0.001, 0.8, 0.0, 1.0, 0.0] for x in (-0.5, 0.0, 0.5)]))
+    one = [subprocess.run([sys.executable, "-m", "oclgi", *map(str, a)], cwd=tmp_path, env=_env(),
+                          capture_output=True, text=True, timeout=TIMEOUT)
+           for a in (("render", scene, "--width", 16, "--height", 16, "-o", "one.exr", *common),
+                     ("irradiance", scene, "--points", "p.npy", "-o", "one.npy", *common))]
+    assert all(r.returncode == 0 for r in one), [r.stderr for r in one]
+    for ranks in (2, 3):
+        r = _oclgi_mpi(ranks, tmp_path, "render", scene, "--width", 16, "--height", 16, "-o", f"r{ranks}.exr",
+                       *common)
+        assert r.returncode == 0, r.stderr
+        assert r.stdout.splitlines() == [f"wrote r{ranks}.exr", f"wrote r{ranks}.png"]
+        for suffix in (".exr", ".png"):
+            assert (tmp_path / f"one{suffix}").read_bytes() == (tmp_path / f"r{ranks}{suffix}").read_bytes()
+        r = _oclgi_mpi(ranks, tmp_path, "irradiance", scene, "--points", "p.npy", "-o", f"e{ranks}.npy", *common)
+        assert r.returncode == 0, r.stderr
+        assert (tmp_path / "one.npy").read_bytes() == (tmp_path / f"e{ranks}.npy").read_bytes()
+    # an input error: one line from rank 0, status 2 from the job; a command that does not distribute says so
+    r = _oclgi_mpi(3, tmp_path, "irradiance", scene, "--points", "missing.npy", "-o", "x.npy")
+    assert r.returncode != 0 and r.stderr.strip().splitlines() == ["oclgi: error: points file not found: missing.npy"]
+    r = _oclgi_mpi(2, tmp_path, "render", scene, "--checkpoint", "c.npz", "-o", "x.exr")
+    assert r.returncode != 0 and r.stderr.strip().splitlines() == [
+        "oclgi: error: --checkpoint does not run over MPI ranks yet: run it in one process"]
+    assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.npy").exists()
