@@ -294,8 +294,9 @@ def _world(args, command: str):
     comm = distributed.world()
     if comm is None:
         return None
-    if command not in ("render", "irradiance"):
-        raise OclgiError(f"{command} does not run over MPI ranks (render and irradiance do): run it in one process")
+    if command not in ("render", "irradiance", "study"):
+        raise OclgiError(f"{command} does not run over MPI ranks (render, irradiance and study do): run it in "
+                         "one process")
     given = [f for f in ("checkpoint", "resume", "more", "progressive") if getattr(args, f, None) is not None]
     if given:
         raise OclgiError(f"--{given[0]} does not run over MPI ranks yet: run it in one process")
@@ -423,7 +424,7 @@ def cmd_animate(args):
 def cmd_study(args):
     from .study.cli import run
 
-    run(args)
+    run(args, _world(args, "study"))
 
 
 def cmd_warm(args):
@@ -480,7 +481,7 @@ def _run(argv) -> int:
 
                 os.environ[COMPILER_OUTPUT_ENV] = "1"
             warnings.showwarning = _show_warning
-            if args.command in ("animate", "study"):
+            if args.command == "animate":
                 _world(args, args.command)  # refused under MPI, before any work
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
              "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)

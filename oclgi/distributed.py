@@ -331,6 +331,32 @@ class _Distributed:
         return est
 
 
+class EveryRank:
+    """An Engine (its attributes are the wrapped one's) whose ``irradiance``
+    runs over the ranks of ``comm`` and returns the estimate on every rank:
+    rank 0's irradiance, sums, scale, stats and work counts, broadcast. For
+    programs that every rank runs alike and that look at every estimate,
+    such as the estimator study (``mpirun -n K oclgi study``); the ranks'
+    estimates carry no estimator (its device buffers stay on rank 0)."""
+
+    def __init__(self, engine, comm):
+        self._engine, self._comm = engine, comm
+
+    def __getattr__(self, name):
+        return getattr(self._engine, name)
+
+    def irradiance(self, points, count_work: bool = False, **kwargs):
+        from .tracing.run import Estimate
+
+        est = irradiance(self._engine, points, self._comm, count_work=count_work, **kwargs)
+        shared = share(self._comm, None if est is None else
+                       (est.irradiance, est.accumulators, est.scale, est.stats, est.work, est.points))
+        if est is not None:
+            return est
+        irr, acc, scale, stats, work, pts = shared
+        return Estimate(irr, acc, scale, stats, pts, work, None)
+
+
 def render(engine, comm, camera=None, width: int | None = None, height: int | None = None,
            exposure: float = 1.0, **estimate_args):
     """``engine.render`` over the ranks of ``comm``: the Render on rank 0,

@@ -246,3 +246,26 @@ def test_mpirun_oclgi_writes_one_process_bytes(tmp_path):
     assert r.returncode != 0 and r.stderr.strip().splitlines() == [
         "oclgi: error: --checkpoint does not run over MPI ranks yet: run it in one process"]
     assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.npy").exists()
+
+
+def test_mpirun_oclgi_study_gives_one_process_statistics(tmp_path):
+    """The study over 2 ranks: every estimate split over the ranks; the
+    statistics (all but the time columns) are one process's."""
+    import csv
+
+    scene = HERE.parent / "scenes" / "cornell_box.toml"
+    args = ("study", scene, "--methods", "detp_disc_index,photon_map,impact", "--photons", "2e4,4e4", "--seeds", 3,
+            "--points", "random:64", "--reference", "detp:2e5", "--quiet")
+    one = subprocess.run([sys.executable, "-m", "oclgi", *map(str, args), "-o", "one"], cwd=tmp_path, env=_env(),
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert one.returncode == 0, one.stderr
+    two = _oclgi_mpi(2, tmp_path, *args, "-o", "two")
+    assert two.returncode == 0, two.stderr
+    assert two.stdout.count("wrote ") == one.stdout.count("wrote ") == 4  # rank 0 alone writes
+
+    def rows(folder):
+        with open(tmp_path / folder / "study.csv", newline="") as f:
+            return [{k: v for k, v in r.items() if k not in ("time_s", "estimate_s", "efficiency")}
+                    for r in csv.DictReader(f)]
+
+    assert rows("one") == rows("two") and len(rows("one")) == 6

@@ -77,11 +77,18 @@ def _image_module():
     return study_image
 
 
-def run(args) -> None:
+def run(args, comm=None) -> None:
+    """The study command; ``comm``: an MPI communicator, each estimate's
+    photons then split over its ranks (oclgi.distributed.EveryRank) and rank
+    0 writing the outputs."""
+    from .. import distributed
     from ..engine import Engine
     from ..scene.description import load_file
     from .run import run_study, seed_total
     from .stats import equal_time
+
+    if comm is not None and args.image:
+        raise OclgiError("--image does not run over MPI ranks yet: run it in one process")
 
     out = args.output
     if out.exists() and not out.is_dir():
@@ -91,13 +98,21 @@ def run(args) -> None:
     reference = _reference(args.reference)
     image = _image_module() if args.image else None
 
-    engine = Engine(load_file(args.scene), device=args.device, local_size=args.local_size,
-                    progress=False if args.quiet else None)
+    if comm is None:
+        engine = Engine(load_file(args.scene), device=args.device, local_size=args.local_size,
+                        progress=False if args.quiet else None)
+    else:
+        engine = distributed.EveryRank(distributed.engine(comm, args.scene, device=args.device,
+                                                          local_size=args.local_size,
+                                                          progress=False if args.quiet else None), comm)
     configs = _configs(engine, args)
     if image is not None:
         engine.view_camera()  # no camera: fail before the long work
+    root = distributed.is_root(comm)
     result = run_study(engine, configs, points=points, seeds=args.seeds, reference=reference,
-                       point_seed=args.point_seed, progress=False if args.quiet else None)
+                       point_seed=args.point_seed, progress=False if args.quiet or not root else None)
+    if not root:
+        return
     if image is not None:  # first: its five files are written all or none, then the study's
         first = configs[0]
         summary = image.compare_with_mitsuba(engine, out, spp=args.spp, method=first.method,
