@@ -185,6 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     _estimate_args(i)
     i.add_argument("--points", type=Path, required=True, help=".npy (n, 6) or .csv: x,y,z,nx,ny,nz")
     i.add_argument("-o", "--output", type=Path, required=True, help=".npy (n, 3) or .csv output")
+    i.add_argument("--units", choices=("radiometric", "photometric"), default="radiometric",
+                   help="radiometric: irradiance E_r, E_g, E_b in W/m^2 (default); photometric: illuminance in "
+                        "lux, one column (RGB as linear Rec. 709, 683 lm/W)")
     resumable.add_arguments(i)
 
     a = sub.add_parser("animate", help="move an object along a path; incremental update and one image per frame")
@@ -352,6 +355,15 @@ def cmd_render(args):
         print(f"wrote {p}")
 
 
+def _irradiance_output(args, est):
+    """The values and columns ``irradiance`` writes, in ``--units``."""
+    if args.units == "photometric":
+        from .photometry import illuminance_lux
+
+        return illuminance_lux(est.irradiance), ("E_v_lux",)
+    return est.irradiance, ("E_r", "E_g", "E_b")
+
+
 def cmd_irradiance(args):
     from .io import check_not_input, check_output, write_array
     from .queries import from_file
@@ -370,7 +382,8 @@ def cmd_irradiance(args):
         engine = _mpi_engine(args, comm)
         est = distributed.irradiance(engine, points, comm, **_est_kwargs(args))
         if distributed.is_root(comm):
-            path = write_array(args.output, est.irradiance, points)
+            values, columns = _irradiance_output(args, est)
+            path = write_array(args.output, values, points, columns)
             if not args.quiet:
                 print(f"{est.stats.summary()} | {comm.size} ranks", file=sys.stderr)
             print(f"wrote {path}")
@@ -378,7 +391,8 @@ def cmd_irradiance(args):
     points = from_file(args.points)
     engine = _engine(args)
     _run, est = resumable.execute(args, engine, lambda **kw: engine.run(points, **kw))
-    path = write_array(args.output, est.irradiance, points)
+    values, columns = _irradiance_output(args, est)
+    path = write_array(args.output, values, points, columns)
     if not args.quiet:
         print(est.stats.summary(), file=sys.stderr)
     print(f"wrote {path}")

@@ -434,8 +434,9 @@ def _write_bytes(tmp: Path, data: bytes) -> None:
         raise OSError(errno.EIO, "the file on disk is shorter than what was written")
 
 
-def write_array(path, values: np.ndarray, points=None) -> Path:
-    """Irradiance per point: ``.npy`` (n, 3) float64, or ``.csv`` with the points' columns."""
+def write_array(path, values: np.ndarray, points=None, columns=("E_r", "E_g", "E_b")) -> Path:
+    """Irradiance per point: ``.npy`` (n, 3) float64 (or (n,) for one
+    column), or ``.csv`` with the points' columns, then ``columns``."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".npy", ".csv"):
@@ -446,11 +447,11 @@ def write_array(path, values: np.ndarray, points=None) -> Path:
         if suffix == ".npy":
             np.save(buf, values)
         else:
-            cols = ["E_r", "E_g", "E_b"]
-            data = values
+            cols = list(columns)
+            data = values.reshape(len(values), -1)
             if points is not None:
                 cols = ["x", "y", "z", "nx", "ny", "nz"] + cols
-                data = np.hstack([points.positions[:, :3], points.normals[:, :3], values])
+                data = np.hstack([points.positions[:, :3], points.normals[:, :3], data])
             np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
         _write_bytes(tmp, buf.getvalue())
     return path

@@ -56,7 +56,7 @@ from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObj
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
-_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "materials",
+_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "lumens", "materials",
          "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
@@ -254,7 +254,38 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     if "transform" in desc:
         m, shift = _transform(desc["transform"], where + ".transform")
         vertices = vertices @ m.T + shift
+    if "lumens" in desc:  # every face of the mesh emits, its total luminous flux given
+        from ..photometry import emission_from_lumens
+
+        lumens = _number(desc["lumens"], where + ".lumens")
+        if not lumens > 0:
+            raise OclgiError(f"{where}.lumens: expected a luminous flux > 0, got {desc['lumens']!r}")
+        v = vertices[faces]
+        area = float(np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum() / 2)
+        colour = desc.get("emission", (1.0, 1.0, 1.0))
+        radiance = _radiant(emission_from_lumens(lumens, area, _vec3(colour, where + ".emission")),
+                            where + ".lumens")
+        for k in set(local):
+            materials[k].emission = radiance
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
+
+
+def _point_intensity(pl: dict, where: str):
+    """``intensity`` (W/sr per channel), or ``candela`` with an optional
+    ``colour`` (oclgi/photometry.py's convention)."""
+    if "candela" in pl:
+        if "intensity" in pl:
+            raise OclgiError(f"{where}: give intensity (W/sr) or candela, not both")
+        from ..photometry import intensity_from_candela
+
+        cd = _number(pl["candela"], where + ".candela")
+        if not cd > 0:
+            raise OclgiError(f"{where}.candela: expected a luminous intensity > 0, got {pl['candela']!r}")
+        colour = _vec3(pl.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
+        return _radiant(intensity_from_candela(cd, colour), where + ".candela")
+    if "colour" in pl:
+        raise OclgiError(f"{where}.colour goes with candela; an intensity has its own colour")
+    return _radiant(pl.get("intensity"), where + ".intensity")
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -350,9 +381,9 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
 
     lights = []
     for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
-        _check_keys(pl, {"position", "intensity"}, f"point_light[{i}]")
+        _check_keys(pl, {"position", "intensity", "candela", "colour"}, f"point_light[{i}]")
         lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position", MAX_COORDINATE),
-                                 _radiant(pl.get("intensity"), f"point_light[{i}].intensity")))
+                                 _point_intensity(pl, f"point_light[{i}]")))
 
     camera = None
     if "camera" in desc:
