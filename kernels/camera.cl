@@ -2,8 +2,10 @@
  *
  * camera_visible_points  one work-item per pixel of the rectangle x0, y0,
  *     rw x rh of a width x height image (row-major, top row first; outputs
- *     are the rectangle's pixels, row-major): a pinhole ray through the pixel
- *     centre against the instances given (all of them, or a subset: a
+ *     are the rectangle's pixels, row-major): a pinhole ray through the
+ *     pixel's point `offset` (in pixel units from its top-left corner: 0.5,
+ *     0.5 is the centre; a render of several samples per pixel launches
+ *     once per sample) against the instances given (all of them, or a subset: a
  *     session's static layer); on a hit, the point (w =
  *     as_float(tri)), the geometric normal turned towards the camera (w = 1
  *     when the triangle's own normal faces the camera, which is when a
@@ -14,7 +16,7 @@
 __kernel void camera_visible_points(SCENE_ARGS,
                                     __global const float4 *tri_normals,
                                     float4 eye, float4 forward, float4 right, float4 up,
-                                    int width, int height, int x0, int y0, int rw, int rh,
+                                    int width, int height, int x0, int y0, int rw, int rh, float2 offset,
                                     __global float4 *positions, __global float4 *normals,
                                     __global float2 *barys)
 {
@@ -22,8 +24,8 @@ __kernel void camera_visible_points(SCENE_ARGS,
     if (i >= rw * rh) return;
     int px = x0 + i % rw, py = y0 + i / rw;
     /* right and up are pre-scaled by the half-extents of the image plane */
-    float sx = 2.0f * ((float)px + 0.5f) / (float)width - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)py + 0.5f) / (float)height;
+    float sx = 2.0f * ((float)px + offset.x) / (float)width - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)py + offset.y) / (float)height;
     float3 d = normalize(forward.xyz + sx * right.xyz + sy * up.xyz);
     Hit h;
     scene_closest_hit(SCENE_PASS, eye.xyz, d, INFINITY, &h);

@@ -3,7 +3,9 @@
  * image_shade     one work-item per pixel: L = Le (when the emitter's front
  *                 is seen) + albedo * E / pi; background (tri = -1) is 0.
  * image_tonemap   one work-item per pixel: exposure, clamp, sRGB encoding,
- *                 8 bits per channel, alpha 255.
+ *                 8 bits per channel; alpha is the coverage (radiance.w:
+ *                 1 where a sample hit geometry, 0 on the background,
+ *                 between for a pixel's averaged samples).
  */
 #include "oclgi_types.h"
 
@@ -35,5 +37,6 @@ __kernel void image_tonemap(__global const float4 *radiance, int n, float exposu
     float3 c = radiance[i].xyz * exposure;
     pixels[i] = (uchar4)(convert_uchar_sat_rte(255.0f * srgb_encode(c.x)),
                          convert_uchar_sat_rte(255.0f * srgb_encode(c.y)),
-                         convert_uchar_sat_rte(255.0f * srgb_encode(c.z)), (uchar)255);
+                         convert_uchar_sat_rte(255.0f * srgb_encode(c.z)),
+                         convert_uchar_sat_rte(255.0f * radiance[i].w));
 }

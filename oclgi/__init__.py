@@ -63,7 +63,7 @@ def save_render(result: "Render", path) -> tuple[_Path, _Path]:
 
     path = _Path(path)
     exr, png = path.with_suffix(".exr"), path.with_suffix(".png")
-    write_images({exr: result.radiance, png: result.pixels})  # all or nothing
+    write_images({exr: result.radiance, png: result.pixels}, metadata=result.metadata)  # all or nothing
     return exr, png
 
 

@@ -358,33 +358,34 @@ class EveryRank:
 
 
 def render(engine, comm, camera=None, width: int | None = None, height: int | None = None,
-           exposure: float = 1.0, **estimate_args):
+           exposure: float = 1.0, spp: int = 1, **estimate_args):
     """``engine.render`` over the ranks of ``comm``: the Render on rank 0,
     None on the others (rank 0's camera and sizes are used). ``comm`` None:
     one process."""
     from . import budget, params
-    from .engine import Render
+    from .engine import Render, render_metadata
 
     if comm is None:
-        return engine.render(camera, width, height, exposure, **estimate_args)
+        return engine.render(camera, width, height, exposure, spp=spp, **estimate_args)
     t0 = time.perf_counter()
     pts = None
     with _phase(comm):
         if comm.rank == 0:
             exposure = params.exposure(exposure, "exposure")
             cam = engine.view_camera(camera, width, height)
+            spp = params.samples_per_pixel(spp)
             r = engine.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
-            budget.check(budget.render_need(cam.width, cam.height, r.method, r.photons, r.max_depth,
+            budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
                                             engine.batch_bytes, estimate_args.get("k")), engine.queue.device)
-            pts = engine.camera_points(cam)
+            pts = engine.camera_points(cam, spp=spp)
     t_cam = time.perf_counter() - t0
     est = irradiance(engine, pts, comm, **estimate_args)
     result = None
     with _phase(comm):
         if comm.rank == 0:
-            radiance, pixels = engine.shade(est.points, est.estimator.irr, exposure)  # resolved by finish
+            radiance, pixels = engine.shade(est.points, est.estimator.irr, exposure, spp)  # resolved by finish
             est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
-            result = Render(radiance, pixels, est)
+            result = Render(radiance, pixels, est, render_metadata(engine, r, est, cam, spp, exposure))
     return result
 
 

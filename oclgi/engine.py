@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import pyopencl as cl
@@ -36,6 +36,36 @@ from .scene.mesh import is_trimesh
 from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
+
+
+def render_metadata(engine, run_params, est, camera, spp: int, exposure: float) -> dict:
+    """What made an image, as the attributes its files carry (``oclgi:``
+    names, text values: PNG keeps text only): the scene, the method and its
+    parameters, the photons traced, the camera, the samples per pixel,
+    oclgi's version. No time stamp: the same run writes the same bytes."""
+    from . import __version__
+
+    p = asdict(run_params)
+    meta = {"version": __version__, "scene": engine.scene.name, "method": p["method"],
+            "photons": est.stats.photons, "segments": est.stats.segments, "seed": p["seed"],
+            "radius": f"{p['radius']:.9g}", "max_depth": p["max_depth"], "extension": f"{p['extension']:.9g}",
+            "count_emitted": str(p["count_emitted"]).lower(), "spp": spp, "exposure": f"{exposure:.9g}"}
+    if camera is not None:
+        meta.update({f"camera_{k}": " ".join(f"{v:.9g}" for v in getattr(camera, k))
+                     for k in ("position", "look_at", "up")})
+        meta["camera_fov"] = f"{camera.fov:.9g}"
+    return {f"oclgi:{k}": str(v) for k, v in meta.items()}
+
+
+R2 = 1.32471795724474602596  # the plastic number: the R2 sequence's generator
+
+
+def sample_offsets(spp: int) -> list[tuple[float, float]]:
+    """Where in a pixel each of ``spp`` samples looks: the R2 low-discrepancy
+    sequence from the pixel's centre (sample 0), the same for every pixel
+    and every run, so images are reproducible and a sample set is a
+    rotated-grid supersampling of the pixel."""
+    return [((0.5 + k / R2) % 1.0, (0.5 + k / R2**2) % 1.0) for k in range(spp)]
 
 
 def as_query_points(points) -> queries.QueryPoints:
@@ -68,8 +98,9 @@ def _check_float32(scene: Scene) -> None:
 @dataclass
 class Render:
     radiance: np.ndarray  # (H, W, 3) float32
-    pixels: np.ndarray  # (H, W, 4) uint8, tone-mapped sRGB
+    pixels: np.ndarray  # (H, W, 4) uint8, tone-mapped sRGB, alpha = coverage
     estimate: Estimate
+    metadata: dict = field(default_factory=dict)  # how it was made: written into the image files
 
     @property
     def stats(self) -> Stats:
@@ -145,10 +176,15 @@ class Engine:
 
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
-                      height: int | None = None) -> queries.QueryPoints:
+                      height: int | None = None, spp: int = 1) -> queries.QueryPoints:
+        """The visible point of every pixel; with ``spp`` > 1 samples per
+        pixel, one image of points per sample (``sample_offsets``), stacked:
+        shape (spp * height, width)."""
         cam = self.view_camera(camera, width, height)
-        budget.check(budget.camera_need(cam.width, cam.height), self.queue.device)
-        return self.view_points(cam, (0, 0, cam.width, cam.height))
+        spp = params.samples_per_pixel(spp)
+        budget.check(budget.camera_need(cam.width, cam.height * spp), self.queue.device)
+        images = [self.view_points(cam, (0, 0, cam.width, cam.height), offset=o) for o in sample_offsets(spp)]
+        return images[0] if spp == 1 else queries.stack(images)
 
     def view_camera(self, camera: Camera | None = None, width: int | None = None,
                     height: int | None = None) -> Camera:
@@ -163,9 +199,10 @@ class Engine:
         height = None if height is None else params.image_size(height, "height")
         return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))
 
-    def view_points(self, cam: Camera, rect, instances=None) -> queries.QueryPoints:
+    def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5)) -> queries.QueryPoints:
         """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
-        against all instances or against ``instances`` = (buffer, count)."""
+        against all instances or against ``instances`` = (buffer, count), each
+        through its pixel's point ``offset`` (pixel units from its corner)."""
         x0, y0, rw, rh = (int(v) for v in rect)
         eye, fwd, right, up = cam.frame()
         n = rw * rh
@@ -178,7 +215,7 @@ class Engine:
         host = (np.empty((n, 4), np.float32), np.empty((n, 4), np.float32), np.empty((n, 2), np.float32))
         if n:
             launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
-                   cam.width, cam.height, x0, y0, rw, rh,
+                   cam.width, cam.height, x0, y0, rw, rh, np.array(offset, np.float32),
                    pos, nrm, bary, local_size=self.local_size)
             for h, dev in zip(host, (pos, nrm, bary)):
                 cl.enqueue_copy(self.queue, h, dev)
@@ -310,33 +347,42 @@ class Engine:
         return self.render_result(run, run.complete(self.progress), exposure)
 
     def render_run(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
-                   paths: PathRange | None = None, **estimate_args) -> Run:
-        """The run ``render`` makes over the camera's visible points, not yet
-        traced (``Engine.run``); ``render_result`` turns its estimate into
-        the image."""
+                   paths: PathRange | None = None, spp: int = 1, **estimate_args) -> Run:
+        """The run ``render`` makes over the camera's visible points (``spp``
+        per pixel), not yet traced (``Engine.run``); ``render_result`` turns
+        its estimate into the image."""
         cam = self.view_camera(camera, width, height)
+        spp = params.samples_per_pixel(spp)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
-        budget.check(budget.render_need(cam.width, cam.height, r.method, r.photons, r.max_depth, self.batch_bytes,
-                                        estimate_args.get("k")), self.queue.device)
+        budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
+                                        self.batch_bytes, estimate_args.get("k")), self.queue.device)
         t0 = time.perf_counter()
-        pts = self.camera_points(cam)
+        pts = self.camera_points(cam, spp=spp)
         run = self.run(pts, paths=paths, **estimate_args)
         run.seconds["camera"] = time.perf_counter() - t0
+        run.spp, run.camera = spp, cam
         return run
 
     def render_result(self, run: Run, est: Estimate, exposure: float = 1.0) -> Render:
         """The image of a render run's estimate (resolved: ``Run.finish``)."""
-        radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure)
-        return Render(radiance, pixels, est)
+        spp = getattr(run, "spp", 1)
+        radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure, spp)
+        return Render(radiance, pixels, est, render_metadata(self, run.params, est, getattr(run, "camera", None),
+                                                             spp, exposure))
 
-    def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0):
+    def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
-        pixels, from the irradiance (a device float4 buffer, one per point)."""
+        pixels, from the irradiance (a device float4 buffer, one per point).
+        ``spp`` > 1: the points are ``camera_points``' stacked samples, and a
+        pixel is the mean of its samples' radiance (its alpha, their coverage)."""
         exposure = params.exposure(exposure, "exposure")
+        spp = params.samples_per_pixel(spp)
         if not isinstance(points, queries.QueryPoints) or points.shape is None:
             raise OclgiError("shade: points must be a camera's QueryPoints (Engine.camera_points), with a shape")
         points.check_triangles(self.scene.n_triangles, f"scene {self.scene.name!r}")
         h, w = points.shape
+        if h % spp:
+            raise OclgiError(f"shade: {h} rows of points are not {spp} samples of an image")
         if not isinstance(irradiance, cl.Buffer) or irradiance.size < h * w * 16:
             raise OclgiError(f"shade: irradiance must be a device buffer of {h * w} float4 values (16 bytes each), "
                              f"got {getattr(irradiance, 'size', type(irradiance).__name__)}")
@@ -349,6 +395,12 @@ class Engine:
         rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
         pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
         launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, n, rad)
+        if spp > 1:  # the box filter over a pixel's samples, in a fixed order (the same bits every run)
+            samples = np.empty((spp, h // spp, w, 4), np.float32)
+            cl.enqueue_copy(self.queue, samples, rad)
+            mean = np.ascontiguousarray(samples.astype(np.float64).mean(axis=0).astype(np.float32))
+            h, n = h // spp, n // spp
+            cl.enqueue_copy(self.queue, rad, mean)
         launch(self.queue, prog.image_tonemap, n, rad, n, exposure, pix)
         radiance = np.empty((h, w, 4), np.float32)
         pixels = np.empty((h, w, 4), np.uint8)

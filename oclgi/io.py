@@ -228,7 +228,7 @@ def _one_line(text: str) -> str:
     return " ".join(part.strip() for part in text.splitlines() if part.strip())
 
 
-def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
+def write_image_file(tmp: Path, path: Path, pixels: np.ndarray, metadata: dict | None = None) -> None:
     """Write an image to ``tmp`` (a temporary name from :func:`atomic_path`; ``path``
     names it in errors): the one OpenImageIO writer of every image oclgi makes.
 
@@ -248,6 +248,8 @@ def write_image_file(tmp: Path, path: Path, pixels: np.ndarray) -> None:
     # same run gives the same bytes, so renders can be compared with cmp.
     spec.attribute("DateTime", "")
     spec.attribute("Software", SOFTWARE)
+    for key, value in (metadata or {}).items():  # str, int or float attributes
+        spec.attribute(key, value)
     if path.suffix.lower() == ".exr":
         spec.attribute("compression", "zip")
     ok = out.open(str(tmp), spec) and out.write_image(np.ascontiguousarray(pixels))
@@ -300,8 +302,9 @@ def write_image(path, pixels: np.ndarray) -> Path:
     return path
 
 
-def write_images(images: dict, sync: bool = True) -> list[Path]:
-    """Write several images ``{path: pixels}``, all or nothing.
+def write_images(images: dict, sync: bool = True, metadata: dict | None = None) -> list[Path]:
+    """Write several images ``{path: pixels}``, all or nothing, each with
+    the attributes ``metadata`` (a render's: how it was made).
 
     Every image is written to its temporary file and checked first; only
     when all are complete are they renamed into place. ``sync``: as for
@@ -310,7 +313,7 @@ def write_images(images: dict, sync: bool = True) -> list[Path]:
     paths = [Path(p) for p in images]
     with atomic_paths(paths, sync) as temps:
         for tmp, p, pixels in zip(temps, paths, images.values()):
-            write_image_file(tmp, p, pixels)
+            write_image_file(tmp, p, pixels, metadata)
     return paths
 
 

@@ -162,6 +162,13 @@ def seed(value, name: str = "seed") -> int:
     return _integer_in(value, name, 0, 2**64 - 1, "an integer in 0..2^64-1")
 
 
+MAX_SPP = 256
+
+
+def samples_per_pixel(value, name: str = "spp") -> int:
+    return _integer_in(value, name, 1, MAX_SPP, f"an integer in 1..{MAX_SPP}")
+
+
 def max_depth(value, name: str = "max_depth") -> int:
     return _integer_in(value, name, 1, MAX_DEPTH_LIMIT, f"an integer in 1..{MAX_DEPTH_LIMIT}")
 

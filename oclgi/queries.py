@@ -195,6 +195,16 @@ def real_array(value, name: str) -> np.ndarray:
     return a.astype(np.float64)
 
 
+def stack(images: list) -> QueryPoints:
+    """Camera points of several images of one size (a render's samples per
+    pixel), one image after the other: shape (len * height, width)."""
+    h, w = images[0].shape
+    if any(im.shape != (h, w) for im in images):
+        raise OclgiError("stack: the images of points differ in size")
+    return QueryPoints(np.concatenate([im.positions for im in images]), np.concatenate([im.normals for im in images]),
+                       np.concatenate([im.barys for im in images]), kind=images[0].kind, shape=(len(images) * h, w))
+
+
 def from_arrays(points, normals) -> QueryPoints:
     """User points: (n, 3) positions and (n, 3) normals, validated.
 

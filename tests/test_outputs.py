@@ -165,10 +165,10 @@ def test_full_disk_cli_render(scene, tmp_path):
 
         real = io.write_images
 
-        def full_disk(images):
+        def full_disk(images, **kw):
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             resource.setrlimit(resource.RLIMIT_FSIZE, (200, 200))
-            return real(images)
+            return real(images, **kw)
 
         io.write_images = full_disk
         sys.exit(cli.main(sys.argv[1:]))
@@ -207,8 +207,8 @@ SLOW_WRITE = textwrap.dedent("""
 
     real = io.write_image_file
 
-    def slow(tmp, path, pixels):
-        real(tmp, path, pixels)
+    def slow(tmp, path, pixels, metadata=None):
+        real(tmp, path, pixels, metadata)
         print("writing", flush=True)  # the temporary file exists now
         # Short sleeps: the signal may reach one of the OpenCL runtime's
         # threads, and Python runs its handler only once the main thread wakes.

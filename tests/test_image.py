@@ -1,0 +1,60 @@
+"""The image pipeline: samples per pixel (each a query point, the photons
+shared), their box filter, and alpha as coverage."""
+
+import numpy as np
+import pytest
+
+import oclgi
+from oclgi.engine import sample_offsets
+
+
+@pytest.fixture(scope="module")
+def engine(scenes_dir):
+    return oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_bunny.toml"))
+
+
+def test_samples_per_pixel_are_the_mean_of_one_sample_images(engine):
+    kw = dict(photons=30_000, width=24, height=24)
+    four = engine.render(spp=4, **kw)
+    assert four.radiance.shape == (24, 24, 3) and four.stats.points == 4 * 24 * 24
+    cam = engine.view_camera(None, 24, 24)
+    offsets = sample_offsets(4)
+    assert offsets[0] == (0.5, 0.5) and len(set(offsets)) == 4
+    assert all(0 <= x < 1 and 0 <= y < 1 for x, y in offsets)
+    singles = []
+    for off in offsets:
+        pts = engine.view_points(cam, (0, 0, 24, 24), offset=off)
+        est = engine.irradiance(pts, photons=30_000)
+        singles.append(engine.shade(pts, est.estimator.irr)[0])
+    mean = np.mean(np.stack(singles).astype(np.float64), axis=0).astype(np.float32)
+    assert four.radiance.tobytes() == mean.tobytes()  # the same sums per point, the same filter
+    # one sample is the pixel's centre: the plain render, bit for bit
+    one = engine.render(**kw)
+    assert one.radiance.tobytes() == singles[0].tobytes()
+    # the edges: pixels some samples of which miss the scene (the open front) have partial alpha
+    alpha = four.pixels[..., 3]
+    assert set(np.unique(one.pixels[..., 3])) <= {0, 255}
+    partial = (alpha > 0) & (alpha < 255)
+    assert partial.any() and (alpha == 0).any() and (alpha == 255).any()
+    assert np.array_equal(alpha == 0, (one.pixels[..., 3] == 0) & (alpha == 0))
+
+
+def test_spp_is_checked(engine):
+    for bad in (0, 257, 1.5, True):
+        with pytest.raises(oclgi.OclgiError, match="spp"):
+            engine.render(photons=1000, width=8, height=8, spp=bad)
+
+
+def test_images_say_how_they_were_made(engine, tmp_path):
+    import OpenImageIO as oiio
+
+    result = engine.render(photons=20_000, width=16, height=16, spp=2, seed=7, method="impact")
+    exr, png = oclgi.save_render(result, tmp_path / "r.exr")
+    for path in (exr, png):
+        spec = oiio.ImageInput.open(str(path)).spec()
+        got = {a.name: spec.getattribute(a.name) for a in spec.extra_attribs if a.name.startswith("oclgi:")}
+        assert got == result.metadata, path
+    m = result.metadata
+    assert (m["oclgi:method"], m["oclgi:photons"], m["oclgi:seed"], m["oclgi:spp"]) == ("impact", "20000", "7", "2")
+    assert m["oclgi:camera_position"] == "0 1 3.94" and m["oclgi:version"] == oclgi.__version__
+    assert m["oclgi:segments"] == str(result.stats.segments)
