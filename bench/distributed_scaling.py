@@ -33,6 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' rigid motions
+from test_instances import _rigid  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 
@@ -58,17 +61,6 @@ def _bunny_scene():
         "camera": {"position": [0, 1, 3.94], "look_at": [0, 1, 0], "fov": 39.3},
         "photons": {"seed": 21, "max_depth": 10},
     }, base_dir=SCENES)
-
-
-def _rigid(rng, shift):
-    a = rng.normal(size=3)
-    a /= np.linalg.norm(a)
-    angle = rng.uniform(0, 2 * np.pi)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    m = np.eye(4)
-    m[:3, :3] = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-    m[:3, 3] = rng.uniform(-shift, shift, 3)
-    return m
 
 
 def worker_scaling(photons: int, side: int) -> dict:
@@ -110,7 +102,7 @@ def worker_session(photons: int, side: int, moves: int, drag: bool) -> dict:
             m = np.eye(4)
             m[0, 3] = -0.01 * (i + 1)
         else:  # jumps: anywhere in the room, any orientation
-            m = _rigid(rng, 0.5)
+            m = _rigid(rng, 0.5)  # tests/test_instances.py: a random rigid motion
             m[1, 3] = abs(m[1, 3])
         comm.Barrier()
         t1 = time.perf_counter()
