@@ -360,3 +360,19 @@ def test_writing_plots_leaves_the_users_matplotlib_alone(plane_study, tmp_path):
     finally:
         plt.close(fig)
         matplotlib.use(before)
+
+
+def test_a_study_shows_as_a_table_in_a_notebook(plane_study):
+    from html.parser import HTMLParser
+
+    cells = []
+
+    class Cells(HTMLParser):
+        def handle_data(self, data):
+            cells.append(data)
+
+    html = plane_study._repr_html_()
+    Cells().feed(html)
+    assert html.count("<tr>") == len(plane_study.rows) + 1
+    for row in plane_study.rows:
+        assert row.label in cells and f"{row.photons}" in cells

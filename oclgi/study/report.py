@@ -26,6 +26,21 @@ COLUMNS = ["label", "method", "photons", "radius", "k", "estimator", "seeds", "p
 PLOTS = ("error_vs_time.png", "variance_vs_photons.png")
 
 
+HTML_COLUMNS = ["label", "photons", "seeds", "points", "rel_bias", "rel_var", "nrmse", "time_s", "efficiency",
+                "bound_ratio_max"]
+
+
+def html_table(result) -> str:
+    """The study's main columns as an HTML table (a notebook shows it inline)."""
+    import html
+
+    head = "".join(f"<th>{c}</th>" for c in HTML_COLUMNS)
+    rows = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.summary.get(c, '')))}</td>" for c in HTML_COLUMNS)
+                   + "</tr>" for r in result.rows)
+    return (f"<p>{html.escape(result.scene_name)}: {len(result.rows)} configurations x {len(result.seeds)} seeds at "
+            f"{len(result.points):,} points</p><table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+
+
 def _fmt(v) -> str:
     if isinstance(v, (float, np.floating)):
         if not math.isfinite(v):

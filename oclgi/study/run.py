@@ -265,6 +265,12 @@ class StudyResult:
         return out
 
     # writers (oclgi/study/report.py)
+    def _repr_html_(self) -> str:
+        """The table, shown inline by Jupyter."""
+        from .report import html_table
+
+        return html_table(self)
+
     def to_markdown(self) -> str:
         from .report import markdown
 
