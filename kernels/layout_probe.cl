@@ -12,6 +12,8 @@ __kernel void layout_probe(__global int *out)
 {
     int i = 0;
     SIZE(BvhNode); OFF(BvhNode, lo); OFF(BvhNode, first); OFF(BvhNode, hi); OFF(BvhNode, count);
+    SIZE(BvhNode8); OFF(BvhNode8, lox); OFF(BvhNode8, loy); OFF(BvhNode8, loz); OFF(BvhNode8, hix);
+    OFF(BvhNode8, hiy); OFF(BvhNode8, hiz); OFF(BvhNode8, child);
     SIZE(Tri); OFF(Tri, v0); OFF(Tri, id); OFF(Tri, v1); OFF(Tri, pad1); OFF(Tri, v2); OFF(Tri, pad2);
     SIZE(Instance); OFF(Instance, world_from_object); OFF(Instance, object_from_world); OFF(Instance, lo);
     OFF(Instance, root); OFF(Instance, hi); OFF(Instance, first_tri); OFF(Instance, n_tris); OFF(Instance, pad);
