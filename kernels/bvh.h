@@ -225,7 +225,13 @@ inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tri
             int4 c4 = in.lo + in.hi;
             int2 c2 = c4.lo + c4.hi;
             int n_in = -(c2.x + c2.y);
-            if (n_in > 0) {
+            if (n_in == 1) { /* the one lane hit has the largest key */
+                int4 m4 = max(key.lo, key.hi);
+                int2 m2 = max(m4.lo, m4.hi);
+                ref = ((__global const int *)&n->child)[max(m2.x, m2.y) & 7];
+                continue;
+            }
+            if (n_in > 1) {
                 key = bvh_sort8_desc(key);
                 vstore8(shuffle(n->child, as_uint8(key) & 7u), 0, stack + sp);
                 vstore8(as_float8(key & ~7), 0, stack_t + sp);
