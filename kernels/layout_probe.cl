@@ -1,6 +1,7 @@
 /* layout_probe.cl: reports sizeof and offsetof of every shared struct, in
  * the order of oclgi/cl/layout.py (struct by struct, size first, then each
- * field), so tests/test_layout.py can compare them with the numpy dtypes.
+ * field), so tests/test_layout.py can compare them with the numpy dtypes;
+ * after the end marker, the alignment of BvhNode8.
  * Entry point: layout_probe, one work-item. */
 #include "oclgi_types.h"
 
@@ -31,4 +32,6 @@ __kernel void layout_probe(__global int *out)
     OFF(RayMapDisc, lo); OFF(RayMapDisc, pad2); OFF(RayMapDisc, hi); OFF(RayMapDisc, pad3);
     SIZE(ScRecord); OFF(ScRecord, org_tmax); OFF(ScRecord, dir_inv2);
     out[i++] = -1; /* end marker */
+    /* after it, the alignment of the structs whose vector fields need more than 16 bytes */
+    out[i++] = (int)__alignof__(BvhNode8);
 }
