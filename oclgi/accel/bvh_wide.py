@@ -53,11 +53,14 @@ def _half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
 
 
-def collapse(nodes: np.ndarray, node_offset: int = 0, tri_offset: int = 0) -> WideData:
+def collapse(nodes: np.ndarray, node_offset: int = 0, tri_offset: int = 0, width: int = WIDE) -> WideData:
     """Wide nodes of the binary tree ``nodes`` (``BvhNode`` records, root 0,
     leaves of at most 8 triangles); child indices get ``node_offset`` added
     and triangle runs ``tri_offset`` (the object's place in the scene's joint
-    arrays)."""
+    arrays). ``width`` (2 to WIDE) caps the children of a node: fewer lanes
+    used, for measuring narrower trees in the same layout."""
+    if not 2 <= width <= WIDE:
+        raise ValueError(f"a wide node has 2 to {WIDE} children, got {width}")
     first = nodes["first"].astype(np.int64)
     count = nodes["count"].astype(np.int64)
     inner = count == 0
@@ -75,12 +78,12 @@ def collapse(nodes: np.ndarray, node_offset: int = 0, tri_offset: int = 0) -> Wi
             lanes[:, 0], lanes[:, 1] = first[roots], first[roots] + 1
             used = np.full(m, 2, np.int64)
             rows = np.arange(m)
-            for _ in range(WIDE - 2):
+            for _ in range(width - 2):
                 valid = lanes >= 0
                 openable = valid & inner[np.where(valid, lanes, 0)]
                 score = np.where(openable, area[np.where(valid, lanes, 0)], -1.0)
                 pick = np.argmax(score, axis=1)  # the first of equal areas
-                grow = (used < WIDE) & openable.any(axis=1)
+                grow = (used < width) & openable.any(axis=1)
                 if not grow.any():
                     break
                 r, k = rows[grow], pick[grow]
