@@ -275,7 +275,8 @@ def test_collapse_structure(rng, scenes_dir):
     # narrower nodes in the same layout: at most `width` lanes used, more nodes
     narrow = collapse(bvh.nodes, width=4)
     _check_wide(bvh, narrow)
-    assert np.isfinite(narrow.nodes["lox"]).sum(axis=1).max() == 4 and len(narrow.nodes) > len(collapse(bvh.nodes).nodes)
+    assert np.isfinite(narrow.nodes["lox"]).sum(axis=1).max() == 4
+    assert len(narrow.nodes) > len(collapse(bvh.nodes).nodes)
     with pytest.raises(ValueError, match="2 to 8 children"):
         collapse(bvh.nodes, width=9)
     # deterministic: the same bytes again
