@@ -94,7 +94,8 @@ RayMapDisc = np.dtype(
 ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
-    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter,
+    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment,
+    "Material": Material, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }
 
