@@ -191,8 +191,8 @@ inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tri
     float stack_t[BVH_WIDE_STACK];
     int sp = 0;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    /* With every 1/d finite no slab product is NaN, and then (lo - o) / d
-     * and (hi - o) / d are ordered by the sign of 1/d alone (rounding is
+    /* With every 1/d finite no slab product is NaN, and then (lo - o) * inv
+     * and (hi - o) * inv are ordered by the sign of inv alone (rounding is
      * monotone): the near and far planes can be chosen once per ray (field
      * indices of BvhNode8: lox..loz = 0..2, hix..hiz = 3..5), and plain
      * max/min (one instruction each) give fmax/fmin's values. An axis with
