@@ -1,6 +1,8 @@
 """BVH build time for a million triangles (``oclgi.accel.bvh_build.build_bvh``),
 for both builders: the Morton LBVH (the overlap trees') and the binned SAH
-(the scene's and the movable objects' trees).
+(the scene's and the movable objects' trees); and the time to collapse the
+SAH tree into the scene's 8-wide nodes (``oclgi.accel.bvh_wide.collapse``),
+which a scene compile adds to the SAH build.
 
 The build runs on the host in vectorised numpy each time a scene is compiled,
 so it is the start-up cost of every run; the target is at most 1 s for 10^6
@@ -23,7 +25,8 @@ import numpy as np
 
 import pytest
 
-from oclgi.accel.bvh_build import QUALITIES, build_bvh
+from oclgi.accel.bvh_build import BUILDERS, build_bvh
+from oclgi.accel.bvh_wide import collapse
 from oclgi.scene.compiled import BVH_STACK_SIZE
 
 TRIANGLES = 1_000_000
@@ -55,7 +58,7 @@ def sah_cost(nodes) -> float:
     return float((a[~leaf].sum() + (a[leaf] * nodes["count"][leaf]).sum()) / a[0])
 
 
-@pytest.mark.parametrize("quality", QUALITIES)
+@pytest.mark.parametrize("quality", BUILDERS)
 def test_bvh_build(benchmark, scale, cores_used, quality):
     n = scale(TRIANGLES)
     tris = random_triangles(n, np.random.default_rng(3))
@@ -77,3 +80,21 @@ def test_bvh_build(benchmark, scale, cores_used, quality):
     if benchmark.stats:  # absent under --benchmark-disable
         info["seconds"] = round(benchmark.stats.stats.median, 3)
         info["mtris_per_s"] = round(n / benchmark.stats.stats.median / 1e6, 3)
+
+
+def test_wide_collapse(benchmark, scale, cores_used):
+    """The SAH tree of the same triangles into 8-wide nodes."""
+    n = scale(TRIANGLES)
+    tris = random_triangles(n, np.random.default_rng(3))
+    bvh = build_bvh(tris.min(axis=1), tris.max(axis=1), quality="sah")
+
+    benchmark.group = "bvh build"
+    with cores_used():
+        wide = benchmark.pedantic(collapse, args=(bvh.nodes,), rounds=3, warmup_rounds=1)
+
+    assert len(wide.nodes) < len(bvh.nodes) // 4
+    info = benchmark.extra_info
+    info.update(triangles=n, binary_nodes=len(bvh.nodes), wide_nodes=len(wide.nodes), wide_depth=wide.depth,
+                binary_depth=bvh.depth, stack_need=wide.stack_need)
+    if benchmark.stats:
+        info["seconds"] = round(benchmark.stats.stats.median, 3)

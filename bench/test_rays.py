@@ -17,10 +17,13 @@ Two ray sets of 10^6 rays each:
   normal of a random side, directions cosine-distributed about that normal,
   as the rays of diffuse photon bounces are.
 
-Each runs on both scene trees, the binned SAH tree (the default) and the
-Morton LBVH, with the traversal work of each counted exactly (nodes visited
-and triangles tested per ray, ``oclgi.accel.bvh.traversal_work``): the
-count is what a tree changes, the time what it costs on this machine.
+Each runs on every scene tree (``oclgi.accel.bvh_build.QUALITIES``): the
+binned SAH tree in 8-wide nodes (the default, "sah8"), the same tree
+traversed binary ("sah"), and the Morton LBVH both ways ("lbvh8", "lbvh"),
+with the traversal work of each counted exactly (nodes visited and
+triangles tested per ray, ``oclgi.accel.bvh.traversal_work``; a wide node
+tests 8 boxes, a binary one 2): the count is what a tree changes, the time
+what it costs on this machine. ``-k sah`` runs the two SAH layouts alone.
 
 Both must agree on hit or miss for more than 99% of the rays (float
 intersectors may differ on grazing rays); nothing is asserted about time.
@@ -127,7 +130,8 @@ def test_closest_hit(benchmark, request, scale, cores_used, scene, rays, tree):
     info = benchmark.extra_info
     nodes, tests = traversal_work(engine.queue, compiled, origins, dirs)
     info.update(scene=scene, rays=rays, tree=tree, n_rays=n, triangles=engine.scene.n_triangles,
-                tree_nodes=compiled.n_nodes, tree_depth=compiled.bvh_depth,
+                tree_nodes=compiled.n_nodes, tree_depth=compiled.bvh_depth, wide=compiled.bvh_wide,
+                binary_nodes=compiled.n_binary_nodes,
                 nodes_per_ray=round(float(nodes.mean()), 2), tests_per_ray=round(float(tests.mean()), 2),
                 hit_fraction=round(float(np.mean(tri >= 0)), 4), hit_agreement=round(agree, 6),
                 same_triangle=round(float(np.mean(tri == prim)), 6), nearer_hit_missed=int(missed.sum()),

@@ -7,8 +7,9 @@ segments/s is the engine's raw speed on a scene. It depends on the BVH
 (closest hit per segment) and on memory: every path writes its ``max_depth``
 segment slots, the unused ones zero-filled.
 
-Each scene is traced with both scene trees (binned SAH, the default, and
-the Morton LBVH), the same paths with each.
+Each scene is traced with every scene tree (``oclgi.accel.bvh_build.QUALITIES``:
+the binned SAH tree in 8-wide nodes, the default, and binary; the Morton
+LBVH both ways), the same paths with each. ``-k sah`` runs the SAH layouts alone.
 
 The workload is what ``Engine.irradiance`` does for its trace step: the same
 ``PhotonTracer``, the same batch size, the path lengths read back per batch.

@@ -1,18 +1,32 @@
 /* bvh.h: closest-hit and any-hit traversal of the scene's two-level BVH.
  *
- * Bottom level: one BVH per object (oclgi_types.h BvhNode; children of an
- * inner node adjacent at first and first + 1, leaves a run of triangles in
- * BVH order; all objects' nodes in one array, each object's root given by
- * its Instance). Top level: the instances, each a world-space box and a
+ * Bottom level: one BVH per object, all objects' nodes in one array, each
+ * object's root given by its Instance, in one of two layouts (the host's
+ * choice, oclgi/scene/compiled.py):
+ *   - binary (Instance.root >= 0): oclgi_types.h BvhNode, children of an
+ *     inner node adjacent at first and first + 1, leaves a run of triangles
+ *     in BVH order;
+ *   - wide (Instance.root < 0, the root node is ~root): BvhNode8, the same
+ *     binary tree collapsed into nodes of up to 8 children
+ *     (oclgi/accel/bvh_wide.py) whose boxes are slabbed all at once, one
+ *     float8 op per plane (PoCL does not vectorise across work-items: the
+ *     lanes are written out). The `nodes` buffer holds the layout the
+ *     instances' roots say.
+ * Top level: the instances, each a world-space box and a
  * transform; a ray is moved into an object's frame (the direction is not
  * renormalised, so distances t stay world distances) and traversed there.
  * Moving an object changes its Instance only: no BVH is rebuilt. The top
  * level is a flat list: a move touches one record, and scenes have few
  * movable objects (a BVH over instances when they have many).
  *
- * Traversal visits the nearer child first and keeps each pushed node's entry
- * distance, so a node farther than the best hit is dropped when popped. The
- * host guarantees every depth fits OCLGI_BVH_STACK_SIZE.
+ * Both traversals visit the nearer children first and keep each pushed
+ * node's entry distance, so a node farther than the best hit is dropped
+ * when popped. They compute every box entry with the same slab arithmetic
+ * (box.h's) and test leaves' triangles in the same order with the same
+ * test, so they return the same hit bit for bit, but for which of two
+ * triangles at exactly the same distance is found first. The host
+ * guarantees every traversal fits its stack (OCLGI_BVH_STACK_SIZE entries
+ * binary, BVH_WIDE_STACK wide).
  *
  * Kernels take the scene as SCENE_ARGS and pass it on as SCENE_PASS.
  */
@@ -23,7 +37,7 @@
 #include "geometry.h"
 #include "box.h"
 
-#define SCENE_ARGS __global const BvhNode *nodes, __global const Tri *tris, \
+#define SCENE_ARGS __global const void *nodes, __global const Tri *tris, \
                    __global const Instance *instances, int n_instances
 #define SCENE_PASS nodes, tris, instances, n_instances
 
@@ -74,10 +88,10 @@ inline float3 xform_vector(__global const float *m, float3 v)
                     r2.x * v.x + r2.y * v.y + r2.z * v.z);
 }
 
-/* One object's BVH from its root; hit->t is the current limit and is
- * lowered by every hit found. */
-inline int bvh_traverse(__global const BvhNode *nodes, __global const Tri *tris, int root,
-                        float3 o, float3 d, int any_hit, Hit *hit)
+/* One object's binary BVH from its root; hit->t is the current limit and
+ * is lowered by every hit found. */
+inline int bvh2_traverse(__global const BvhNode *nodes, __global const Tri *tris, int root,
+                         float3 o, float3 d, int any_hit, Hit *hit)
 {
     float3 inv = 1.0f / d;
     RayShear shear = ray_shear(d);
@@ -124,6 +138,137 @@ inline int bvh_traverse(__global const BvhNode *nodes, __global const Tri *tris,
         }
         node = stack[sp];
     }
+}
+
+/* The wide traversal's stack: a node stores a whole vector of entries at
+ * the top (oclgi/accel/bvh_wide.py WIDE_STACK mirrors it and checks every
+ * tree against it). */
+#define BVH_WIDE_STACK (2 * OCLGI_BVH_STACK_SIZE)
+
+/* One step of a sorting network over 8 int lanes: each lane meets lane
+ * perm[i] and keeps the min where mask is set, else the max. */
+#define BVH_SORT_STEP(k, p0, p1, p2, p3, p4, p5, p6, p7, m0, m1, m2, m3, m4, m5, m6, m7) do { \
+        int8 w_ = shuffle(k, (uint8)(p0, p1, p2, p3, p4, p5, p6, p7)); \
+        k = select(max(k, w_), min(k, w_), (int8)(m0, m1, m2, m3, m4, m5, m6, m7)); } while (0)
+
+/* max/min of lanes without NaN: the compare-and-select one instruction does. */
+#define BVH_MAX8(a, b) select((b), (a), (a) > (b))
+#define BVH_MIN8(a, b) select((b), (a), (a) < (b))
+
+/* The 8 keys in descending order (bitonic network, 6 steps). */
+inline int8 bvh_sort8_desc(int8 k)
+{
+    BVH_SORT_STEP(k, 1, 0, 3, 2, 5, 4, 7, 6, 0, -1, -1, 0, 0, -1, -1, 0);
+    BVH_SORT_STEP(k, 2, 3, 0, 1, 6, 7, 4, 5, 0, 0, -1, -1, -1, -1, 0, 0);
+    BVH_SORT_STEP(k, 1, 0, 3, 2, 5, 4, 7, 6, 0, -1, 0, -1, -1, 0, -1, 0);
+    BVH_SORT_STEP(k, 4, 5, 6, 7, 0, 1, 2, 3, 0, 0, 0, 0, -1, -1, -1, -1);
+    BVH_SORT_STEP(k, 2, 3, 0, 1, 6, 7, 4, 5, 0, 0, -1, -1, 0, 0, -1, -1);
+    BVH_SORT_STEP(k, 1, 0, 3, 2, 5, 4, 7, 6, 0, -1, 0, -1, 0, -1, 0, -1);
+    return k;
+}
+
+/* One object's wide BVH from its root node. A node's 8 child boxes are
+ * slabbed together with box_slab's arithmetic lane by lane (the same bits
+ * as the binary walk's test of the same box). Each hit lane's key is its
+ * entry distance with the lane number in the 3 low mantissa bits (entry
+ * distances are >= 0, so the int order is the float order; misses are -1);
+ * sorted in descending order, the keys' children and distances go to the
+ * stack as whole vectors, the farthest deepest, and the nearest is taken
+ * straight back off the top. A pushed entry keeps its distance with the
+ * lane bits cleared: at most 7 ulps below the true entry, so culling on pop
+ * never drops a node the exact distance would keep.
+ *
+ * An unused lane's box is lo = hi = +inf: along an axis with 1/d >= 0 its
+ * entry is +inf, and with all three negative its exit is -inf; either way
+ * it is a miss (the test below counts an entry of +inf as one, as the binary
+ * walk's box_entry does). */
+inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tris, int root,
+                         float3 o, float3 d, int any_hit, Hit *hit)
+{
+    float3 inv = 1.0f / d;
+    RayShear shear = ray_shear(d);
+    int stack[BVH_WIDE_STACK];
+    float stack_t[BVH_WIDE_STACK];
+    int sp = 0;
+    const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
+    /* With every 1/d finite no slab product is NaN, and then (lo - o) * inv
+     * and (hi - o) * inv are ordered by the sign of inv alone (rounding is
+     * monotone): the near and far planes can be chosen once per ray (field
+     * indices of BvhNode8: lox..loz = 0..2, hix..hiz = 3..5), and plain
+     * max/min (one instruction each) give fmax/fmin's values. An axis with
+     * d = 0 (1/d infinite) takes box_slab's own NaN-dropping form. */
+    int finite = isfinite(inv.x) && isfinite(inv.y) && isfinite(inv.z);
+    int3 near = (int3)(inv.x >= 0.0f ? 0 : 3, inv.y >= 0.0f ? 1 : 4, inv.z >= 0.0f ? 2 : 5);
+    int ref = root;
+    for (;;) {
+        if (ref >= 0) {
+            __global const BvhNode8 *n = &nodes[ref];
+            BVH_COUNT(hit, nodes, 1);
+            float8 enter, leave;
+            if (finite) {
+                __global const float8 *f = (__global const float8 *)n;
+                float8 tnx = (f[near.x] - o.x) * inv.x, tfx = (f[3 - near.x] - o.x) * inv.x;
+                float8 tny = (f[near.y] - o.y) * inv.y, tfy = (f[5 - near.y] - o.y) * inv.y;
+                float8 tnz = (f[near.z] - o.z) * inv.z, tfz = (f[7 - near.z] - o.z) * inv.z;
+                enter = BVH_MAX8(BVH_MAX8(tnx, tny), BVH_MAX8(tnz, (float8)(0.0f)));
+                leave = BVH_MIN8(BVH_MIN8(tfx, tfy), BVH_MIN8(tfz, (float8)(hit->t))) * 1.0000004f;
+            } else {
+                float8 t0x = (n->lox - o.x) * inv.x, t1x = (n->hix - o.x) * inv.x;
+                float8 t0y = (n->loy - o.y) * inv.y, t1y = (n->hiy - o.y) * inv.y;
+                float8 t0z = (n->loz - o.z) * inv.z, t1z = (n->hiz - o.z) * inv.z;
+                enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), 0.0f));
+                leave = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)), fmin(fmax(t0z, t1z), hit->t)) * 1.0000004f;
+            }
+            int8 in = (enter <= leave) & (enter < INFINITY);
+            /* -0.0f and +0.0f both become key 0 | lane */
+            int8 key = select((int8)(-1), (as_int8(enter) & 0x7FFFFFF8) | lane, in);
+            int4 c4 = in.lo + in.hi;
+            int2 c2 = c4.lo + c4.hi;
+            int n_in = -(c2.x + c2.y);
+            if (n_in == 1) { /* the one lane hit has the largest key */
+                int4 m4 = max(key.lo, key.hi);
+                int2 m2 = max(m4.lo, m4.hi);
+                ref = ((__global const int *)&n->child)[max(m2.x, m2.y) & 7];
+                continue;
+            }
+            if (n_in > 1) {
+                key = bvh_sort8_desc(key);
+                vstore8(shuffle(n->child, as_uint8(key) & 7u), 0, stack + sp);
+                vstore8(as_float8(key & ~7), 0, stack_t + sp);
+                sp += n_in - 1;
+                ref = stack[sp];
+                continue;
+            }
+        } else {
+            int run = ~ref;
+            int first = run >> 3, end = first + (run & 7) + 1;
+            BVH_COUNT(hit, tests, end - first);
+            for (int i = first; i < end; ++i) {
+                __global const Tri *tr = &tris[i];
+                float t, u, v;
+                if (tri_intersect(o, shear, vload3(0, tr->v0), vload3(0, tr->v1), vload3(0, tr->v2),
+                                  hit->t, &t, &u, &v)) {
+                    hit->t = t; hit->u = u; hit->v = v; hit->tri = tr->id;
+                    if (any_hit) return hit->tri;
+                }
+            }
+        }
+        /* pop the next node still nearer than the best hit */
+        for (;;) {
+            if (sp == 0) return hit->tri;
+            --sp;
+            if (stack_t[sp] <= hit->t) break;
+        }
+        ref = stack[sp];
+    }
+}
+
+/* One object's BVH, in the layout its Instance's root says (see the top). */
+inline int bvh_traverse(__global const void *nodes, __global const Tri *tris, int root,
+                        float3 o, float3 d, int any_hit, Hit *hit)
+{
+    if (root < 0) return bvh8_traverse((__global const BvhNode8 *)nodes, tris, ~root, o, d, any_hit, hit);
+    return bvh2_traverse((__global const BvhNode *)nodes, tris, root, o, d, any_hit, hit);
 }
 
 inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hit, Hit *hit)

@@ -1,6 +1,7 @@
 /* layout_probe.cl: reports sizeof and offsetof of every shared struct, in
  * the order of oclgi/cl/layout.py (struct by struct, size first, then each
- * field), so tests/test_layout.py can compare them with the numpy dtypes.
+ * field), so tests/test_layout.py can compare them with the numpy dtypes;
+ * after the end marker, the alignment of BvhNode8.
  * Entry point: layout_probe, one work-item. */
 #include "oclgi_types.h"
 
@@ -12,6 +13,8 @@ __kernel void layout_probe(__global int *out)
 {
     int i = 0;
     SIZE(BvhNode); OFF(BvhNode, lo); OFF(BvhNode, first); OFF(BvhNode, hi); OFF(BvhNode, count);
+    SIZE(BvhNode8); OFF(BvhNode8, lox); OFF(BvhNode8, loy); OFF(BvhNode8, loz); OFF(BvhNode8, hix);
+    OFF(BvhNode8, hiy); OFF(BvhNode8, hiz); OFF(BvhNode8, child);
     SIZE(Tri); OFF(Tri, v0); OFF(Tri, id); OFF(Tri, v1); OFF(Tri, pad1); OFF(Tri, v2); OFF(Tri, pad2);
     SIZE(Instance); OFF(Instance, world_from_object); OFF(Instance, object_from_world); OFF(Instance, lo);
     OFF(Instance, root); OFF(Instance, hi); OFF(Instance, first_tri); OFF(Instance, n_tris); OFF(Instance, pad);
@@ -29,4 +32,6 @@ __kernel void layout_probe(__global int *out)
     OFF(RayMapDisc, lo); OFF(RayMapDisc, pad2); OFF(RayMapDisc, hi); OFF(RayMapDisc, pad3);
     SIZE(ScRecord); OFF(ScRecord, org_tmax); OFF(ScRecord, dir_inv2);
     out[i++] = -1; /* end marker */
+    /* after it, the alignment of the structs whose vector fields need more than 16 bytes */
+    out[i++] = (int)__alignof__(BvhNode8);
 }

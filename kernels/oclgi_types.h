@@ -38,6 +38,22 @@ typedef struct {
     int count;   /* 0 for inner nodes */
 } BvhNode;
 
+/* The scene's wide node (bvh.h): up to 8 children, their boxes as SoA
+ * float8 fields (child k in lane k), so one float8 op slabs every child
+ * against one plane. child[k] >= 0: an inner child, index of its BvhNode8;
+ * child[k] < 0: a leaf, ~(first_tri << 3 | (count - 1)), triangles [first,
+ * first + count), count 1..8. An unused lane has the box lo = hi = +inf,
+ * which every ray misses (bvh.h says why). 224 bytes, 32-byte aligned. */
+typedef struct {
+    float8 lox;
+    float8 loy;
+    float8 loz;
+    float8 hix;
+    float8 hiy;
+    float8 hiz;
+    int8 child;
+} BvhNode8;
+
 typedef struct {
     float v0[3];
     int id;      /* triangle id in scene order */

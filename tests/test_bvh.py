@@ -5,7 +5,7 @@ import pytest
 
 import oclgi
 from oclgi.accel.bvh import any_hits, closest_hits, traversal_work
-from oclgi.accel.bvh_build import QUALITIES, build_bvh
+from oclgi.accel.bvh_build import BUILDERS, QUALITIES, build_bvh
 from oclgi.accel.bvh_sah import MEDIAN_DEPTH
 from oclgi.cl.constants import BVH_STACK_SIZE
 from oclgi.scene.compiled import CompiledScene
@@ -77,27 +77,31 @@ def test_closest_hit_equals_brute_force_bunny(bunny, rng):
     _check_against_brute_force(bunny, rng, 2_000)
 
 
-def test_scene_trees_are_sah_by_default(bunny):
-    assert bunny.compiled.bvh_quality == "sah"
+def test_scene_trees_are_wide_sah_by_default(bunny):
+    assert bunny.compiled.bvh_quality == "sah8" and bunny.compiled.bvh_wide
 
 
-def test_closest_hit_equals_brute_force_lbvh(cornell_spheres, rng):
-    """The Morton tree (the builder the overlap trees use) traverses to the
-    same hits as brute force too."""
-    lbvh = CompiledScene(cornell_spheres.ctx, cornell_spheres.scene, bvh_quality="lbvh")
-    _check_against_brute_force(cornell_spheres, rng, 10_000, lbvh)
+@pytest.mark.parametrize("quality", [q for q in QUALITIES if q != "sah8"])
+def test_closest_hit_equals_brute_force_every_tree(cornell_spheres, rng, quality):
+    """The binary trees and the wide Morton tree traverse to the same hits
+    as brute force too (the default, sah8, is checked above; the wide trees
+    against the binary ones bit for bit in test_bvh_wide.py)."""
+    compiled = CompiledScene(cornell_spheres.ctx, cornell_spheres.scene, bvh_quality=quality)
+    assert compiled.bvh_wide == quality.endswith("8")
+    _check_against_brute_force(cornell_spheres, rng, 10_000, compiled)
 
 
 def test_sah_tree_does_less_traversal_work_than_lbvh(bunny, rng):
     """The point of SAH: fewer nodes visited per ray, for the same hits
     (counted by the counting build of the closest-hit kernel)."""
     origins, dirs = _random_rays(bunny.scene, rng, 20_000)
+    sah = CompiledScene(bunny.ctx, bunny.scene, bvh_quality="sah")
     lbvh = CompiledScene(bunny.ctx, bunny.scene, bvh_quality="lbvh")
-    nodes_sah, tests_sah = traversal_work(bunny.queue, bunny.compiled, origins, dirs)
+    nodes_sah, tests_sah = traversal_work(bunny.queue, sah, origins, dirs)
     nodes_lbvh, tests_lbvh = traversal_work(bunny.queue, lbvh, origins, dirs)
     assert nodes_sah.min() >= 1 and tests_sah.sum() > 0
     assert nodes_sah.sum() < 0.95 * nodes_lbvh.sum()
-    a = closest_hits(bunny.queue, bunny.compiled, origins, dirs)
+    a = closest_hits(bunny.queue, sah, origins, dirs)
     b = closest_hits(bunny.queue, lbvh, origins, dirs)
     assert (a[3] == b[3]).mean() > 0.999
 
@@ -131,7 +135,7 @@ def _check_structure(bvh, lo, hi, leaf_size=4):
         assert (nodes["hi"][i] >= hi[ids].astype(np.float32)).all()
 
 
-@pytest.mark.parametrize("quality", QUALITIES)
+@pytest.mark.parametrize("quality", BUILDERS)
 def test_bvh_structure_invariants(rng, quality):
     c = rng.random((5000, 3))
     lo, hi = c - 0.01, c + 0.02

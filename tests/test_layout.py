@@ -100,3 +100,12 @@ def test_header_declares_every_struct_with_layout_py_fields():
         assert m, f"{name} not declared in oclgi_types.h"
         fields = re.findall(r"\b(\w+)\s*(?:\[\s*\d+\s*\])?\s*;", m.group(1))
         assert fields == list(dt.names), name
+
+
+def test_wide_node_is_32_byte_aligned(probe_result):
+    """BvhNode8's float8 fields are one AVX register each: the device aligns
+    the struct to 32 bytes, and its size keeps every record of an array so."""
+    probed = _output(probe_result)
+    end = int(np.argmax(probed == -1))
+    assert probed[end + 1] == 32
+    assert layout.BvhNode8.itemsize % 32 == 0

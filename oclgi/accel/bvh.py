@@ -53,7 +53,11 @@ def any_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
 def traversal_work(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
     """(nodes visited, triangles tested) by each ray's closest-hit query: the
     exact work count behind rays/s, for comparing trees (the counting build
-    of ``bvh_query.cl``; every other kernel traverses without counters)."""
+    of ``bvh_query.cl``; every other kernel traverses without counters).
+    A node is a record the walk reads: a binary node (two child boxes
+    tested, or a leaf's triangles) or a wide node (all of its up to 8 child
+    boxes tested at once; a wide tree's leaves are lanes of their parent,
+    so reaching one counts its triangles only)."""
     ctx = queue.context
     n = len(origins)
     ob, db = _rays(ctx, origins, dirs, tmax)

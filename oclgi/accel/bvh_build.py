@@ -44,18 +44,30 @@ def bit_length(x: np.ndarray) -> np.ndarray:
     return np.where(hi > 0, 32 + np.frexp(hi)[1], np.frexp(lo)[1]).astype(np.int64)
 
 
-QUALITIES = ("lbvh", "sah")
+# The builders of binary trees.
+BUILDERS = ("lbvh", "sah")
+# The scene trees (oclgi/scene/compiled.py): a builder, and "8" for its tree
+# collapsed into 8-wide nodes (bvh_wide.py), which the scene's traversal
+# slabs 8 boxes at a time; without it the binary tree is traversed as built.
+QUALITIES = ("lbvh", "sah", "lbvh8", "sah8")
+
+
+def scene_tree(quality: str) -> tuple[str, bool]:
+    """(builder, wide) of a scene tree name of QUALITIES."""
+    if quality not in QUALITIES:
+        raise ValueError(f"BVH quality must be one of {QUALITIES}, got {quality!r}")
+    return quality.removesuffix("8"), quality.endswith("8")
 
 
 def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh") -> BvhData:
-    """A BVH over primitive boxes: ``quality="lbvh"`` splits on the 30-bit
-    Morton codes of their centres (fast; the overlap trees use it), ``"sah"``
-    by the binned surface area heuristic (``bvh_sah.py``; better trees for
-    ray traversal)."""
+    """A binary BVH over primitive boxes: ``quality="lbvh"`` splits on the
+    30-bit Morton codes of their centres (fast; the overlap trees use it),
+    ``"sah"`` by the binned surface area heuristic (``bvh_sah.py``; better
+    trees for ray traversal)."""
     if quality == "sah":
         return build_sah(box_lo, box_hi, leaf_size)
     if quality != "lbvh":
-        raise ValueError(f"BVH quality must be one of {QUALITIES}, got {quality!r}")
+        raise ValueError(f"BVH quality must be one of {BUILDERS}, got {quality!r}")
     box_lo = np.asarray(box_lo, dtype=np.float32)
     box_hi = np.asarray(box_hi, dtype=np.float32)
     if len(box_lo) == 0:

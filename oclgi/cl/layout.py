@@ -18,6 +18,14 @@ f4, i4 = np.float32, np.int32
 # (siblings are adjacent). Leaf: triangles [first, first + count).
 BvhNode = np.dtype([("lo", f4, 3), ("first", i4), ("hi", f4, 3), ("count", i4)])
 
+# The scene's wide BVH node, 224 bytes (kernels/bvh.h, oclgi/accel/bvh_wide.py):
+# the boxes of up to 8 children as SoA lanes, and per lane the child: an
+# inner child's node index (>= 0) or a leaf's ~(first_tri << 3 | count - 1);
+# unused lanes have lo = hi = +inf.
+WIDE = LANES  # one float8 per field
+BvhNode8 = np.dtype([("lox", f4, WIDE), ("loy", f4, WIDE), ("loz", f4, WIDE), ("hix", f4, WIDE), ("hiy", f4, WIDE),
+                     ("hiz", f4, WIDE), ("child", i4, WIDE)])
+
 # Triangle in BVH order, 48 bytes: its three vertices (not edges, so that
 # triangles sharing an edge see bit-identical vertices and the watertight
 # test holds) and its id in scene order.
@@ -86,7 +94,8 @@ RayMapDisc = np.dtype(
 ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
-    "BvhNode": BvhNode, "Tri": Tri, "Instance": Instance, "Segment": Segment, "Material": Material, "Emitter": Emitter,
+    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment,
+    "Material": Material, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }
 

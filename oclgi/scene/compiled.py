@@ -14,7 +14,8 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from ..accel.bvh_build import build_bvh
+from ..accel.bvh_build import build_bvh, scene_tree
+from ..accel.bvh_wide import WIDE_STACK, collapse
 from ..cl.constants import BVH_STACK_SIZE, FIXED_ONE
 from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
@@ -26,8 +27,10 @@ F32_MAX = float(np.finfo(np.float32).max)
 
 
 # The scene's and the movable objects' trees: built once per scene (a move
-# changes a transform only), traversed by every ray of every kernel.
-BVH_QUALITY = "sah"
+# changes a transform only), traversed by every ray of every kernel. The
+# binned SAH tree collapsed into 8-wide nodes (oclgi/accel/bvh_build.py
+# QUALITIES has the others).
+BVH_QUALITY = "sah8"
 
 
 def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
@@ -53,6 +56,16 @@ def as_transform(matrix) -> np.ndarray:
 
 
 class CompiledScene:
+    """``bvh_quality`` names the objects' trees (oclgi/accel/bvh_build.py
+    QUALITIES): "sah8" (the default) builds the binned SAH tree and collapses
+    it into 8-wide nodes (BvhNode8, oclgi/accel/bvh_wide.py), which the
+    kernels traverse 8 child boxes at a time; "sah" traverses the binary SAH
+    tree itself (two boxes a node), "lbvh" and "lbvh8" the Morton tree.
+    Every one gives the same hits up to which of two equally near triangles
+    is found (the wide and binary layouts of one tree: the same bits but
+    for such ties); ``n_nodes`` counts the traversed layout's nodes,
+    ``n_binary_nodes`` the binary tree's."""
+
     def __init__(self, ctx: cl.Context, scene: Scene, bvh_quality: str = BVH_QUALITY):
         self.ctx = ctx
         self.scene = scene
@@ -125,39 +138,58 @@ class CompiledScene:
 
     @property
     def scene_args(self) -> tuple:
-        """The kernels' SCENE_ARGS (kernels/bvh.h): nodes, triangles, instances, count."""
+        """The kernels' SCENE_ARGS (kernels/bvh.h): nodes (BvhNode or
+        BvhNode8 records, as the instances' roots say), triangles,
+        instances, count."""
         return (self.nodes, self.tris, self.instances, len(self.instances_host))
 
     def _build_objects(self, v):
         """One BVH per object, in one node array and one triangle array; one
-        Instance per object, placed where the scene file put it (identity)."""
+        Instance per object, placed where the scene file put it (identity).
+        A wide tree's Instance root is ~(its root node) (kernels/bvh.h)."""
+        builder, wide = scene_tree(self.bvh_quality)
         ranges = self.scene.object_ranges()
         nodes_all, tris = [], np.zeros(len(v), dtype=Tri)
         self.instances_host = np.zeros(len(ranges), dtype=Instance)
         self.object_boxes = []
-        n_nodes, depth = 0, 0
+        n_nodes, depth, n_binary, stack_need = 0, 0, 0, 0
         for k, (a, b) in enumerate(ranges):
             vk = v[a:b]
-            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=self.bvh_quality)
-            nodes = bvh.nodes.copy()
-            inner = nodes["count"] == 0
-            nodes["first"][inner] += n_nodes  # children in the joint node array
-            nodes["first"][~inner] += a  # triangle runs in the joint triangle array
+            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=builder)
+            n_binary += len(bvh.nodes)
+            if wide:
+                tree = collapse(bvh.nodes, node_offset=n_nodes, tri_offset=a)
+                nodes, root = tree.nodes, ~n_nodes
+                stack_need = max(stack_need, tree.stack_need)
+                depth = max(depth, tree.depth)
+            else:
+                nodes = bvh.nodes.copy()
+                inner = nodes["count"] == 0
+                nodes["first"][inner] += n_nodes  # children in the joint node array
+                nodes["first"][~inner] += a  # triangle runs in the joint triangle array
+                root = n_nodes
+                depth = max(depth, bvh.depth)
             vo = vk[bvh.order]
             tris["v0"][a:b], tris["v1"][a:b], tris["v2"][a:b] = vo[:, 0], vo[:, 1], vo[:, 2]
             tris["id"][a:b] = a + bvh.order
             inst = self.instances_host[k]
-            inst["root"], inst["first_tri"], inst["n_tris"] = n_nodes, a, b - a
+            inst["root"], inst["first_tri"], inst["n_tris"] = root, a, b - a
             self.object_boxes.append((vk.min(axis=(0, 1)), vk.max(axis=(0, 1))))
             self._place(k, np.eye(4))
             nodes_all.append(nodes)
             n_nodes += len(nodes)
-            depth = max(depth, bvh.depth)
-        if depth > BVH_STACK_SIZE:
+        if not wide and depth > BVH_STACK_SIZE:
             raise OclgiError(f"BVH depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
-        self.bvh_depth = depth
+        if wide and stack_need > WIDE_STACK:
+            raise OclgiError(f"the wide BVH needs a traversal stack of {stack_need} entries, more than the "
+                             f"kernels' {WIDE_STACK}")
+        self.bvh_depth = depth  # levels of the traversed layout
+        self.bvh_wide = wide
+        self.bvh_stack_need = stack_need if wide else depth
+        # the traversed layout's nodes: what the device reads and the fingerprint hashes
         self._nodes = np.concatenate(nodes_all)
         self.n_nodes = len(self._nodes)
+        self.n_binary_nodes = n_binary
         self._tris = tris
 
     def _place(self, k: int, m: np.ndarray):
