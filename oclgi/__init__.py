@@ -63,7 +63,8 @@ def save_render(result: "Render", path) -> tuple[_Path, _Path]:
 
     path = _Path(path)
     exr, png = path.with_suffix(".exr"), path.with_suffix(".png")
-    write_images({exr: result.radiance, png: result.pixels}, metadata=result.metadata)  # all or nothing
+    pixels, channels = result.exr_channels()  # RGB, and the layers when the render has them
+    write_images({exr: pixels, png: result.pixels}, metadata=result.metadata, channels={exr: channels})
     return exr, png
 
 

@@ -179,6 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--height", type=_param(params.image_size, "--height"),
                    help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
+    r.add_argument("--layers", action="store_true",
+                   help="also write the irradiance, albedo, normal and depth layers into the EXR "
+                        "(irradiance.R, albedo.R, normal.X, depth.Z, ...; for compositing and denoisers)")
     r.add_argument("--spp", type=_param(params.samples_per_pixel, "--spp"), default=1,
                    help="samples per pixel, each a query point (default 1, the pixel's centre); the photons are "
                         "shared, so 4 costs far less than 4 renders")
@@ -304,6 +307,7 @@ def _world(args, command: str):
         raise OclgiError(f"{command} does not run over MPI ranks (render, irradiance and study do): run it in "
                          "one process")
     given = [f for f in ("checkpoint", "resume", "more", "progressive") if getattr(args, f, None) is not None]
+    given += ["layers"] if getattr(args, "layers", False) else []
     if given:
         raise OclgiError(f"--{given[0]} does not run over MPI ranks yet: run it in one process")
     return comm
@@ -341,9 +345,10 @@ def cmd_render(args):
     engine = _engine(args)
 
     def write(run, est):  # all or none: a failure leaves neither file
-        result = engine.render_result(run, est, args.exposure)
-        write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths},
-                     metadata=result.metadata)
+        result = engine.render_result(run, est, args.exposure, args.layers)
+        exr, channels = result.exr_channels()
+        write_images({p: exr if p.suffix.lower() == ".exr" else result.pixels for p in paths},
+                     metadata=result.metadata, channels={p: channels for p in paths if p.suffix.lower() == ".exr"})
         return result
 
     def snapshot(run, est):

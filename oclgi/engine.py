@@ -38,6 +38,28 @@ from .scene.scene import Camera, Scene
 DEFAULT_BATCH_BYTES = 256 << 20
 
 
+LAYER_CHANNELS = {"irradiance": "RGB", "albedo": "RGB", "normal": "XYZ", "depth": "Z"}
+
+
+def render_layers(engine, points, irradiance: np.ndarray, camera, spp: int) -> dict:
+    """A render's layers (compositing, denoisers): the irradiance E (W/m^2),
+    the albedo and the normal (world space, towards the camera) of the
+    visible surface, and its distance from the eye; 0 on the background.
+    Each the mean over a pixel's samples, as the radiance."""
+    h, w = points.shape
+    tri = points.tri
+    hit = tri >= 0
+    albedo = np.zeros((len(tri), 3), np.float32)
+    table = np.asarray([m.albedo for m in engine.scene.materials], np.float32)
+    albedo[hit] = table[engine.scene.tri_material[tri[hit]]]
+    eye = np.asarray(camera.position, np.float64)
+    depth = np.where(hit, np.linalg.norm(points.positions[:, :3].astype(np.float64) - eye, axis=1), 0.0)
+    raw = {"irradiance": np.where(hit[:, None], irradiance, 0.0), "albedo": albedo,
+           "normal": np.where(hit[:, None], points.normals[:, :3], 0.0), "depth": depth[:, None]}
+    return {k: np.ascontiguousarray(v.astype(np.float64).reshape(spp, h // spp, w, -1).mean(axis=0), np.float32)
+            for k, v in raw.items()}
+
+
 def render_metadata(engine, run_params, est, camera, spp: int, exposure: float) -> dict:
     """What made an image, as the attributes its files carry (``oclgi:``
     names, text values: PNG keeps text only): the scene, the method and its
@@ -101,6 +123,16 @@ class Render:
     pixels: np.ndarray  # (H, W, 4) uint8, tone-mapped sRGB, alpha = coverage
     estimate: Estimate
     metadata: dict = field(default_factory=dict)  # how it was made: written into the image files
+    layers: dict = field(default_factory=dict)  # name -> (H, W, k) float32, with render(layers=True)
+
+    def exr_channels(self) -> tuple[np.ndarray, list[str]]:
+        """The EXR's pixels and channel names: R, G, B, then each layer's
+        (``irradiance.R``, ``albedo.R``, ..., ``normal.X``, ..., ``depth.Z``)."""
+        names, parts = ["R", "G", "B"], [self.radiance]
+        for name, a in self.layers.items():
+            parts.append(a)
+            names += [f"{name}.{c}" for c in LAYER_CHANNELS[name]]
+        return np.ascontiguousarray(np.concatenate(parts, axis=2), np.float32), names
 
     @property
     def stats(self) -> Stats:
@@ -341,12 +373,15 @@ class Engine:
 
     # -- images -----------------------------------------------------------------
     def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
-               exposure: float = 1.0, **estimate_args) -> Render:
+               exposure: float = 1.0, layers: bool = False, **estimate_args) -> Render:
         """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels.
-        ``width``, ``height``: None for the camera's."""
+        ``width``, ``height``: None for the camera's; ``spp``: samples per
+        pixel; ``layers``: also irradiance, albedo, normal and depth
+        (``Render.layers``, written into the EXR by ``save_render``)."""
         exposure = params.exposure(exposure, "exposure")
+        layers = params.flag(layers, "layers")
         run = self.render_run(camera, width, height, **estimate_args)
-        return self.render_result(run, run.complete(self.progress), exposure)
+        return self.render_result(run, run.complete(self.progress), exposure, layers)
 
     def render_run(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
                    paths: PathRange | None = None, spp: int = 1, **estimate_args) -> Run:
@@ -365,12 +400,14 @@ class Engine:
         run.spp, run.camera = spp, cam
         return run
 
-    def render_result(self, run: Run, est: Estimate, exposure: float = 1.0) -> Render:
-        """The image of a render run's estimate (resolved: ``Run.finish``)."""
+    def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False) -> Render:
+        """The image of a render run's estimate (resolved: ``Run.finish``);
+        ``layers``: also the irradiance, albedo, normal and depth layers."""
         spp = getattr(run, "spp", 1)
+        cam = getattr(run, "camera", None)
         radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure, spp)
-        return Render(radiance, pixels, est, render_metadata(self, run.params, est, getattr(run, "camera", None),
-                                                             spp, exposure))
+        extra = render_layers(self, run.estimator.points, est.irradiance, cam, spp) if layers and cam else {}
+        return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure), extra)
 
     def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped

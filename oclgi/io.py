@@ -228,7 +228,8 @@ def _one_line(text: str) -> str:
     return " ".join(part.strip() for part in text.splitlines() if part.strip())
 
 
-def write_image_file(tmp: Path, path: Path, pixels: np.ndarray, metadata: dict | None = None) -> None:
+def write_image_file(tmp: Path, path: Path, pixels: np.ndarray, metadata: dict | None = None,
+                     channels: list | None = None) -> None:
     """Write an image to ``tmp`` (a temporary name from :func:`atomic_path`; ``path``
     names it in errors): the one OpenImageIO writer of every image oclgi makes.
 
@@ -244,6 +245,10 @@ def write_image_file(tmp: Path, path: Path, pixels: np.ndarray, metadata: dict |
     if out is None:
         raise OclgiError(f"cannot write {path}: {_oiio_error(oiio.geterror(), tmp, path)}")
     spec = oiio.ImageSpec(w, h, c, fmt)
+    if channels is not None:  # named channels: an EXR's layers (R, G, B, then irradiance.R, ...)
+        if len(channels) != c:
+            raise OclgiError(f"cannot write {path}: {len(channels)} channel names for {c} channels")
+        spec.channelnames = tuple(channels)
     # No time stamp (OpenEXR's writer adds one unless told otherwise): the
     # same run gives the same bytes, so renders can be compared with cmp.
     spec.attribute("DateTime", "")
@@ -302,9 +307,11 @@ def write_image(path, pixels: np.ndarray) -> Path:
     return path
 
 
-def write_images(images: dict, sync: bool = True, metadata: dict | None = None) -> list[Path]:
+def write_images(images: dict, sync: bool = True, metadata: dict | None = None,
+                 channels: dict | None = None) -> list[Path]:
     """Write several images ``{path: pixels}``, all or nothing, each with
-    the attributes ``metadata`` (a render's: how it was made).
+    the attributes ``metadata`` (a render's: how it was made); ``channels``:
+    {path: channel names} for images with more than RGB(A).
 
     Every image is written to its temporary file and checked first; only
     when all are complete are they renamed into place. ``sync``: as for
@@ -313,7 +320,7 @@ def write_images(images: dict, sync: bool = True, metadata: dict | None = None) 
     paths = [Path(p) for p in images]
     with atomic_paths(paths, sync) as temps:
         for tmp, p, pixels in zip(temps, paths, images.values()):
-            write_image_file(tmp, p, pixels, metadata)
+            write_image_file(tmp, p, pixels, metadata, (channels or {}).get(p))
     return paths
 
 

@@ -461,10 +461,10 @@ def test_write_images_all_or_nothing(tmp_path, monkeypatch):
 
     real = io.write_image_file
 
-    def fail_on_png(tmp, path, pixels, metadata=None):
+    def fail_on_png(tmp, path, pixels, *args):
         if path.suffix == ".png":
             raise OclgiError(f"cannot write {path}: disk full")
-        real(tmp, path, pixels, metadata)
+        real(tmp, path, pixels, *args)
 
     monkeypatch.setattr(io, "write_image_file", fail_on_png)
     img = np.ones((2, 3, 3), np.float32)

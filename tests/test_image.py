@@ -58,3 +58,33 @@ def test_images_say_how_they_were_made(engine, tmp_path):
     assert (m["oclgi:method"], m["oclgi:photons"], m["oclgi:seed"], m["oclgi:spp"]) == ("impact", "20000", "7", "2")
     assert m["oclgi:camera_position"] == "0 1 3.94" and m["oclgi:version"] == oclgi.__version__
     assert m["oclgi:segments"] == str(result.stats.segments)
+
+
+def test_layers_irradiance_albedo_normal_depth(engine, tmp_path):
+    import math
+
+    import OpenImageIO as oiio
+
+    result = engine.render(photons=20_000, width=16, height=16, layers=True)
+    lay = result.layers
+    assert list(lay) == ["irradiance", "albedo", "normal", "depth"]
+    hit = result.pixels[..., 3] == 255
+    # the radiance is the layers' product where no emitter is seen (L = albedo E / pi)
+    tri = result.estimate.points.tri.reshape(16, 16)
+    emission = np.array([m.emission for m in engine.scene.materials])[engine.scene.tri_material[tri]].sum(axis=2)
+    lit = hit & (emission == 0)
+    assert lit.sum() > 100 and (hit & ~lit).any()  # the light is seen too
+    np.testing.assert_allclose(result.radiance[lit], (lay["albedo"] * lay["irradiance"] / math.pi)[lit],
+                               rtol=2e-6, atol=1e-9)
+    assert np.array_equal(lay["irradiance"].reshape(-1, 3)[hit.ravel()], result.estimate.irradiance[hit.ravel()])
+    assert np.allclose(np.linalg.norm(lay["normal"][hit], axis=1), 1, atol=1e-5)
+    assert (lay["depth"][hit] > 1).all() and (lay["depth"][~hit] == 0).all()
+    exr, _ = oclgi.save_render(result, tmp_path / "l.exr")
+    buf = oiio.ImageBuf(str(exr))
+    names = buf.spec().channelnames
+    back = buf.get_pixels(oiio.FLOAT)
+    for name, a in [("R", result.radiance[..., :1])] + [(f"{k}.{c}", v[..., i:i + 1]) for k, v in lay.items()
+                                                        for i, c in enumerate(oclgi.engine.LAYER_CHANNELS[k])]:
+        assert np.array_equal(back[..., names.index(name)], a[..., 0]), name
+    plain = engine.render(photons=20_000, width=16, height=16)
+    assert plain.layers == {} and plain.exr_channels()[1] == ["R", "G", "B"]

@@ -207,8 +207,8 @@ SLOW_WRITE = textwrap.dedent("""
 
     real = io.write_image_file
 
-    def slow(tmp, path, pixels, metadata=None):
-        real(tmp, path, pixels, metadata)
+    def slow(tmp, path, pixels, *args):
+        real(tmp, path, pixels, *args)
         print("writing", flush=True)  # the temporary file exists now
         # Short sleeps: the signal may reach one of the OpenCL runtime's
         # threads, and Python runs its handler only once the main thread wakes.
