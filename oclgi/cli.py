@@ -65,6 +65,10 @@ def _type_error(exc: OclgiError, name: str) -> argparse.ArgumentTypeError:
     return argparse.ArgumentTypeError(str(exc))
 
 
+def _auto_or_number(text):
+    return text if text.strip().lower() == params.AUTO else params.number_text(text)
+
+
 def _param(reader, name, read_text=params.number_text):
     """An argparse type reading a run parameter with oclgi.params, so that the
     command line refuses what the scene file and the API refuse, in the same
@@ -178,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image width (default: the scene camera's)")
     r.add_argument("--height", type=_param(params.image_size, "--height"),
                    help="image height (default: the scene camera's)")
-    r.add_argument("--exposure", type=_positive_float, default=1.0, help="PNG exposure multiplier")
+    r.add_argument("--exposure", type=_param(params.exposure, "--exposure", _auto_or_number), default=1.0,
+                   help="PNG exposure multiplier, or 'auto' (the image's log-average luminance to middle grey)")
     r.add_argument("--layers", action="store_true",
                    help="also write the irradiance, albedo, normal and depth layers into the EXR "
                         "(irradiance.R, albedo.R, normal.X, depth.Z, ...; for compositing and denoisers)")

@@ -71,12 +71,28 @@ def render_metadata(engine, run_params, est, camera, spp: int, exposure: float) 
     meta = {"version": __version__, "scene": engine.scene.name, "method": p["method"],
             "photons": est.stats.photons, "segments": est.stats.segments, "seed": p["seed"],
             "radius": f"{p['radius']:.9g}", "max_depth": p["max_depth"], "extension": f"{p['extension']:.9g}",
-            "count_emitted": str(p["count_emitted"]).lower(), "spp": spp, "exposure": f"{exposure:.9g}"}
+            "count_emitted": str(p["count_emitted"]).lower(), "spp": spp,
+            "exposure": exposure if isinstance(exposure, str) else f"{exposure:.9g}"}
     if camera is not None:
         meta.update({f"camera_{k}": " ".join(f"{v:.9g}" for v in getattr(camera, k))
                      for k in ("position", "look_at", "up")})
         meta["camera_fov"] = f"{camera.fov:.9g}"
     return {f"oclgi:{k}": str(v) for k, v in meta.items()}
+
+
+KEY = 0.18  # middle grey: where auto exposure puts the image's log-average luminance
+
+
+def auto_exposure(radiance: np.ndarray) -> float:
+    """The exposure that maps the log-average luminance of the covered
+    pixels (radiance (n, 4), w = coverage) to middle grey (Reinhard et al.'s
+    key value 0.18); 1 for an image with no light."""
+    lum = radiance[:, :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lit = (radiance[:, 3] > 0) & (lum > 0)
+    if not lit.any():
+        return 1.0
+    mean = float(np.exp(np.mean(np.log(lum[lit]))))
+    return float(np.clip(KEY / mean, params.F32_TINY, params.F32_MAX))
 
 
 R2 = 1.32471795724474602596  # the plastic number: the R2 sequence's generator
@@ -440,6 +456,10 @@ class Engine:
             mean = np.ascontiguousarray(samples.astype(np.float64).mean(axis=0).astype(np.float32))
             h, n = h // spp, n // spp
             cl.enqueue_copy(self.queue, rad, mean)
+        if exposure == params.AUTO:
+            image = np.empty((n, 4), np.float32)
+            cl.enqueue_copy(self.queue, image, rad)
+            exposure = auto_exposure(image)
         launch(self.queue, prog.image_tonemap, n, rad, n, exposure, pix)
         radiance = np.empty((h, w, 4), np.float32)
         pixels = np.empty((h, w, 4), np.uint8)

@@ -212,12 +212,18 @@ def float32_real(value, name: str, lo: float | None = None, hi: float | None = N
     return r
 
 
-def exposure(value, name: str = "exposure") -> float:
-    """The tone mapping's multiplier (a float32 on the device)."""
+AUTO = "auto"
+
+
+def exposure(value, name: str = "exposure") -> float | str:
+    """The tone mapping's multiplier (a float32 on the device), or "auto"
+    (the image's own: ``oclgi.engine.auto_exposure``)."""
+    if isinstance(value, str) and value.strip().lower() == AUTO:
+        return AUTO
     r = _real(value)
     if r is None or not F32_TINY <= r <= F32_MAX:
-        raise ParamError(name, f"expected a positive number from 1.2e-38 to 3.4e38 (float32 on the device), "
-                               f"got {_show(value)}")
+        raise ParamError(name, f"expected 'auto' or a positive number from 1.2e-38 to 3.4e38 (float32 on the "
+                               f"device), got {_show(value)}")
     return r
 
 

@@ -176,7 +176,7 @@ def test_render_size_checked(engine, key, value):
 @pytest.mark.parametrize("value", [-1, 0, np.nan, np.inf, True, "1", 1e-300, 1e39])
 def test_render_exposure_checked(engine, value):
     """Were accepted: black, or NaN, pixels."""
-    with pytest.raises(params.ParamError, match=r"^exposure: expected a positive number from 1.2e-38 to 3.4e38"):
+    with pytest.raises(params.ParamError, match=r"^exposure: expected 'auto' or a positive number from 1.2e-38 to 3.4e38"):
         engine.render(exposure=value, photons=1000)
 
 

@@ -88,3 +88,17 @@ def test_layers_irradiance_albedo_normal_depth(engine, tmp_path):
         assert np.array_equal(back[..., names.index(name)], a[..., 0]), name
     plain = engine.render(photons=20_000, width=16, height=16)
     assert plain.layers == {} and plain.exr_channels()[1] == ["R", "G", "B"]
+
+
+def test_auto_exposure_puts_the_log_average_at_middle_grey(engine):
+    from oclgi.engine import KEY, auto_exposure
+
+    auto = engine.render(photons=20_000, width=16, height=16, exposure="auto")
+    cover = (auto.pixels[..., 3] > 0).astype(np.float32)[..., None]
+    x = auto_exposure(np.concatenate([auto.radiance, cover], axis=2).reshape(-1, 4))
+    lum = auto.radiance.reshape(-1, 3).astype(np.float64) @ [0.2126, 0.7152, 0.0722]
+    lit = (cover.ravel() > 0) & (lum > 0)
+    assert np.exp(np.log(lum[lit] * x).mean()) == pytest.approx(KEY)
+    fixed = engine.render(photons=20_000, width=16, height=16, exposure=x)
+    assert fixed.pixels.tobytes() == auto.pixels.tobytes() and auto.metadata["oclgi:exposure"] == "auto"
+    assert engine.render(photons=20_000, width=16, height=16).pixels.tobytes() != auto.pixels.tobytes()
