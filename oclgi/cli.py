@@ -209,6 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--frames", type=_param(budget.frames, "--frames"), default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
+    a.add_argument("--video", type=Path, metavar="FILE.gif|.mp4",
+                   help="also write the frames as one video (pip install 'oclgi[video]')")
+    a.add_argument("--fps", type=_positive_float, default=24.0, help="frames per second of --video (default 24)")
     a.add_argument("--dynamic", choices=[m for m in METHODS if m.startswith("detp")],
                    help="DETP variant that recomputes the pixels on the moving object (default detp_disc_index, "
                         "summed in the pass that finds the affected paths)")
@@ -426,6 +429,12 @@ def cmd_animate(args):
     if Path(args.path).is_file():
         inputs[Path(args.path)] = "the keyframes file (--path)"
     check_not_input([out / n for n in output_names(args.frames, args.exr)], inputs)
+    if args.video is not None:
+        from . import video
+
+        video.check(args.video)
+        check_output(args.video)
+        check_not_input([args.video], inputs)
     poses(args.path, args.frames)  # a bad path fails before any work
     engine = _engine(args)
     movable = [o.name for o in engine.scene.objects if o.movable]
@@ -448,6 +457,13 @@ def cmd_animate(args):
               f"{np.median(update) * 1e3:.1f} ms ({1 / max(np.median(update), 1e-9):.1f} updates/s), "
               f"{np.mean([r['paths'] for r in rows]):,.0f} paths re-traced per frame", file=sys.stderr)
     print(f"wrote {len(rows)} frames and timing.csv to {out}")
+    if args.video is not None:
+        from .incremental.animate import frame_paths
+        from .io import read_image
+        from .video import write_video
+
+        frames = [np.rint(read_image(p) * 255).astype(np.uint8) for p in frame_paths(out, len(rows))]
+        print(f"wrote {write_video(args.video, frames, args.fps)}")
 
 
 def cmd_study(args):

@@ -98,3 +98,31 @@ def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
     with pytest.raises(OclgiError, match="places object 'block' beyond 1e\\+18"):
         engine.move("block", far)
     assert engine.compiled.instances_host.tobytes() == before  # a refused move changes nothing
+
+
+def test_animate_writes_a_gif_of_its_frames(tmp_path):
+    from PIL import Image
+
+    from oclgi.io import read_image
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "anim"
+    r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--video",
+            tmp_path / "a.gif", "--fps", 10, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[-1] == f"wrote {tmp_path / 'a.gif'}"
+    with Image.open(tmp_path / "a.gif") as gif:
+        first = np.asarray(gif.convert("RGBA"))
+        total = 0  # Pillow folds a frame equal to the one before into its duration
+        for k in range(gif.n_frames):
+            gif.seek(k)
+            total += gif.info["duration"]
+        assert total == 300
+    png = np.rint(read_image(out / "frame_0000.png") * 255).astype(np.uint8)
+    over_black = (png[..., :3].astype(np.uint16) * png[..., 3:] // 255).astype(np.int16)
+    assert np.abs(first[..., :3].astype(np.int16) - over_black).max() <= 24  # GIF's 256-colour palette
+    for bad, match in (("a.avi", "must end in .gif or .mp4"),):
+        r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", tmp_path / "b",
+                "--video", tmp_path / bad)
+        assert r.returncode == 2 and match in r.stderr and not (tmp_path / "b").exists()

@@ -120,6 +120,11 @@ def _poses(spec: str, frames: int) -> list[np.ndarray]:
     return [_translate_rotate(*(c[i] for c in cols)) for i in range(frames)]
 
 
+def frame_paths(out_dir: Path, frames: int) -> list[Path]:
+    """The PNG frames ``animate`` wrote into ``out_dir``, in order."""
+    return [Path(out_dir) / (_frame_stem(f) + ".png") for f in range(frames)]
+
+
 def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure: float = 1.0,
             write_exr: bool = False, progress=None) -> list[dict]:
     """Move ``name`` along the path, write one PNG (and EXR) per frame and a
