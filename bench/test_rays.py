@@ -33,8 +33,10 @@ The rays where Embree finds a nearer hit than oclgi are counted
 
 from __future__ import annotations
 
+import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,34 +45,13 @@ from oclgi.accel.bvh import closest_hits, traversal_work
 from oclgi.accel.bvh_build import QUALITIES
 from conftest import compiled_with
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' ray sets
+from rays import RAYS as RAY_SETS  # noqa: E402
+
 RAYS = 1_000_000
 ROUNDS = 5
 
 
-def _unit(v):
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def incoherent_rays(scene, n, rng):
-    lo, hi = scene.bounds()
-    return rng.uniform(lo, hi, (n, 3)), _unit(rng.normal(size=(n, 3)))
-
-
-def bounce_rays(scene, n, rng):
-    areas = scene.triangle_areas()
-    tri = rng.choice(len(areas), n, p=areas / areas.sum())
-    v = scene.vertices[scene.faces[tri]]
-    su, r2 = np.sqrt(rng.random((n, 1))), rng.random((n, 1))
-    p = v[:, 0] + su * (1 - r2) * (v[:, 1] - v[:, 0]) + su * r2 * (v[:, 2] - v[:, 0])
-    normal = scene.triangle_normals()[tri] * rng.choice([-1.0, 1.0], (n, 1))
-    # 10x the engine's ray offset, so that neither intersector re-hits the
-    # origin's own triangle and the hit/miss comparison stays meaningful.
-    p += 1e-4 * scene.diagonal * normal
-    # normal + a uniform unit vector is cosine-distributed about the normal
-    return p, _unit(normal + _unit(rng.normal(size=(n, 3))))
-
-
-RAY_SETS = {"incoherent": incoherent_rays, "bounce": bounce_rays}
 
 
 class Embree:
@@ -102,7 +83,7 @@ def test_closest_hit(benchmark, request, scale, cores_used, scene, rays, tree):
     engine = request.getfixturevalue(scene)
     compiled = compiled_with(engine, tree)
     n = scale(RAYS)
-    origins, dirs = RAY_SETS[rays](engine.scene, n, np.random.default_rng(7))
+    origins, dirs = RAY_SETS[rays](engine.scene, np.random.default_rng(7), n)
     origins, dirs = origins.astype(np.float32), dirs.astype(np.float32)
     embree = Embree(engine.scene, engine.queue.device.max_compute_units)
 

@@ -24,6 +24,7 @@ from oclgi.cl.constants import BVH_STACK_SIZE
 from oclgi.cl.layout import WIDE
 from oclgi.cl.programs import kernel_dir
 from oclgi.scene.compiled import CompiledScene
+from rays import RAYS, incoherent_rays, unit
 from reference import ray_triangle_brute
 
 
@@ -53,31 +54,6 @@ def sponza(scenes_dir):
 SCENES = ["cornell", "bunny", "sponza"]
 
 
-def _unit(v):
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def incoherent_rays(scene, rng, n):
-    """Origins uniform in the bounding box, directions uniform on the sphere."""
-    lo, hi = scene.bounds()
-    return rng.uniform(lo, hi, (n, 3)), _unit(rng.normal(size=(n, 3)))
-
-
-def bounce_rays(scene, rng, n):
-    """Origins on the surface (area-uniform), lifted off a random side by
-    1e-4 of the diagonal, directions cosine-distributed about that side's
-    normal: the rays of diffuse photon bounces."""
-    areas = scene.triangle_areas()
-    tri = rng.choice(len(areas), n, p=areas / areas.sum())
-    v = scene.vertices[scene.faces[tri]]
-    su, r2 = np.sqrt(rng.random((n, 1))), rng.random((n, 1))
-    p = v[:, 0] + su * (1 - r2) * (v[:, 1] - v[:, 0]) + su * r2 * (v[:, 2] - v[:, 0])
-    normal = scene.triangle_normals()[tri] * rng.choice([-1.0, 1.0], (n, 1))
-    p += 1e-4 * scene.diagonal * normal
-    return p, _unit(normal + _unit(rng.normal(size=(n, 3))))
-
-
-RAYS = {"incoherent": incoherent_rays, "bounce": bounce_rays}
 
 
 def binary_of(engine):
@@ -148,7 +124,7 @@ def test_axis_aligned_rays_equal_binary(cornell, rng):
     zero = rng.random((n, 3)) < 0.4  # each component zero with probability 0.4
     zero[zero.all(axis=1), 0] = False
     dirs[zero] = 0.0
-    dirs = _unit(dirs)
+    dirs = unit(dirs)
     assert (dirs == 0).any(axis=1).mean() > 0.5
     t, *_ = closest_hits(cornell.queue, cornell.compiled, origins, dirs)
     assert np.isfinite(t).mean() > 0.3
