@@ -51,10 +51,9 @@ def _other_rank() -> bool:
     """One of several MPI ranks other than rank 0: every rank meets the same
     argument and input errors, and rank 0 alone says so (errors one rank
     meets alone reach rank 0 through oclgi.distributed's exchanges)."""
-    for var in ("PMI_RANK", "OMPI_COMM_WORLD_RANK"):
-        if os.environ.get(var, "0").strip() not in ("", "0"):
-            return True
-    return False
+    from .distributed import launched_rank  # the environment only: MPI is not loaded
+
+    return launched_rank() != 0
 
 
 def _type_error(exc: OclgiError, name: str) -> argparse.ArgumentTypeError:

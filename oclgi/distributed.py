@@ -50,7 +50,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-import warnings
 from contextlib import contextmanager
 
 import numpy as np
@@ -78,6 +77,19 @@ def launched_size() -> int:
         except ValueError:
             pass
     return size
+
+
+RANK_VARIABLES = ("PMI_RANK", "OMPI_COMM_WORLD_RANK")
+
+
+def launched_rank() -> int:
+    """This process's rank as the launcher set it (0 for a plain process)."""
+    for var in RANK_VARIABLES:
+        try:
+            return int(os.environ[var])
+        except (KeyError, ValueError):
+            pass
+    return 0
 
 
 def world():
@@ -223,29 +235,6 @@ def _check_same(comm, engine, what: str, key: str):
 # -- one run over the ranks ------------------------------------------------------
 
 
-def _trace(run, progress, notice: bool):
-    """Run.complete without its resolve (a rank's partial sums are reduced
-    first); ``notice``: say so when the run looks long (rank 0 only)."""
-    from . import budget
-    from .progress import Progress
-    from .scene.scene import OclgiWarning
-
-    t0 = time.perf_counter()
-    bar = Progress(run.params.method, run.paths.count, progress)
-    try:
-        first = True
-        while not run.done:
-            n = run.step()
-            bar.update(n)
-            if first and notice:
-                first = False
-                line = budget.time_notice(n, time.perf_counter() - t0, run.paths.end - run.next_path + n)
-                if line:
-                    warnings.warn(line, OclgiWarning, stacklevel=4)
-    finally:
-        bar.close()
-
-
 def _reduce_state(comm, state: dict) -> dict | None:
     """The ranks' estimator states combined on rank 0 (None elsewhere):
     integer arrays summed, a Photon Map's impacts concatenated in rank order."""
@@ -311,7 +300,7 @@ class _Distributed:
             run = engine.run(points, **self.args, count_work=self.count_work, paths=part, **self.options)
         with _phase(comm):
             shown = engine.progress if progress is None else progress  # as Engine.irradiance shows it
-            _trace(run, shown if comm.rank == 0 else False, comm.rank == 0)
+            run.trace(shown if comm.rank == 0 else False, notice=comm.rank == 0)
         t1 = time.perf_counter()
         state = None
         with _phase(comm):
@@ -362,7 +351,7 @@ def render(engine, comm, camera=None, width: int | None = None, height: int | No
     """``engine.render`` over the ranks of ``comm``: the Render on rank 0,
     None on the others (rank 0's camera and sizes are used). ``comm`` None:
     one process."""
-    from . import budget, params
+    from . import params
     from .engine import Render, render_metadata
 
     if comm is None:
@@ -372,12 +361,8 @@ def render(engine, comm, camera=None, width: int | None = None, height: int | No
     with _phase(comm):
         if comm.rank == 0:
             exposure = params.exposure(exposure, "exposure")
-            cam = engine.view_camera(camera, width, height)
-            spp = params.samples_per_pixel(spp)
             r = engine.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
-            budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                            engine.batch_bytes, estimate_args.get("k")), engine.queue.device)
-            pts = engine.camera_points(cam, spp=spp)
+            cam, spp, pts = engine.render_points(camera, width, height, spp, estimate_args)
     t_cam = time.perf_counter() - t0
     est = irradiance(engine, pts, comm, **estimate_args)
     result = None

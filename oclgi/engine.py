@@ -87,7 +87,9 @@ def auto_exposure(radiance: np.ndarray) -> float:
     """The exposure that maps the log-average luminance of the covered
     pixels (radiance (n, 4), w = coverage) to middle grey (Reinhard et al.'s
     key value 0.18); 1 for an image with no light."""
-    lum = radiance[:, :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    from .photometry import luminance
+
+    lum = luminance(radiance[:, :3])
     lit = (radiance[:, 3] > 0) & (lum > 0)
     if not lit.any():
         return 1.0
@@ -404,23 +406,27 @@ class Engine:
         """The run ``render`` makes over the camera's visible points (``spp``
         per pixel), not yet traced (``Engine.run``); ``render_result`` turns
         its estimate into the image."""
-        cam = self.view_camera(camera, width, height)
-        spp = params.samples_per_pixel(spp)
-        r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
-        budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                        self.batch_bytes, estimate_args.get("k")), self.queue.device)
         t0 = time.perf_counter()
-        pts = self.camera_points(cam, spp=spp)
+        cam, spp, pts = self.render_points(camera, width, height, spp, estimate_args)
         run = self.run(pts, paths=paths, **estimate_args)
         run.seconds["camera"] = time.perf_counter() - t0
         run.spp, run.camera = spp, cam
         return run
 
+    def render_points(self, camera, width, height, spp, estimate_args: dict):
+        """A render's camera (checked), samples per pixel and visible
+        points, its memory checked first: (camera, spp, points)."""
+        cam = self.view_camera(camera, width, height)
+        spp = params.samples_per_pixel(spp)
+        r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
+        budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
+                                        self.batch_bytes, estimate_args.get("k")), self.queue.device)
+        return cam, spp, self.camera_points(cam, spp=spp)
+
     def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False) -> Render:
         """The image of a render run's estimate (resolved: ``Run.finish``);
         ``layers``: also the irradiance, albedo, normal and depth layers."""
-        spp = getattr(run, "spp", 1)
-        cam = getattr(run, "camera", None)
+        spp, cam = run.spp, run.camera
         radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure, spp)
         extra = render_layers(self, run.estimator.points, est.irradiance, cam, spp) if layers and cam else {}
         return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure), extra)
@@ -457,8 +463,11 @@ class Engine:
             h, n = h // spp, n // spp
             cl.enqueue_copy(self.queue, rad, mean)
         if exposure == params.AUTO:
-            image = np.empty((n, 4), np.float32)
-            cl.enqueue_copy(self.queue, image, rad)
+            if spp > 1:
+                image = mean.reshape(n, 4)
+            else:
+                image = np.empty((n, 4), np.float32)
+                cl.enqueue_copy(self.queue, image, rad)
             exposure = auto_exposure(image)
         launch(self.queue, prog.image_tonemap, n, rad, n, exposure, pix)
         radiance = np.empty((h, w, 4), np.float32)

@@ -83,10 +83,14 @@ def test_face_arrays_are_checked():
 
 
 def test_the_summary_stages_add_up_to_the_total(scenes_dir):
+    # which stages are reported and how they nest; how long they take is bench/'s
     engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
-    assert engine.scene.load_seconds > 0
     for method in ("detp_disc_index", "photon_map"):
-        s = engine.render(method=method, photons=50_000, width=16, height=16).stats.seconds
+        stats = engine.render(method=method, photons=50_000, width=16, height=16).stats
+        s = stats.seconds
         assert list(s) == ["load", "setup", "camera", "trace", "estimate", "resolve", "total"]
-        parts = s["camera"] + s["trace"] + s["estimate"] + s["resolve"]
-        assert parts <= s["total"] and s["total"] - parts < 0.05 + 0.05 * s["total"], s
+        assert s["load"] == engine.scene.load_seconds and s["setup"] == engine.setup_seconds
+        # the run's stages are intervals within its total
+        assert s["camera"] + s["trace"] + s["estimate"] + s["resolve"] <= s["total"], s
+        engine_part, run_part = stats.summary().split(" | ")[1:]
+        assert engine_part.startswith("load ") and run_part.startswith("camera ") and " total " in run_part

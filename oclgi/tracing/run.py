@@ -129,6 +129,7 @@ class Run:
         self.next_path = self.paths.first
         self.segments = 0
         self.marks = None  # batches end on multiples of this many paths (progressive images)
+        self.camera, self.spp = None, 1  # a render run's view (Engine.render_run)
         self.seconds = {"trace": 0.0, "estimate": 0.0}
         self.set_batch(batch_paths(engine.batch_bytes, params.max_depth, max(1, self.paths.count)))
 
@@ -215,10 +216,20 @@ class Run:
         self.paths = PathRange(self.paths.first, self.paths.count + photons)
 
     def complete(self, progress: bool | None = None, on_batch=None):
+        """``trace`` to the end of the range, then ``finish()``."""
+        t0 = time.perf_counter()
+        self.trace(progress, on_batch)
+        est = self.finish()
+        # the run's stages (camera points, made with the run, to resolve): load and setup are the engine's
+        est.stats.seconds["total"] = time.perf_counter() - t0 + self.seconds.get("camera", 0.0)
+        return est
+
+    def trace(self, progress: bool | None = None, on_batch=None, notice: bool = True) -> None:
         """Step to the end of the range, with a progress bar (``progress``
         as ``oclgi.progress.Progress`` takes it) and, after each batch,
-        ``on_batch(self)`` (e.g. a checkpoint); then ``finish()``. A run
-        estimated to take over a minute says so after its first batch."""
+        ``on_batch(self)`` (e.g. a checkpoint). After the first batch the
+        estimator checks the run (``first_batch``) and, with ``notice``, a
+        run estimated to take over a minute says so."""
         from .. import budget
         from ..progress import Progress
         from ..scene.scene import OclgiWarning
@@ -234,17 +245,13 @@ class Run:
                 if first:  # a long run says so, with its time from the first batch
                     first = False
                     self.estimator.first_batch(self.traced, self.paths.count, self.segments)
-                    notice = budget.time_notice(n, time.perf_counter() - t0, self.paths.end - self.next_path + n)
-                    if notice:
-                        warnings.warn(notice, OclgiWarning, stacklevel=3)
+                    line = budget.time_notice(n, time.perf_counter() - t0, self.paths.end - self.next_path + n)
+                    if line and notice:
+                        warnings.warn(line, OclgiWarning, stacklevel=4)
                 if on_batch is not None:
                     on_batch(self)
         finally:
             bar.close()
-        est = self.finish()
-        # the run's stages (camera points, made with the run, to resolve): load and setup are the engine's
-        est.stats.seconds["total"] = time.perf_counter() - t0 + self.seconds.get("camera", 0.0)
-        return est
 
     # -- result ---------------------------------------------------------------
     def finish(self, photons: int | None = None):
