@@ -16,6 +16,13 @@
 #error "oclgi's shared constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 
+#if !defined(OCLGI_BSDF_DIFFUSE) || !defined(OCLGI_BSDF_PHONG) || !defined(OCLGI_BSDF_MIRROR) ||         \
+    !defined(OCLGI_BSDF_DIELECTRIC) || !defined(OCLGI_BSDF_CONDUCTOR) ||                                \
+    !defined(OCLGI_BSDF_ROUGH_DIELECTRIC) || !defined(OCLGI_MATERIAL_TWOSIDED) ||                       \
+    !defined(OCLGI_MATERIAL_DELTA) || !defined(OCLGI_CAMERA_MAX_DEPTH)
+#error "oclgi's material constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
+#endif
+
 /* One photon's largest power in fixed-point units (segment.h). */
 #define OCLGI_FIXED_ONE ((float)(1L << OCLGI_FIXED_BITS))
 

@@ -20,7 +20,9 @@ __kernel void layout_probe(__global int *out)
     OFF(Instance, root); OFF(Instance, hi); OFF(Instance, first_tri); OFF(Instance, n_tris); OFF(Instance, pad);
     SIZE(Segment); OFF(Segment, org); OFF(Segment, t_end); OFF(Segment, dir); OFF(Segment, tri);
     OFF(Segment, power); OFF(Segment, path);
-    SIZE(Material); OFF(Material, albedo); OFF(Material, survive); OFF(Material, emission); OFF(Material, pad);
+    SIZE(Material); OFF(Material, albedo); OFF(Material, kind); OFF(Material, emission); OFF(Material, flags);
+    OFF(Material, specular); OFF(Material, exponent); OFF(Material, roughness); OFF(Material, ior);
+    OFF(Material, texture); OFF(Material, pad);
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
     OFF(Emitter, e2); OFF(Emitter, pad1); OFF(Emitter, power); OFF(Emitter, pad2);
     SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);

@@ -15,8 +15,9 @@
  * Neither depends on the photon count: 1/n is applied only when sums are
  * resolved into watts (the resolve kernels' factor), so the sums of
  * disjoint path ranges (batches, resumed runs, MPI ranks) add up exactly.
- * Russian roulette survives with the max albedo, so no segment carries more
- * than phi_max: one contribution is at most 2^24, and a sum over n_paths *
+ * Russian roulette survives with the largest component of the bounce's
+ * sample weight f cos / pdf, which every kind keeps at most 1 (bsdf.h,
+ * oclgi/scene/materials.py), so no segment carries more than phi_max: one contribution is at most 2^24, and a sum over n_paths *
  * max_depth contributions stays below 2^(24 + 30 + 8) = 2^62 < 2^63 for
  * 10^9 photons and max_depth <= 256 (the host enforces both limits, for
  * the whole of a run however it is split or extended). Resolution: 2^-24
@@ -85,10 +86,17 @@ typedef struct {
     int pad[3];
 } Instance;
 
+/* A material (bsdf.h scatters by it; oclgi/scene/materials.py writes it). */
 typedef struct {
-    float albedo[3];
-    float survive;     /* Russian-roulette survival probability */
+    float albedo[3];   /* the diffuse part's reflectance; a dielectric's transmission tint */
+    int kind;          /* OCLGI_BSDF_* */
     float emission[3]; /* radiance, emitted on the normal's side */
+    int flags;         /* OCLGI_MATERIAL_TWOSIDED | OCLGI_MATERIAL_DELTA */
+    float specular[3]; /* highlight / mirror / conductor reflectance; a dielectric's reflection tint */
+    float exponent;    /* modified Phong's n */
+    float roughness;   /* GGX alpha */
+    float ior;         /* a dielectric's index, inside over outside */
+    int texture;       /* -1: none */
     int pad;
 } Material;
 

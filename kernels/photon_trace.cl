@@ -20,9 +20,10 @@
  * the sphere. Each photon carries emitter.power, in units of the largest
  * power any emitter gives a photon (oclgi_types.h): the same for a path
  * whatever the run's photon count, which only its resolve divides by.
- * Scattering: Lambertian (cosine about the normal on the incoming side),
- * Russian roulette with survival = max albedo, so power never grows.
+ * Scattering: by the surface's material (bsdf.h), with Russian roulette on
+ * the sample's weight, so power never grows.
  */
+#include "bsdf.h"
 #include "bvh.h"
 #include "rng.h"
 #include "segment.h"
@@ -70,19 +71,25 @@ inline PathState path_emit(TRACE_ARGS, uint path)
 }
 
 /* Event b >= 1: the photon that ran along segment (o, d, t) to triangle tri
- * with the given power scatters there, or is absorbed (returns 0). */
+ * with the given power scatters there (bsdf.h), or is absorbed (returns 0).
+ * Russian roulette survives with q = min(1, the sample weight's largest
+ * component) and divides by it, so power never grows (oclgi_types.h); for
+ * a diffuse surface q is the max albedo, as before the kinds existed. The
+ * next segment starts eps off the surface on the side it leaves by. */
 inline int path_scatter(TRACE_ARGS, uint path, int b, float3 o, float3 d, float t, int tri,
                         float3 power, PathState *s)
 {
     if (tri < 0 || b >= max_depth) return 0;
     __global const Material *m = &materials[tri_material[tri]];
     float4 r = rng_uniform4(seed_lo, seed_hi, path, (uint)b, 0);
-    if (!(r.z < m->survive)) return 0;
-    s->power = power * vload3(0, m->albedo) / m->survive;
     float3 n = tri_normals[tri].xyz;
-    if (dot(n, d) > 0.0f) n = -n;
-    s->o = o + t * d + eps * n;
-    s->d = sample_cosine(n, r.x, r.y);
+    BsdfSample bs = bsdf_sample(m, n, -d, r, 1);
+    float q = fmin(1.0f, fmax(bs.weight.x, fmax(bs.weight.y, bs.weight.z)));
+    if (!(r.z < q)) return 0;
+    s->power = power * bs.weight / q;
+    if (dot(n, d) > 0.0f) n = -n; /* the side the photon came from */
+    s->o = o + t * d + eps * (bs.flags & BSDF_TRANSMITTED ? -n : n);
+    s->d = bs.wi;
     return 1;
 }
 

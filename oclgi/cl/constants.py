@@ -73,6 +73,22 @@ CELL_OUTSIDE_BIT = 127
 EMITTER_TRIANGLE = 0
 EMITTER_POINT = 1
 
+# Material.kind (oclgi/cl/layout.py Material; kernels/bsdf.h scatters by it,
+# oclgi/scene/materials.py names the kinds) and Material.flags.
+BSDF_DIFFUSE = 0
+BSDF_PHONG = 1
+BSDF_MIRROR = 2
+BSDF_DIELECTRIC = 3
+BSDF_CONDUCTOR = 4
+BSDF_ROUGH_DIELECTRIC = 5
+MATERIAL_TWOSIDED = 1  # both sides scatter alike (else the back is black)
+MATERIAL_DELTA = 2  # scatters into single directions: no density estimation there
+
+# Camera rays pass through mirrors and glass and sample glossy surfaces to
+# a surface with a diffuse part: at most this many surfaces along the way
+# (kernels/camera.cl); a ray still on its way after them sees black.
+CAMERA_MAX_DEPTH = 8
+
 # name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
 # 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
 # the kernel rounds to float (as it always has).
@@ -92,6 +108,15 @@ DEFINES = {
     "cell_outside_bit": CELL_OUTSIDE_BIT,
     "emitter_triangle": EMITTER_TRIANGLE,
     "emitter_point": EMITTER_POINT,
+    "bsdf_diffuse": BSDF_DIFFUSE,
+    "bsdf_phong": BSDF_PHONG,
+    "bsdf_mirror": BSDF_MIRROR,
+    "bsdf_dielectric": BSDF_DIELECTRIC,
+    "bsdf_conductor": BSDF_CONDUCTOR,
+    "bsdf_rough_dielectric": BSDF_ROUGH_DIELECTRIC,
+    "material_twosided": MATERIAL_TWOSIDED,
+    "material_delta": MATERIAL_DELTA,
+    "camera_max_depth": CAMERA_MAX_DEPTH,
 }
 
 

@@ -50,7 +50,20 @@ Segment = np.dtype(
 
 # Diffuse material, 32 bytes: albedo, Russian-roulette survival probability
 # (max albedo, clamped to 1), emitted radiance (one-sided, along the normal).
-Material = np.dtype([("albedo", f4, 3), ("survive", f4), ("emission", f4, 3), ("pad", i4)])
+# Material, 64 bytes (kernels/bsdf.h reads it, oclgi/scene/materials.py
+# writes it): kind BSDF_*, flags MATERIAL_*; albedo is the diffuse part's
+# reflectance (a dielectric's transmission tint); specular the highlight's,
+# mirror's or conductor's reflectance (a dielectric's reflection tint);
+# exponent the Phong lobe's n, roughness GGX's alpha, ior the dielectric's
+# index (inside over outside); texture -1 (none yet).
+Material = np.dtype(
+    [
+        ("albedo", f4, 3), ("kind", i4),
+        ("emission", f4, 3), ("flags", i4),
+        ("specular", f4, 3), ("exponent", f4),
+        ("roughness", f4), ("ior", f4), ("texture", i4), ("pad", i4),
+    ]
+)
 
 # Emitter, 64 bytes. kind 0: triangle (p = v0, e1, e2 its edges); kind 1:
 # point light at p. power = emitter power / its selection probability, so a

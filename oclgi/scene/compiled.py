@@ -18,9 +18,10 @@ from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_wide import WIDE_STACK, collapse
 from ..cl.constants import BVH_STACK_SIZE, FIXED_ONE
 from ..params import MAX_LENGTH
-from ..cl.layout import Emitter, Instance, Material, Tri
+from ..cl.layout import Emitter, Instance, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from . import materials
 from .scene import Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
@@ -80,10 +81,7 @@ class CompiledScene:
         normals[:, :3] = scene.triangle_normals()  # object space = world space until a move
         self.areas = scene.triangle_areas().astype(np.float32)
 
-        mats = np.zeros(len(scene.materials), dtype=Material)
-        mats["albedo"] = [m.albedo for m in scene.materials]
-        mats["emission"] = [m.emission for m in scene.materials]
-        mats["survive"] = np.minimum(mats["albedo"].max(axis=1), 1.0)
+        mats = materials.record(scene.materials)
 
         kind, tri, p, e1, e2, power = scene.emitters()
         weight = power.mean(axis=1)

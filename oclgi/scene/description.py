@@ -51,14 +51,13 @@ import numpy as np
 from ..errors import OclgiError
 from .. import params
 from .mesh import from_trimesh, is_file, load_mesh
-from .obj import MtlMaterial
+from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
 from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "lumens", "materials",
          "transform", "movable", "name"}
-_MAT = {"albedo", "emission"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 # The run parameters a scene file sets: (table, key) -> RunParams field.
 _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("photons", "max_depth"): "max_depth",
@@ -161,6 +160,13 @@ def _number(value, where, kind=float):
     return float(value)
 
 
+class _READ:
+    """The readers a material table's values go through (materials.from_table)."""
+    vec3 = staticmethod(lambda v, where: _vec3(v, where))
+    radiant = staticmethod(lambda v, where: _radiant(v, where))
+    number = staticmethod(lambda v, where: _number(v, where))
+
+
 def _transform(t, where):
     _check_keys(t, {"scale", "rotate", "translate"}, where)
     m = np.eye(3)
@@ -229,19 +235,14 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             mat = default
         else:
             fm = file_mats.get(name)
-            mat = Material(
-                name=f"{label}:{name}",
-                albedo=fm.albedo if fm and fm.albedo is not None else default.albedo,
-                emission=(_radiant(fm.emission, f"{label}: material {name!r} (Ke)")
-                          if fm and fm.emission is not None else default.emission),
-            )
+            if fm is not None and fm.emission is not None:
+                fm.emission = _radiant(fm.emission, f"{label}: material {name!r} (Ke)")
+            mat = from_file(f"{label}:{name}", fm, default)
             if name in overrides:
                 o = overrides[name]
-                _check_keys(o, _MAT, f"{where}.materials.{name}")
-                if "albedo" in o:
-                    mat.albedo = _vec3(o["albedo"], f"{where}.materials.{name}.albedo")
-                if "emission" in o:
-                    mat.emission = _radiant(o["emission"], f"{where}.materials.{name}.emission")
+                _check_keys(o, TABLE_KEYS, f"{where}.materials.{name}")
+                mat = from_table(f"{where}.materials.{name}", o, mat, _READ)
+        mat.validate()
         local.append(len(materials))
         materials.append(mat)
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
@@ -315,7 +316,7 @@ def _face_materials(desc, n_faces: int, where: str):
                   if cols[0] is not None else None)
         emission = tuple(float(x) for x in table[face, 3:]) if cols[1] is not None else None
         names.append(f"#{k}")
-        mats[f"#{k}"] = MtlMaterial(albedo=albedo, emission=emission)
+        mats[f"#{k}"] = FileMaterial(albedo=albedo, emission=emission)
     return fmat.astype(np.int64), names, mats
 
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from ..errors import OclgiError
 from .counts import check_counts
-from .obj import MtlMaterial, read_obj
+from .materials import FileMaterial
+from .obj import read_obj
 from .trimesh_errors import trimesh_problem
 from .zip_reader import ZipReader
 
@@ -37,7 +38,7 @@ class LoadedMesh:
     faces: np.ndarray
     face_material: np.ndarray  # (F,) index into names
     names: list[str]
-    materials: dict[str, MtlMaterial]
+    materials: dict[str, FileMaterial]
 
 
 def is_file(path: Path, what: str) -> bool:
@@ -181,13 +182,23 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
     return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats)
 
 
-def _trimesh_material(geom) -> MtlMaterial | None:
+def _trimesh_material(geom) -> FileMaterial | None:
+    """A glTF (or trimesh-made) PBR material's factors, textures named. A
+    material without ``metallicFactor`` is read as non-metallic: glTF's
+    default is 1, but a file (or a trimesh object) that gives none means a
+    plain colour far more often than a metal."""
     mat = getattr(getattr(geom, "visual", None), "material", None)
     if mat is None or type(mat).__name__ != "PBRMaterial":
         return None
-    albedo = emission = None
+    fm = FileMaterial(source="gltf")
     if mat.baseColorFactor is not None:
-        albedo = tuple(float(c) / 255.0 for c in np.asarray(mat.baseColorFactor)[:3])
+        fm.albedo = tuple(float(c) / 255.0 for c in np.asarray(mat.baseColorFactor)[:3])
     if mat.emissiveFactor is not None:
-        emission = tuple(float(c) for c in np.asarray(mat.emissiveFactor)[:3])
-    return MtlMaterial(albedo=albedo, emission=emission)
+        fm.emission = tuple(float(c) for c in np.asarray(mat.emissiveFactor)[:3])
+    fm.metallic = 0.0 if mat.metallicFactor is None else float(mat.metallicFactor)
+    if mat.roughnessFactor is not None:
+        fm.roughness = float(mat.roughnessFactor)
+    for key in ("baseColorTexture", "emissiveTexture", "metallicRoughnessTexture", "normalTexture"):
+        if getattr(mat, key, None) is not None:
+            fm.textures[key] = "(embedded image)"
+    return fm

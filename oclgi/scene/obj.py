@@ -5,9 +5,11 @@ after ``v`` (McGuire's Cornell box among them: it loads 40 vertices, silently
 wrong). This reader follows the format: any whitespace separates fields,
 negative indices count back from the last vertex read so far, polygons are
 fan-triangulated, ``usemtl`` names the material of the faces that follow and
-``mtllib`` files give ``Kd`` (albedo) and ``Ke`` (emission). A material
-library that cannot be found is a warning (its materials keep the defaults);
-a NaN or infinite vertex coordinate is an error naming its line.
+``mtllib`` files give each material's ``Kd Ke Ks Ns Ni d Tr Tf illum`` and
+texture names (``map_*``), which :func:`oclgi.scene.materials.from_file`
+turns into a kind. A material library that cannot be found is a warning
+(its materials keep the defaults); a NaN or infinite vertex coordinate is an
+error naming its line.
 """
 
 from __future__ import annotations
@@ -21,13 +23,13 @@ from typing import Callable
 import numpy as np
 
 from ..errors import OclgiError
+from .materials import FileMaterial
 from .scene import OclgiWarning
 
+_COLOURS = {"Kd": "albedo", "Ke": "emission", "Ks": "specular", "Tf": "transmission"}
+_NUMBERS = {"Ns": "exponent", "Ni": "ior", "d": "dissolve"}
 
-@dataclass
-class MtlMaterial:
-    albedo: tuple[float, float, float] | None = None
-    emission: tuple[float, float, float] | None = None
+
 
 
 @dataclass
@@ -36,7 +38,7 @@ class ObjMesh:
     faces: np.ndarray  # (F, 3) int64, 0-based
     face_material: np.ndarray  # (F,) int64 index into material_names, -1 = none
     material_names: list[str] = field(default_factory=list)
-    materials: dict[str, MtlMaterial] = field(default_factory=dict)
+    materials: dict[str, FileMaterial] = field(default_factory=dict)
 
 
 def _plain(words) -> bool:
@@ -59,13 +61,13 @@ def _floats(parts, path, lineno, n):
     return vals
 
 
-def read_mtl(path: Path, text: str | None = None) -> dict[str, MtlMaterial]:
+def read_mtl(path: Path, text: str | None = None) -> dict[str, FileMaterial]:
     if text is None:
         try:
             text = path.read_text(errors="replace")
         except OSError as exc:
             raise OclgiError(f"cannot read material library {path}: {exc.strerror}") from None
-    mats: dict[str, MtlMaterial] = {}
+    mats: dict[str, FileMaterial] = {}
     cur = None
     for lineno, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].split()
@@ -74,17 +76,30 @@ def read_mtl(path: Path, text: str | None = None) -> dict[str, MtlMaterial]:
         key, args = line[0], line[1:]
         if key == "newmtl":
             name = " ".join(args)
-            cur = mats.setdefault(name, MtlMaterial())
-        elif cur is not None and key in ("Kd", "Ke"):
+            cur = mats.setdefault(name, FileMaterial())
+        elif cur is None:
+            continue
+        elif key in _COLOURS:
+            if args[:1] == ["spectral"] or args[:1] == ["xyz"]:
+                raise OclgiError(f"{path}:{lineno}: {key} {args[0]} colours are not supported (give r g b)")
             vals = _floats(args, path, lineno, 1)
             if len(args) >= 3:
                 vals = _floats(args, path, lineno, 3)
             else:
                 vals = vals * 3
-            if key == "Kd":
-                cur.albedo = tuple(vals)
-            else:
-                cur.emission = tuple(vals)
+            setattr(cur, _COLOURS[key], tuple(vals))
+        elif key in _NUMBERS:
+            setattr(cur, _NUMBERS[key], _floats(args, path, lineno, 1)[0])
+        elif key == "Tr":  # the complement of d
+            cur.dissolve = 1.0 - _floats(args, path, lineno, 1)[0]
+        elif key == "illum":
+            value = _floats(args, path, lineno, 1)[0]
+            if value != int(value):
+                raise OclgiError(f"{path}:{lineno}: illum takes an integer, got {args[0]!r}")
+            cur.illum = int(value)
+        elif key.startswith("map_") or key in ("bump", "disp", "decal", "refl"):
+            if args:
+                cur.textures[key] = args[-1]  # options (-bm 1 ...) come first, the file name last
     return mats
 
 
@@ -121,7 +136,7 @@ def read_obj(path: Path, text: str | None = None,
     face_mat: list[int] = []
     names: list[str] = []
     name_index: dict[str, int] = {}
-    materials: dict[str, MtlMaterial] = {}
+    materials: dict[str, FileMaterial] = {}
     cur_mat = -1
     for lineno, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].split()

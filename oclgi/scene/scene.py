@@ -18,17 +18,11 @@ import numpy as np
 from ..errors import OclgiError
 from ..params import MAX_LENGTH, RunParams
 from .degenerate import degenerate_triangles
+from .materials import Material
 
 
 class OclgiWarning(UserWarning):
     """Something in the input was fixed up (e.g. degenerate triangles dropped)."""
-
-
-@dataclass
-class Material:
-    name: str
-    albedo: tuple[float, float, float] = (0.5, 0.5, 0.5)
-    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass
@@ -166,11 +160,9 @@ class Scene:
             if len(self.faces) == 0:
                 raise OclgiError(f"{self.name}: every triangle is degenerate")
         for m in self.materials:
-            a, e = np.asarray(m.albedo, float), np.asarray(m.emission, float)
-            if a.shape != (3,) or not np.isfinite(a).all() or (a < 0).any() or (a > 1).any():
-                raise OclgiError(f"material {m.name!r}: albedo must be 3 numbers in [0, 1], got {m.albedo}")
-            if e.shape != (3,) or not np.isfinite(e).all() or (e < 0).any():
-                raise OclgiError(f"material {m.name!r}: emission must be 3 numbers >= 0, got {m.emission}")
+            if not isinstance(m, Material):
+                raise OclgiError(f"{self.name}: materials must be oclgi.Material, got {type(m).__name__}")
+            m.validate()
         for pl in self.point_lights:
             if not (np.isfinite(pl.position).all() and np.isfinite(pl.intensity).all()) or min(pl.intensity) < 0:
                 raise OclgiError(f"point light at {pl.position}: bad position or intensity")
