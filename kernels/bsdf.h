@@ -165,6 +165,22 @@ inline float phong_p_diffuse(__global const Material *m)
     return pd + ps > 0.0f ? pd / (pd + ps) : 1.0f;
 }
 
+/* The highlight alone: *wi with cos^n alpha about the mirror direction of
+ * wo (ns on wo's side), and its weight f_s cos / pdf_s = Ks (n + 2) /
+ * (n + 1) cos theta_i, 0 below the surface. The camera follows it alone
+ * (camera.cl: the diffuse lobe is estimated at the point). */
+inline float3 phong_lobe_sample(__global const Material *m, float3 ns, float3 wo, float4 u, float3 *wi)
+{
+    float3 r = bsdf_reflect(wo, ns);
+    float nexp = m->exponent;
+    float ca = pow(u.x, 1.0f / (nexp + 1.0f));
+    float sa = sqrt(fmax(0.0f, 1.0f - ca * ca)), phi = 2.0f * OCLGI_PI * u.y;
+    Frame f = frame_of(r);
+    *wi = normalize(to_world(f, (float3)(sa * cos(phi), sa * sin(phi), ca)));
+    float ci = dot(ns, *wi);
+    return ci > 0.0f ? vload3(0, m->specular) * ((nexp + 2.0f) / (nexp + 1.0f) * ci) : (float3)(0.0f);
+}
+
 /* -- the verbs ------------------------------------------------------------ */
 
 inline float3 bsdf_eval(__global const Material *m, float3 n, float3 wo, float3 wi, int adjoint)
@@ -303,16 +319,10 @@ inline BsdfSample bsdf_sample(__global const Material *m, float3 n, float3 wo, f
     }
     if (kind == OCLGI_BSDF_PHONG) {
         float pdiff = phong_p_diffuse(m);
-        if (u.w < pdiff) {
+        if (u.w < pdiff)
             s.wi = sample_cosine(ns, u.x, u.y);
-        } else {
-            /* cos alpha = u^(1 / (n + 1)) about the mirror direction */
-            float3 r = bsdf_reflect(wo, ns);
-            float ca = pow(u.x, 1.0f / (m->exponent + 1.0f));
-            float sa = sqrt(fmax(0.0f, 1.0f - ca * ca)), phi = 2.0f * OCLGI_PI * u.y;
-            Frame f = frame_of(r);
-            s.wi = normalize(to_world(f, (float3)(sa * cos(phi), sa * sin(phi), ca)));
-        }
+        else
+            phong_lobe_sample(m, ns, wo, u, &s.wi);
         float ci = dot(ns, s.wi);
         float pdf = bsdf_pdf(m, n, wo, s.wi);
         if (ci <= 0.0f || !(pdf > 0.0f)) return bsdf_absorbed();

@@ -5,20 +5,43 @@
  *     are the rectangle's pixels, row-major): a pinhole ray through the
  *     pixel's point `offset` (in pixel units from its top-left corner: 0.5,
  *     0.5 is the centre; a render of several samples per pixel launches
- *     once per sample) against the instances given (all of them, or a subset: a
- *     session's static layer); on a hit, the point (w =
- *     as_float(tri)), the geometric normal turned towards the camera (w = 1
- *     when the triangle's own normal faces the camera, which is when a
- *     one-sided emitter is seen) and the hit barycentrics; tri = -1 on a miss.
+ *     once per sample, `sample` numbering them) against the instances given
+ *     (all of them, or a subset: a session's static layer).
+ *
+ * The ray goes on through mirrors and glass, and samples the highlight of
+ * glossy surfaces (bsdf.h, radiance mode), until it reaches a surface with
+ * a diffuse part: that surface's point (w = as_float(tri)), its geometric
+ * normal turned towards the arriving ray (w = 1 when the triangle's own
+ * normal faces it, which is when a one-sided emitter is seen), the hit
+ * barycentrics, and the weight the point's radiance is seen with (the
+ * product of the sample weights on the way; 1 for a direct view). A
+ * modified Phong surface is the point with probability p_d (its diffuse
+ * lobe's share, bsdf.h phong_p_diffuse), weight / p_d, and otherwise
+ * reflects through its highlight. Misses: tri = -1 when the camera ray
+ * itself sees nothing; a ray lost later (escaping, absorbed, or past
+ * OCLGI_CAMERA_MAX_DEPTH surfaces) keeps the first surface's point with a
+ * zero normal (nothing is estimated there) and weight 0: covered, black.
+ *
+ * Random numbers: rng.h keyed by the camera's own seed, the pixel, and
+ * sample * OCLGI_CAMERA_MAX_DEPTH + surface, so a pixel's path is the same
+ * in every launch (the static layer and the composite of a session agree
+ * wherever no moving object is met).
  */
+#include "bsdf.h"
 #include "bvh.h"
+#include "rng.h"
+
+#define CAMERA_SEED_LO 0x85EBCA6Bu
+#define CAMERA_SEED_HI 0xC2B2AE35u
 
 __kernel void camera_visible_points(SCENE_ARGS,
-                                    __global const float4 *tri_normals,
+                                    __global const float4 *tri_normals, __global const int *tri_material,
+                                    __global const Material *materials,
                                     float4 eye, float4 forward, float4 right, float4 up,
                                     int width, int height, int x0, int y0, int rw, int rh, float2 offset,
+                                    int sample, float eps,
                                     __global float4 *positions, __global float4 *normals,
-                                    __global float2 *barys)
+                                    __global float2 *barys, __global float4 *weights)
 {
     int i = get_global_id(0);
     if (i >= rw * rh) return;
@@ -26,19 +49,48 @@ __kernel void camera_visible_points(SCENE_ARGS,
     /* right and up are pre-scaled by the half-extents of the image plane */
     float sx = 2.0f * ((float)px + offset.x) / (float)width - 1.0f;
     float sy = 1.0f - 2.0f * ((float)py + offset.y) / (float)height;
+    float3 o = eye.xyz;
     float3 d = normalize(forward.xyz + sx * right.xyz + sy * up.xyz);
-    Hit h;
-    scene_closest_hit(SCENE_PASS, eye.xyz, d, INFINITY, &h);
-    if (h.tri < 0) {
-        positions[i] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
-        normals[i] = (float4)(0.0f); /* a zero normal: no estimator counts anything here */
-        barys[i] = (float2)(0.0f);
-        return;
+    float3 weight = (float3)(1.0f);
+    float4 first = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
+    uint pixel = (uint)(py * width + px);
+    for (int depth = 0; depth < OCLGI_CAMERA_MAX_DEPTH; ++depth) {
+        Hit h;
+        scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
+        if (h.tri < 0) break;
+        float3 p = o + h.t * d;
+        if (depth == 0) first = (float4)(p, as_float(h.tri));
+        __global const Material *m = &materials[tri_material[h.tri]];
+        float3 n = tri_normals[h.tri].xyz;
+        float front = dot(n, d) < 0.0f ? 1.0f : 0.0f;
+        float3 ns = front == 0.0f ? -n : n;
+        float4 u = rng_uniform4(CAMERA_SEED_LO, CAMERA_SEED_HI, pixel,
+                                (uint)(sample * OCLGI_CAMERA_MAX_DEPTH + depth), 0);
+        int kind = m->kind;
+        if (kind == OCLGI_BSDF_DIFFUSE || kind == OCLGI_BSDF_PHONG) {
+            if (front == 0.0f && !(m->flags & OCLGI_MATERIAL_TWOSIDED)) break; /* a black back */
+            float pd = kind == OCLGI_BSDF_PHONG ? phong_p_diffuse(m) : 1.0f;
+            if (u.w < pd) {
+                positions[i] = (float4)(p, as_float(h.tri));
+                normals[i] = (float4)(ns, front);
+                barys[i] = (float2)(h.u, h.v);
+                weights[i] = (float4)(weight / pd, 1.0f);
+                return;
+            }
+            float3 wi;
+            weight *= phong_lobe_sample(m, ns, -d, u, &wi) / (1.0f - pd);
+            d = wi;
+        } else {
+            BsdfSample bs = bsdf_sample(m, n, -d, u, 0);
+            weight *= bs.weight;
+            d = bs.wi;
+        }
+        if (!(fmax(weight.x, fmax(weight.y, weight.z)) > 0.0f)) break;
+        o = p + eps * (dot(d, ns) < 0.0f ? -ns : ns);
     }
-    float3 n = tri_normals[h.tri].xyz;
-    float front = dot(n, d) < 0.0f ? 1.0f : 0.0f;
-    if (front == 0.0f) n = -n;
-    positions[i] = (float4)(eye.xyz + h.t * d, as_float(h.tri));
-    normals[i] = (float4)(n, front);
-    barys[i] = (float2)(h.u, h.v);
+    /* lost on the way (or nothing seen: first.w is -1) */
+    positions[i] = first;
+    normals[i] = (float4)(0.0f);
+    barys[i] = (float2)(0.0f);
+    weights[i] = (float4)(0.0f);
 }

@@ -1,7 +1,10 @@
 /* image.cl: radiance from irradiance, and tone mapping.
  *
- * image_shade     one work-item per pixel: L = Le (when the emitter's front
- *                 is seen) + albedo * E / pi; background (tri = -1) is 0.
+ * image_shade     one work-item per pixel: L = weight * (Le (when the
+ *                 emitter's front is seen) + albedo * E / pi), weight the
+ *                 camera path's (camera.cl: 1 for a direct view, the
+ *                 mirrors' and glass's on the way, 0 for a ray lost);
+ *                 background (tri = -1) is 0.
  * image_tonemap   one work-item per pixel: exposure, clamp, sRGB encoding,
  *                 8 bits per channel; alpha is the coverage (radiance.w:
  *                 1 where a sample hit geometry, 0 on the background,
@@ -11,7 +14,8 @@
 
 __kernel void image_shade(__global const float4 *positions, __global const float4 *normals,
                           __global const float4 *irradiance, __global const int *tri_material,
-                          __global const Material *materials, int n, __global float4 *radiance)
+                          __global const Material *materials, __global const float4 *weights, int n,
+                          __global float4 *radiance)
 {
     int i = get_global_id(0);
     if (i >= n) return;
@@ -20,7 +24,7 @@ __kernel void image_shade(__global const float4 *positions, __global const float
     __global const Material *m = &materials[tri_material[t]];
     float3 L = vload3(0, m->albedo) * irradiance[i].xyz * (1.0f / OCLGI_PI);
     if (normals[i].w > 0.5f) L += vload3(0, m->emission);
-    radiance[i] = (float4)(L, 1.0f);
+    radiance[i] = (float4)(L * weights[i].xyz, 1.0f);
 }
 
 inline float srgb_encode(float c)

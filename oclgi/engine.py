@@ -45,13 +45,15 @@ def render_layers(engine, points, irradiance: np.ndarray, camera, spp: int) -> d
     """A render's layers (compositing, denoisers): the irradiance E (W/m^2),
     the albedo and the normal (world space, towards the camera) of the
     visible surface, and its distance from the eye; 0 on the background.
+    The visible surface is the one a camera path ends on (through mirrors
+    and glass), its albedo the diffuse part's times the path's weight.
     Each the mean over a pixel's samples, as the radiance."""
     h, w = points.shape
     tri = points.tri
     hit = tri >= 0
     albedo = np.zeros((len(tri), 3), np.float32)
-    table = np.asarray([m.albedo for m in engine.scene.materials], np.float32)
-    albedo[hit] = table[engine.scene.tri_material[tri[hit]]]
+    table = np.asarray([m.diffuse_albedo for m in engine.scene.materials], np.float32)
+    albedo[hit] = table[engine.scene.tri_material[tri[hit]]] * points.weights4()[hit, :3]
     eye = np.asarray(camera.position, np.float64)
     depth = np.where(hit, np.linalg.norm(points.positions[:, :3].astype(np.float64) - eye, axis=1), 0.0)
     raw = {"irradiance": np.where(hit[:, None], irradiance, 0.0), "albedo": albedo,
@@ -235,7 +237,8 @@ class Engine:
         cam = self.view_camera(camera, width, height)
         spp = params.samples_per_pixel(spp)
         budget.check(budget.camera_need(cam.width, cam.height * spp), self.queue.device)
-        images = [self.view_points(cam, (0, 0, cam.width, cam.height), offset=o) for o in sample_offsets(spp)]
+        images = [self.view_points(cam, (0, 0, cam.width, cam.height), offset=o, sample=k)
+                  for k, o in enumerate(sample_offsets(spp))]
         return images[0] if spp == 1 else queries.stack(images)
 
     def view_camera(self, camera: Camera | None = None, width: int | None = None,
@@ -251,28 +254,30 @@ class Engine:
         height = None if height is None else params.image_size(height, "height")
         return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))
 
-    def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5)) -> queries.QueryPoints:
+    def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5), sample: int = 0) -> queries.QueryPoints:
         """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
         against all instances or against ``instances`` = (buffer, count), each
-        through its pixel's point ``offset`` (pixel units from its corner)."""
+        through its pixel's point ``offset`` (pixel units from its corner);
+        ``sample`` numbers a pixel's samples (the random numbers of its path
+        through mirrors, glass and highlights, kernels/camera.cl)."""
         x0, y0, rw, rh = (int(v) for v in rect)
         eye, fwd, right, up = cam.frame()
         n = rw * rh
         mf = cl.mem_flags
-        pos, nrm, bary = (cl.Buffer(self.ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8))
+        pos, nrm, bary, wt = (cl.Buffer(self.ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8, 16))
         k = self._programs.get("camera").camera_visible_points
         c = self.compiled
         scene_args = c.scene_args if instances is None else (c.nodes, c.tris, instances[0], int(instances[1]))
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
-        host = (np.empty((n, 4), np.float32), np.empty((n, 4), np.float32), np.empty((n, 2), np.float32))
+        host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
         if n:
-            launch(self.queue, k, n, *scene_args, c.tri_normals, as4(eye), as4(fwd), as4(right), as4(up),
-                   cam.width, cam.height, x0, y0, rw, rh, np.array(offset, np.float32),
-                   pos, nrm, bary, local_size=self.local_size)
-            for h, dev in zip(host, (pos, nrm, bary)):
+            launch(self.queue, k, n, *scene_args, c.tri_normals, c.tri_material, c.materials, as4(eye), as4(fwd),
+                   as4(right), as4(up), cam.width, cam.height, x0, y0, rw, rh, np.array(offset, np.float32),
+                   int(sample), np.float32(c.eps), pos, nrm, bary, wt, local_size=self.local_size)
+            for h, dev in zip(host, (pos, nrm, bary, wt)):
                 cl.enqueue_copy(self.queue, h, dev)
         # made once filled: QueryPoints checks its values
-        return queries.QueryPoints(*host, kind="camera", shape=(rh, rw))
+        return queries.QueryPoints(*host[:3], kind="camera", shape=(rh, rw), weights=host[3])
 
     def vertex_points(self) -> queries.QueryPoints:
         return queries.vertex_points(self.scene)
@@ -455,7 +460,8 @@ class Engine:
         nrm = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.normals)
         rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
         pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
-        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, n, rad)
+        wts = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.weights4())
+        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, wts, n, rad)
         if spp > 1:  # the box filter over a pixel's samples, in a fixed order (the same bits every run)
             samples = np.empty((spp, h // spp, w, 4), np.float32)
             cl.enqueue_copy(self.queue, samples, rad)

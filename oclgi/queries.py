@@ -71,6 +71,9 @@ class QueryPoints:
     barys: np.ndarray  # (n, 2) float32
     kind: str = "points"
     shape: tuple | None = None  # (height, width) for camera points
+    # (n, 4) float32: the weight each point's radiance is seen with (a
+    # camera path through mirrors and glass, kernels/camera.cl); None: 1
+    weights: np.ndarray | None = None
 
     def __post_init__(self):
         pos = _array(self.positions, "positions", (3, 4), None)
@@ -122,6 +125,12 @@ class QueryPoints:
         self.positions = np.ascontiguousarray(pos)
         self.normals = np.ascontiguousarray(nrm, np.float32)
         self.barys = np.ascontiguousarray(bary, np.float32)
+        if self.weights is not None:
+            wt = _array(self.weights, "weights", (4,), n)
+            _finite_rows(wt, "weight")
+            if (wt < 0).any():
+                raise OclgiError("query points: weights must be >= 0")
+            self.weights = np.ascontiguousarray(wt, np.float32)
         if not isinstance(self.kind, str):
             raise OclgiError(f"query points: kind must be a string, got {self.kind!r}")
         if self.shape is not None:
@@ -156,11 +165,21 @@ class QueryPoints:
         return len(self.positions)
 
     def copy(self) -> "QueryPoints":
-        return QueryPoints(self.positions.copy(), self.normals.copy(), self.barys.copy(), self.kind, self.shape)
+        return QueryPoints(self.positions.copy(), self.normals.copy(), self.barys.copy(), self.kind, self.shape,
+                           None if self.weights is None else self.weights.copy())
 
     def subset(self, index) -> "QueryPoints":
         """The points ``index`` (copies), as a flat set of the same kind."""
-        return QueryPoints(self.positions[index], self.normals[index], self.barys[index], self.kind, None)
+        return QueryPoints(self.positions[index], self.normals[index], self.barys[index], self.kind, None,
+                           None if self.weights is None else self.weights[index])
+
+    def reshaped(self, shape) -> "QueryPoints":
+        """These points (not copied) as an image of ``shape`` = (height, width)."""
+        return QueryPoints(self.positions, self.normals, self.barys, self.kind, shape, self.weights)
+
+    def weights4(self) -> np.ndarray:
+        """(n, 4) float32 weights, ones when the points have none."""
+        return self.weights if self.weights is not None else np.ones((len(self), 4), np.float32)
 
     @property
     def tri(self) -> np.ndarray:
@@ -201,8 +220,10 @@ def stack(images: list) -> QueryPoints:
     h, w = images[0].shape
     if any(im.shape != (h, w) for im in images):
         raise OclgiError("stack: the images of points differ in size")
+    weights = None if all(im.weights is None for im in images) else np.concatenate([im.weights4() for im in images])
     return QueryPoints(np.concatenate([im.positions for im in images]), np.concatenate([im.normals for im in images]),
-                       np.concatenate([im.barys for im in images]), kind=images[0].kind, shape=(len(images) * h, w))
+                       np.concatenate([im.barys for im in images]), kind=images[0].kind, shape=(len(images) * h, w),
+                       weights=weights)
 
 
 def from_arrays(points, normals) -> QueryPoints:

@@ -26,6 +26,13 @@ point: the same ray meets the same triangle with the same arithmetic,
 whatever else the traversal visited (kernels/bvh.h). Hence the composite
 equals a full camera pass at the current pose, which the session tests
 check.
+
+With mirrors, glass or highlights in the scene a camera ray goes on past
+its first surface (kernels/camera.cl), so a pixel far from a moving
+object's projection can see it (in a mirror), and a pixel can see a static
+surface through a moving glass: every pixel is re-traced after a move, and
+the dynamic points are those whose composite point (position, normal or
+weight) differs from the static layer's, or lies on a movable object.
 """
 
 from __future__ import annotations
@@ -55,9 +62,22 @@ class DynamicView:
         ranges = scene.object_ranges()
         self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
         full = (0, 0, self.cam.width, self.cam.height)
+        # a camera ray that can go on past its first surface (module doc)
+        self.through = any(m.kind != "diffuse" for m in scene.materials)
         self.static = engine.view_points(self.cam, full, self.static_instances)
         self.points = engine.view_points(self.cam, full)
-        self.dynamic = np.nonzero(self.on_movable(self.points.tri))[0]
+        self.dynamic = np.nonzero(self.is_dynamic(np.arange(len(self.points)), self.points))[0]
+
+    def is_dynamic(self, pix: np.ndarray, sub) -> np.ndarray:
+        """Which of the pixels ``pix``, whose composite points are ``sub``,
+        hold dynamic points (module doc)."""
+        dyn = self.on_movable(sub.tri)
+        if self.through:
+            s = self.static
+            for a, b in ((s.positions[pix], sub.positions), (s.normals[pix], sub.normals),
+                         (s.weights4()[pix], sub.weights4())):
+                dyn |= (a.view(np.int32) != b.view(np.int32)).any(axis=1)
+        return dyn
 
     def on_movable(self, tri: np.ndarray) -> np.ndarray:
         hit = np.zeros(len(tri), bool)
@@ -68,6 +88,8 @@ class DynamicView:
     def rectangle(self):
         """(x0, y0, w, h): pixels that may see a movable object (module doc)."""
         cam = self.cam
+        if self.through:
+            return 0, 0, cam.width, cam.height
         eye, fwd, right, up = cam.frame()
         inst = self.engine.compiled.instances_host[self.movable]
         xs, ys = [], []
@@ -97,7 +119,7 @@ class DynamicView:
         ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
         pix = (y0 + ys) * w + x0 + xs
         sub = self.engine.view_points(self.cam, rect)
-        dyn_new = pix[self.on_movable(sub.tri)]
+        dyn_new = pix[self.is_dynamic(pix, sub)]
         changed = np.union1d(self.dynamic, dyn_new)
         # composite: the re-traced point inside the rectangle, the static one outside
         p = self.points
@@ -107,6 +129,9 @@ class DynamicView:
         p.positions[pix] = sub.positions
         p.normals[pix] = sub.normals
         p.barys[pix] = sub.barys
+        if p.weights is not None:
+            p.weights[changed] = self.static.weights4()[changed]
+            p.weights[pix] = sub.weights4()
         self.dynamic = dyn_new
         return changed, dyn_new
 

@@ -4,11 +4,15 @@
     path = "cornell-box/CornellBox-Original.obj"   # relative to the TOML file
     albedo = [0.5, 0.5, 0.5]        # faces the file gives no material (default 0.5)
     emission = [0, 0, 0]
+    material = { kind = "diffuse" } # or the kind and parameters of those faces (oclgi/scene/materials.py)
     transform = { scale = 1.0, rotate = [0, 1, 0, 30], translate = [0, 0, 0] }
     movable = false                 # true: an object of its own that Engine.move places
     name = "bunny"                  # a movable object's name (default: the file's stem)
     [mesh.materials.light]          # override one material the file names
     emission = [17, 12, 4]
+    [mesh.materials.glass]          # any kind and its parameters (oclgi/scene/materials.py)
+    kind = "dielectric"
+    ior = 1.5
 
     [[point_light]]
     position = [0, 1.9, 0]
@@ -56,7 +60,8 @@ from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObj
 
 
 _TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
-_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "lumens", "materials",
+_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "material",
+         "lumens", "materials",
          "transform", "movable", "name"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 # The run parameters a scene file sets: (table, key) -> RunParams field.
@@ -196,6 +201,13 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
         emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"),
     )
+    if "material" in desc:  # the kind and parameters of the faces the file gives no material
+        _check_keys(desc["material"], TABLE_KEYS, where + ".material")
+        for key in ("albedo", "emission"):
+            if key in desc and key in desc["material"]:
+                raise OclgiError(f"{where}: give {key} in the mesh or in its material table, not both")
+        default = from_table(where + ".material", desc["material"], default, _READ)
+        default.name = f"{where}.default"
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
         raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
@@ -237,7 +249,9 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             fm = file_mats.get(name)
             if fm is not None and fm.emission is not None:
                 fm.emission = _radiant(fm.emission, f"{label}: material {name!r} (Ke)")
-            mat = from_file(f"{label}:{name}", fm, default)
+            # a table that sets the kind replaces the file's material: no warnings about it
+            replaced = isinstance(overrides.get(name), dict) and "kind" in overrides[name]
+            mat = from_file(f"{label}:{name}", fm, default, quiet=replaced)
             if name in overrides:
                 o = overrides[name]
                 _check_keys(o, TABLE_KEYS, f"{where}.materials.{name}")

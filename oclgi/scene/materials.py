@@ -226,9 +226,10 @@ _ILLUM = {0: "diffuse", 1: "diffuse", 2: "phong", 3: "mirror", 4: "dielectric", 
           6: "dielectric", 7: "dielectric", 8: "mirror", 9: "dielectric"}
 
 
-def from_file(label: str, fm: FileMaterial | None, default: Material) -> Material:
+def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: bool = False) -> Material:
     """The scene material for a mesh file's material ``label``; a property
-    oclgi cannot honour is one warning naming it and the material."""
+    oclgi cannot honour is one warning naming it and the material (none
+    when ``quiet``: the scene file replaces the material)."""
     from .scene import OclgiWarning  # scene.py imports this module
 
     m = Material(**{f.name: getattr(default, f.name) for f in fields(Material)})
@@ -247,7 +248,7 @@ def from_file(label: str, fm: FileMaterial | None, default: Material) -> Materia
             m.emission = (0.0, 0.0, 0.0)
     for key, name in sorted(fm.textures.items()):
         ignored.append(f"{key} {name!r} (textures are not supported yet: the factor is used)")
-    if ignored:
+    if ignored and not quiet:
         warnings.warn(f"material {label!r}: ignored " + "; ".join(ignored), OclgiWarning, stacklevel=4)
     return m
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import params
 from ..errors import OclgiError
 from ..queries import QueryPoints
 
@@ -88,14 +89,23 @@ def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
     return out
 
 
-def edge_mask(points: QueryPoints, edge_px: int = 3, scene=None) -> np.ndarray:
+def edge_mask(points: QueryPoints, edge_px: int = 3, scene=None, spp: int = 1) -> np.ndarray:
     """(H, W) bool, True = leave out: the background, and every pixel within
     ``edge_px`` pixels (a square of side 2 edge_px + 1) of a pixel touching a
     geometric discontinuity (see :func:`discontinuities`). ``edge_px = 0``
-    masks only the pixels that touch one."""
+    masks only the pixels that touch one. ``spp`` > 1: the points are a
+    render's stacked samples (``Engine.camera_points``), and a pixel is left
+    out when any of its samples is (mirrors and glass: each sample's own
+    path)."""
     if isinstance(edge_px, bool) or not isinstance(edge_px, (int, np.integer)) or edge_px < 0:
         raise OclgiError(f"edge_px must be an integer >= 0, got {edge_px!r}")
-    return dilate(discontinuities(points, scene), int(edge_px))
+    spp = params.samples_per_pixel(spp)
+    h, w = points.shape
+    if h % spp:
+        raise OclgiError(f"edge_mask: {h} rows of points are not {spp} samples of an image")
+    masks = [dilate(discontinuities(points.subset(slice(k * (h // spp) * w, (k + 1) * (h // spp) * w))
+                                    .reshaped((h // spp, w)), scene), int(edge_px)) for k in range(spp)]
+    return np.logical_or.reduce(masks)
 
 
 @dataclass

@@ -13,8 +13,13 @@ carried over:
   the engine rather than the scene after ``engine.move``. One Mitsuba mesh
   per (object, material), without vertex normals, so Mitsuba's face normal
   is ``(v1 - v0) x (v2 - v0)`` like oclgi's.
-* Materials: Lambertian, reflecting on both faces (the photon tracer
-  scatters on whichever side a photon arrives): ``twosided`` ``diffuse``.
+* Materials: each kind as its Mitsuba plugin
+  (:func:`oclgi.scene.materials.to_mitsuba`): ``diffuse``, ``conductor``
+  and ``roughconductor`` (GGX, ``material = "none"``: F = the specular
+  reflectance at every angle), ``dielectric`` and ``roughdielectric``
+  (GGX), wrapped in ``twosided`` where the material reflects on both faces;
+  modified Phong, which Mitsuba 3 lacks, as a blend of a diffuse and a GGX
+  lobe of about its width (an approximation).
 * Emission: a material's ``emission`` is a radiance ``Le`` leaving only the
   side of the triangle's normal (the tracer emits ``pi A Le`` watts,
   cosine-distributed about the normal; the camera adds ``Le`` only where the
@@ -58,6 +63,7 @@ import os
 import numpy as np
 
 from .. import params
+from ..scene.materials import Material, to_mitsuba
 from ..errors import OclgiError
 
 DEFAULT_VARIANT = "scalar_rgb"
@@ -135,9 +141,8 @@ def _mesh(mi, name, tris, bsdf, emitter=None):
     return mesh
 
 
-def _diffuse(mi, albedo, twosided=True):
-    bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [float(c) for c in albedo]}}
-    return mi.load_dict({"type": "twosided", "material": bsdf} if twosided else bsdf)
+def _bsdf(mi, material: Material):
+    return mi.load_dict(to_mitsuba(material))
 
 
 def scene_dict(mi, scene_or_engine) -> dict:
@@ -154,7 +159,7 @@ def scene_dict(mi, scene_or_engine) -> dict:
                 emitter = mi.load_dict({"type": "area",
                                         "radiance": {"type": "rgb", "value": [float(c) for c in m.emission]}})
             name = f"mesh_{obj}_{mat_id}"
-            out[name] = _mesh(mi, name, tris[sel], _diffuse(mi, m.albedo), emitter)
+            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter)
     for i, pl in enumerate(scene.point_lights):
         if max(pl.intensity) > 0:
             out[f"point_light_{i}"] = {"type": "point", "position": [float(c) for c in pl.position],
@@ -264,7 +269,7 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
     d = scene_dict(mi, scene)
     d["integrator"] = {"type": "path", "max_depth": _mitsuba_depth(sc, max_depth)}
     d["oclgi_sensor_squares"] = _mesh(mi, "oclgi_sensor_squares", squares,
-                                      _diffuse(mi, (1.0, 1.0, 1.0), twosided=False))
+                                      _bsdf(mi, Material("oclgi_sensor", albedo=(1.0, 1.0, 1.0), twosided=False)))
     mscene = mi.load_dict(d)
     film = {"type": "hdrfilm", "width": 1, "height": 1, "rfilter": {"type": "box"},
             "pixel_format": "rgb", "component_format": "float32"}
