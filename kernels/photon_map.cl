@@ -2,9 +2,10 @@
  * estimate from the k nearest (the search itself: point_index.cl).
  *
  * pm_count     one work-item per path of a batch: how many impacts it has
- *              (segment_impact, segment.h: segments that end on a surface;
- *              bounce 0 skipped unless count_emitted). The host turns the
- *              counts into offsets.
+ *              (pm_stored: segments that end on a surface, segment.h,
+ *              other than a mirror's or glass's, where no density is
+ *              estimated (Jensen); bounce 0 skipped unless count_emitted).
+ *              The host turns the counts into offsets.
  * pm_gather    one work-item per path: writes its impacts at its offset, in
  *              bounce order (so a run's impacts come out in (path, bounce)
  *              order, the canonical order whatever the batch size):
@@ -15,8 +16,15 @@
  */
 #include "point_index.h"
 
+#define PM_MATERIALS __global const int *tri_material, __global const Material *materials
+
+inline int pm_stored(__global const Segment *slot, PM_MATERIALS)
+{
+    return segment_impact(slot) && !(materials[tri_material[slot->tri]].flags & OCLGI_MATERIAL_DELTA);
+}
+
 __kernel void pm_count(__global const Segment *segments, int n_paths, int max_depth,
-                       int count_emitted, __global int *counts)
+                       int count_emitted, PM_MATERIALS, __global int *counts)
 {
     int p = get_global_id(0);
     if (p >= n_paths) return;
@@ -28,13 +36,13 @@ __kernel void pm_count(__global const Segment *segments, int n_paths, int max_de
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        c += segment_impact(path + b);
+        c += pm_stored(path + b, tri_material, materials);
     }
     counts[p] = c;
 }
 
 __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_depth,
-                        int count_emitted, __global const int *offsets,
+                        int count_emitted, PM_MATERIALS, __global const int *offsets,
                         __global float *pos, __global float *dir, __global float *power)
 {
     int p = get_global_id(0);
@@ -47,7 +55,7 @@ __kernel void pm_gather(__global const Segment *segments, int n_paths, int max_d
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        if (!segment_impact(path + b)) continue;
+        if (!pm_stored(path + b, tri_material, materials)) continue;
         vstore3(segment_end(&s), o, pos);
         vstore3(s.w, o, dir);
         vstore3(segment_power(path + b), o, power);

@@ -163,7 +163,8 @@ class PhotonMap(Estimator):
     def accumulate(self, batch):
         n_paths = batch.n_paths
         counts_buf = cl.Buffer(self.ctx, cl.mem_flags.READ_WRITE, n_paths * 4)
-        args = (batch.segments, n_paths, batch.max_depth, int(self.count_emitted))
+        c = self.compiled
+        args = (batch.segments, n_paths, batch.max_depth, int(self.count_emitted), c.tri_material, c.materials)
         launch(self.queue, self.k_count, n_paths, *args, counts_buf, local_size=self.local_size)
         counts = np.empty(n_paths, np.int32)
         cl.enqueue_copy(self.queue, counts, counts_buf)

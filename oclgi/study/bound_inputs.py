@@ -83,7 +83,7 @@ def scene_inputs(scene, reference: np.ndarray, point_emission: np.ndarray, l_max
     """Bound inputs of ``scene``; ``reference`` (n, 3) irradiance at the query
     points and ``point_emission`` (n, 3) their own emitted radiance feed L_max."""
     used = np.unique(scene.tri_material)
-    albedo = np.array([scene.materials[i].albedo for i in used], np.float64)
+    albedo = np.array([scene.materials[i].r_max() for i in used], np.float64)  # all the light a kind sends on
     emission = np.array([scene.materials[i].emission for i in used], np.float64)
     power = scene.emitters()[5]
     areas = scene.triangle_areas()

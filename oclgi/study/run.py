@@ -413,8 +413,9 @@ def _run_row(engine, pts, c: Config, photons: int, seeds, inputs, bar) -> Row:
 
 
 def _albedo(scene, pts) -> np.ndarray:
-    """Albedo of the triangle under each point; R_max per channel where unknown."""
-    albedo = np.array([m.albedo for m in scene.materials], np.float64)
+    """Albedo of the triangle under each point (its diffuse part's, which turns
+    irradiance into the radiance the study compares); R_max per channel where unknown."""
+    albedo = np.array([m.diffuse_albedo for m in scene.materials], np.float64)
     used = albedo[np.unique(scene.tri_material)]
     tri = pts.tri
     out = np.tile(used.max(axis=0), (len(pts), 1))
