@@ -56,3 +56,15 @@ def detp_reference(points, normals, segments, radius, ext, count_emitted=True, m
         hit = (wn < -1e-6) & (t > 0) & (t <= t_end + ext) & (np.einsum("ij,ij->i", c, c) <= radius**2)
         out[i] = power[hit].sum(axis=0)
     return out
+
+
+def fresnel_dielectric(cos_i: float, eta: float) -> float:
+    """Unpolarised Fresnel reflectance (cos_i >= 0 on the incident side, eta =
+    eta_t / eta_i); 1 under total internal reflection."""
+    sin2_t = (1 - cos_i ** 2) / eta ** 2
+    if sin2_t >= 1:
+        return 1.0
+    ct = np.sqrt(1 - sin2_t)
+    rs = (cos_i - eta * ct) / (cos_i + eta * ct)
+    rp = (eta * cos_i - ct) / (eta * cos_i + ct)
+    return float(0.5 * (rs ** 2 + rp ** 2))

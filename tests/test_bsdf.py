@@ -13,6 +13,7 @@ import pytest
 from chi2 import cell_of, chi2_pvalue, expected_counts, sidak
 from oclgi.cl.programs import programs
 from oclgi.scene.materials import Material, record
+from reference import fresnel_dielectric
 
 N_Z, N_PHI = 32, 64
 N_SAMPLES = 400_000
@@ -153,16 +154,6 @@ def test_white_furnace_and_the_photon_bound(probe, name):
             assert (mean <= 1.0 + 3e-3).all(), f"{name} at {angle}: returns more than it receives ({mean})"
 
 
-def fresnel(cos_i, eta):
-    sin2_t = (1 - cos_i ** 2) / eta ** 2
-    if sin2_t >= 1:
-        return 1.0
-    ct = np.sqrt(1 - sin2_t)
-    rs = (cos_i - eta * ct) / (cos_i + eta * ct)
-    rp = (eta * cos_i - ct) / (eta * cos_i + ct)
-    return 0.5 * (rs ** 2 + rp ** 2)
-
-
 def test_mirror_reflects_by_the_law_of_reflection(probe):
     mat = Material("m", kind="mirror", specular=(0.9, 0.5, 0.2))
     wo = direction(35.0)
@@ -183,7 +174,7 @@ def test_glass_follows_snell_and_fresnel(probe, angle, ior):
     eta = ior if entering else 1 / ior
     cos_i = abs(wo[2])
     refracted = np.sign(wi[:, 2]) != np.sign(wo[2])
-    F = fresnel(cos_i, eta)
+    F = fresnel_dielectric(cos_i, eta)
     sigma = np.sqrt(F * (1 - F) / n) + 1e-9
     assert abs((~refracted).mean() - F) < 5 * sigma + 1e-6, f"reflected {(~refracted).mean():.4f}, Fresnel {F:.4f}"
     if refracted.any():  # Snell: sin_t = sin_i / eta, in the plane of incidence, on the far side

@@ -150,3 +150,21 @@ def test_retrace_through_glass_equals_a_fresh_trace(scenes_dir, rng):
     stored = seg.copy()
     stored["power"] *= engine.photon_watts(10_000)
     assert stored.tobytes() == fresh_seg.tobytes()
+
+
+def test_photon_maps_store_no_impacts_on_mirrors(cl_env):
+    """Impacts are where density is estimated: on the diffuse wall, none on
+    the mirror floor (its photons go on, and land on the wall)."""
+    mirror = {"vertices": [[-4, 0, -4], [4, 0, -4], [4, 0, 4], [-4, 0, 4]], "faces": [[0, 2, 1], [0, 3, 2]],
+              "material": {"kind": "mirror"}}
+    wall = {"vertices": [[-4, 0, -3], [4, 0, -3], [4, 8, -3], [-4, 8, -3]], "faces": [[0, 1, 2], [0, 2, 3]]}
+    scene = oclgi.load_dict({"mesh": [mirror, wall], "point_light": {"position": [0, 3, 0], "intensity": [5, 5, 5]}})
+    engine = oclgi.Engine(scene)
+    pts = oclgi.query_points(np.array([[0.0, 1.0, -3.0]]), np.array([[0.0, 0.0, 1.0]]))
+    run = engine.run(pts, method="photon_map", photons=20_000, k=10)
+    run.complete()
+    impacts = np.concatenate([c[0] for c in run.estimator.chunks])
+    assert len(impacts) > 1000
+    np.testing.assert_allclose(impacts[:, 2], -3.0, atol=1e-4)  # all on the wall
+    seg, _ = engine.trace(20_000)
+    assert ((seg["tri"] >= 0) & (seg["tri"] < 2)).sum() > 1000  # photons did hit the mirror

@@ -48,8 +48,6 @@ Segment = np.dtype(
     [("org", f4, 3), ("t_end", f4), ("dir", f4, 3), ("tri", i4), ("power", f4, 3), ("path", i4)]
 )
 
-# Diffuse material, 32 bytes: albedo, Russian-roulette survival probability
-# (max albedo, clamped to 1), emitted radiance (one-sided, along the normal).
 # Material, 64 bytes (kernels/bsdf.h reads it, oclgi/scene/materials.py
 # writes it): kind BSDF_*, flags MATERIAL_*; albedo is the diffuse part's
 # reflectance (a dielectric's transmission tint); specular the highlight's,
