@@ -4,27 +4,31 @@
  *                 emitter's front is seen) + albedo * E / pi), weight the
  *                 camera path's (camera.cl: 1 for a direct view, the
  *                 mirrors' and glass's on the way, 0 for a ray lost);
- *                 background (tri = -1) is 0.
+ *                 background (tri = -1) is 0. The albedo (textured) times
+ *                 the weight goes to `albedo` (the render's albedo layer).
  * image_tonemap   one work-item per pixel: exposure, clamp, sRGB encoding,
  *                 8 bits per channel; alpha is the coverage (radiance.w:
  *                 1 where a sample hit geometry, 0 on the background,
  *                 between for a pixel's averaged samples).
  */
-#include "oclgi_types.h"
+#include "texture.h"
 
 __kernel void image_shade(__global const float4 *positions, __global const float4 *normals,
                           __global const float4 *irradiance, __global const int *tri_material,
-                          __global const Material *materials, __global const float4 *weights, int n,
-                          __global float4 *radiance)
+                          __global const Material *materials, __global const float4 *weights,
+                          __global const Instance *instances, TEXTURE_ARGS, int n,
+                          __global float4 *radiance, __global float4 *albedo)
 {
     int i = get_global_id(0);
     if (i >= n) return;
     int t = as_int(positions[i].w);
-    if (t < 0) { radiance[i] = (float4)(0.0f); return; }
+    if (t < 0) { radiance[i] = (float4)(0.0f); albedo[i] = (float4)(0.0f); return; }
     __global const Material *m = &materials[tri_material[t]];
-    float3 L = vload3(0, m->albedo) * irradiance[i].xyz * (1.0f / OCLGI_PI);
+    float3 a = texture_albedo(TEXTURE_PASS, instances, m, t, positions[i].xyz);
+    float3 L = a * irradiance[i].xyz * (1.0f / OCLGI_PI);
     if (normals[i].w > 0.5f) L += vload3(0, m->emission);
     radiance[i] = (float4)(L * weights[i].xyz, 1.0f);
+    albedo[i] = (float4)(a * weights[i].xyz, 0.0f);
 }
 
 inline float srgb_encode(float c)

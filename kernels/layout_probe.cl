@@ -23,6 +23,7 @@ __kernel void layout_probe(__global int *out)
     SIZE(Material); OFF(Material, albedo); OFF(Material, kind); OFF(Material, emission); OFF(Material, flags);
     OFF(Material, specular); OFF(Material, exponent); OFF(Material, roughness); OFF(Material, ior);
     OFF(Material, texture); OFF(Material, pad);
+    SIZE(Texture); OFF(Texture, offset); OFF(Texture, width); OFF(Texture, height); OFF(Texture, pad);
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
     OFF(Emitter, e2); OFF(Emitter, pad1); OFF(Emitter, power); OFF(Emitter, pad2);
     SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);

@@ -96,9 +96,17 @@ typedef struct {
     float exponent;    /* modified Phong's n */
     float roughness;   /* GGX alpha */
     float ior;         /* a dielectric's index, inside over outside */
-    int texture;       /* -1: none */
+    int texture;       /* the albedo's texture (Texture index), -1: none */
     int pad;
 } Material;
+
+/* A texture: width x height float4 texels from offset (texture.h). */
+typedef struct {
+    int offset;
+    int width;
+    int height;
+    int pad;
+} Texture;
 
 typedef struct {
     float p[3];

@@ -27,12 +27,14 @@
 #include "bvh.h"
 #include "rng.h"
 #include "segment.h"
+#include "texture.h"
 
 #define TRACE_ARGS __global const float4 *tri_normals, __global const int *tri_material,     \
-                   __global const Material *materials, __global const Emitter *emitters,   \
+                   __global const Material *materials, TEXTURE_ARGS,                        \
+                   __global const Emitter *emitters,                                        \
                    __global const float *emitter_cdf, int n_emitters, uint seed_lo,        \
                    uint seed_hi, int max_depth, float eps
-#define TRACE_PASS tri_normals, tri_material, materials, emitters, emitter_cdf, n_emitters, \
+#define TRACE_PASS tri_normals, tri_material, materials, TEXTURE_PASS, emitters, emitter_cdf, n_emitters, \
                    seed_lo, seed_hi, max_depth, eps
 
 typedef struct {
@@ -76,14 +78,16 @@ inline PathState path_emit(TRACE_ARGS, uint path)
  * component) and divides by it, so power never grows (oclgi_types.h); for
  * a diffuse surface q is the max albedo, as before the kinds existed. The
  * next segment starts eps off the surface on the side it leaves by. */
-inline int path_scatter(TRACE_ARGS, uint path, int b, float3 o, float3 d, float t, int tri,
-                        float3 power, PathState *s)
+inline int path_scatter(TRACE_ARGS, __global const Instance *instances, uint path, int b, float3 o, float3 d,
+                        float t, int tri, float3 power, PathState *s)
 {
     if (tri < 0 || b >= max_depth) return 0;
     __global const Material *m = &materials[tri_material[tri]];
     float4 r = rng_uniform4(seed_lo, seed_hi, path, (uint)b, 0);
     float3 n = tri_normals[tri].xyz;
     BsdfSample bs = bsdf_sample(m, n, -d, r, 1);
+    if (m->texture >= 0) /* only diffuse materials have textures (oclgi/scene/materials.py) */
+        bs.weight *= texture_rgb(TEXTURE_PASS, m->texture, texture_uv(TEXTURE_PASS, instances, tri, o + t * d));
     float q = fmin(1.0f, fmax(bs.weight.x, fmax(bs.weight.y, bs.weight.z)));
     if (!(r.z < q)) return 0;
     s->power = power * bs.weight / q;
@@ -106,7 +110,7 @@ inline int path_trace_from(SCENE_ARGS, TRACE_ARGS, uint path, int b, PathState s
         segment_write(&out[b], s.o, t, s.d, h.tri, s.power, (int)path);
         len = b + 1;
         PathState next;
-        if (!path_scatter(TRACE_PASS, path, b + 1, s.o, s.d, h.t, h.tri, s.power, &next)) break;
+        if (!path_scatter(TRACE_PASS, instances, path, b + 1, s.o, s.d, h.t, h.tri, s.power, &next)) break;
         s = next;
         ++b;
     }
@@ -141,8 +145,8 @@ __kernel void photon_retrace(SCENE_ARGS, TRACE_ARGS, int path_offset,
     } else {
         SegmentView prev;
         segment_load(&out[b - 1], &prev);
-        if (!path_scatter(TRACE_PASS, path, b, prev.o, prev.w, prev.t_end, prev.tri, segment_power(&out[b - 1]),
-                          &s)) {
+        if (!path_scatter(TRACE_PASS, instances, path, b, prev.o, prev.w, prev.t_end, prev.tri,
+                          segment_power(&out[b - 1]), &s)) {
             for (int j = b; j < max_depth; ++j) segment_write_empty(&out[j], (int)path);
             path_len[i] = b;
             return;

@@ -41,19 +41,17 @@ DEFAULT_BATCH_BYTES = 256 << 20
 LAYER_CHANNELS = {"irradiance": "RGB", "albedo": "RGB", "normal": "XYZ", "depth": "Z"}
 
 
-def render_layers(engine, points, irradiance: np.ndarray, camera, spp: int) -> dict:
+def render_layers(points, irradiance: np.ndarray, albedo: np.ndarray, camera, spp: int) -> dict:
     """A render's layers (compositing, denoisers): the irradiance E (W/m^2),
     the albedo and the normal (world space, towards the camera) of the
     visible surface, and its distance from the eye; 0 on the background.
     The visible surface is the one a camera path ends on (through mirrors
-    and glass), its albedo the diffuse part's times the path's weight.
+    and glass), ``albedo`` (image_shade's) its diffuse part's, textured,
+    times the path's weight.
     Each the mean over a pixel's samples, as the radiance."""
     h, w = points.shape
     tri = points.tri
     hit = tri >= 0
-    albedo = np.zeros((len(tri), 3), np.float32)
-    table = np.asarray([m.diffuse_albedo for m in engine.scene.materials], np.float32)
-    albedo[hit] = table[engine.scene.tri_material[tri[hit]]] * points.weights4()[hit, :3]
     eye = np.asarray(camera.position, np.float64)
     depth = np.where(hit, np.linalg.norm(points.positions[:, :3].astype(np.float64) - eye, axis=1), 0.0)
     raw = {"irradiance": np.where(hit[:, None], irradiance, 0.0), "albedo": albedo,
@@ -432,11 +430,16 @@ class Engine:
         """The image of a render run's estimate (resolved: ``Run.finish``);
         ``layers``: also the irradiance, albedo, normal and depth layers."""
         spp, cam = run.spp, run.camera
-        radiance, pixels = self.shade(run.estimator.points, est.estimator.irr, exposure, spp)
-        extra = render_layers(self, run.estimator.points, est.irradiance, cam, spp) if layers and cam else {}
+        radiance, pixels, albedo = self.shade_albedo(run.estimator.points, est.estimator.irr, exposure, spp)
+        extra = render_layers(run.estimator.points, est.irradiance, albedo, cam, spp) if layers and cam else {}
         return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure), extra)
 
     def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1):
+        """(radiance, pixels): see ``shade_albedo``."""
+        return self.shade_albedo(points, irradiance, exposure, spp)[:2]
+
+    def shade_albedo(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0,
+                     spp: int = 1):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
         pixels, from the irradiance (a device float4 buffer, one per point).
         ``spp`` > 1: the points are ``camera_points``' stacked samples, and a
@@ -461,7 +464,10 @@ class Engine:
         rad = cl.Buffer(self.ctx, mf.READ_WRITE, n * 16)
         pix = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 4)
         wts = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.weights4())
-        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, wts, n, rad)
+        alb = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 16)
+        launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, wts, c.instances,
+               c.tri_uvmap, c.tri_object, c.textures, c.texels, n, rad, alb)
+
         if spp > 1:  # the box filter over a pixel's samples, in a fixed order (the same bits every run)
             samples = np.empty((spp, h // spp, w, 4), np.float32)
             cl.enqueue_copy(self.queue, samples, rad)
@@ -480,4 +486,6 @@ class Engine:
         pixels = np.empty((h, w, 4), np.uint8)
         cl.enqueue_copy(self.queue, radiance, rad)
         cl.enqueue_copy(self.queue, pixels, pix)
-        return radiance[:, :, :3].copy(), pixels
+        albedo = np.empty((len(points), 4), np.float32)  # per sample: the albedo layer averages them
+        cl.enqueue_copy(self.queue, albedo, alb)
+        return radiance[:, :, :3].copy(), pixels, albedo[:, :3]

@@ -63,6 +63,11 @@ Material = np.dtype(
     ]
 )
 
+# Texture, 16 bytes (oclgi/scene/textures.py, kernels/texture.h): a texture's
+# texels are width x height float4 from offset in the scene's texel array,
+# row-major, the top row first.
+Texture = np.dtype([("offset", i4), ("width", i4), ("height", i4), ("pad", i4)])
+
 # Emitter, 64 bytes. kind 0: triangle (p = v0, e1, e2 its edges); kind 1:
 # point light at p. power = emitter power / its selection probability, so a
 # photon carries power / n_paths.
@@ -106,7 +111,7 @@ ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
     "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment,
-    "Material": Material, "Emitter": Emitter,
+    "Material": Material, "Texture": Texture, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }
 

@@ -21,7 +21,7 @@ from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from . import materials
+from . import materials, textures
 from .scene import Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
@@ -81,7 +81,15 @@ class CompiledScene:
         normals[:, :3] = scene.triangle_normals()  # object space = world space until a move
         self.areas = scene.triangle_areas().astype(np.float32)
 
-        mats = materials.record(scene.materials)
+        tex_list, tex_index = [], {}
+        for m in scene.materials:  # each texture once, however many materials share it
+            if m.texture is not None and id(m.texture) not in tex_index:
+                tex_index[id(m.texture)] = len(tex_list)
+                tex_list.append(m.texture)
+        mats = materials.record(scene.materials, [tex_index.get(id(m.texture), -1) for m in scene.materials])
+        tex_records, texels = textures.pack(tex_list)
+        uvmap = (textures.uv_maps(v, scene.tri_uv) if scene.tri_uv is not None and tex_list
+                 else np.zeros((len(v), 8), np.float32))
 
         kind, tri, p, e1, e2, power = scene.emitters()
         weight = power.mean(axis=1)
@@ -113,6 +121,10 @@ class CompiledScene:
         self.tri_normals = _buffer(ctx, normals, cl.mem_flags.READ_WRITE)  # world space
         self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
         self.materials = _buffer(ctx, mats)
+        self.textures, self.texels = _buffer(ctx, tex_records), _buffer(ctx, texels)
+        self.tri_uvmap = _buffer(ctx, uvmap)
+        self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
+        self.texels_host, self.uvmap_host = texels, uvmap
         self.emitters = _buffer(ctx, em)
         self.emitter_cdf = _buffer(ctx, cdf.astype(np.float32))
         self.tri_areas = _buffer(ctx, self.areas)
@@ -128,7 +140,8 @@ class CompiledScene:
         materials, the emitters and the ray offset. Equal fingerprints trace
         equal paths; a checkpoint records it (oclgi/checkpoint.py)."""
         h = hashlib.sha256()
-        for a in (self._nodes, self._tris, self.instances_host, self.materials_host, self.emitters_host,
+        for a in (self._nodes, self._tris, self.instances_host, self.materials_host, self.texels_host, self.uvmap_host,
+                  self.emitters_host,
                   self.emitter_cdf_host, self.scene.tri_material.astype(np.int32),
                   np.array([self.photon_power_max, self.eps], np.float64)):
             h.update(np.ascontiguousarray(a).tobytes())

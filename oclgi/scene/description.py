@@ -165,11 +165,42 @@ def _number(value, where, kind=float):
     return float(value)
 
 
-class _READ:
-    """The readers a material table's values go through (materials.from_table)."""
+class _Readers:
+    """The readers a material table's values go through (materials.from_table);
+    a texture's file name is relative to the scene file."""
+
+    def __init__(self, base_dir):
+        self.base_dir = base_dir
+
     vec3 = staticmethod(lambda v, where: _vec3(v, where))
     radiant = staticmethod(lambda v, where: _radiant(v, where))
     number = staticmethod(lambda v, where: _number(v, where))
+
+    def texture(self, value, where):
+        from . import textures
+
+        if isinstance(value, os.PathLike):
+            value = os.fspath(value)
+        if not isinstance(value, str) or not value.strip():
+            raise OclgiError(f"{where}: expected an image file name, got {value!r}")
+        path = Path(value)
+        if not path.is_absolute() and self.base_dir is not None:
+            path = self.base_dir / path
+        if not is_file(path, "texture"):
+            raise OclgiError(f"{where}: texture not found: {path}")
+        return textures.read(path)
+
+
+def _texture_reader(loaded, label):
+    """Reads the texture a mesh file's material names or holds, or None."""
+    from . import textures
+
+    def read(value):
+        if not isinstance(value, str):
+            return textures.from_image(value, f"{label}: embedded texture")
+        data = loaded.read_file(value) if getattr(loaded, "read_file", None) else None
+        return None if data is None else textures.read_bytes(data, value)
+    return read
 
 
 def _transform(t, where):
@@ -196,6 +227,8 @@ def _transform(t, where):
 def _mesh(desc, i, base_dir, materials, mat_index):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
+    read = _Readers(base_dir)
+    loaded = None
     default = Material(
         name=f"{where}.default",
         albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
@@ -206,7 +239,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         for key in ("albedo", "emission"):
             if key in desc and key in desc["material"]:
                 raise OclgiError(f"{where}: give {key} in the mesh or in its material table, not both")
-        default = from_table(where + ".material", desc["material"], default, _READ)
+        default = from_table(where + ".material", desc["material"], default, read)
         default.name = f"{where}.default"
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
@@ -242,6 +275,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         raise OclgiError(f"{where}.materials: {sorted(unknown)} not in the mesh's materials {sorted(n for n in names if n)}")
     # one scene material per material name of this mesh
     local = []
+    texture_reader = _texture_reader(loaded, label)
     for name in names:
         if name == "":
             mat = default
@@ -251,11 +285,11 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                 fm.emission = _radiant(fm.emission, f"{label}: material {name!r} (Ke)")
             # a table that sets the kind replaces the file's material: no warnings about it
             replaced = isinstance(overrides.get(name), dict) and "kind" in overrides[name]
-            mat = from_file(f"{label}:{name}", fm, default, quiet=replaced)
+            mat = from_file(f"{label}:{name}", fm, default, quiet=replaced, read_texture=texture_reader)
             if name in overrides:
                 o = overrides[name]
                 _check_keys(o, TABLE_KEYS, f"{where}.materials.{name}")
-                mat = from_table(f"{where}.materials.{name}", o, mat, _READ)
+                mat = from_table(f"{where}.materials.{name}", o, mat, read)
         mat.validate()
         local.append(len(materials))
         materials.append(mat)
@@ -282,7 +316,8 @@ def _mesh(desc, i, base_dir, materials, mat_index):
                             where + ".lumens")
         for k in set(local):
             materials[k].emission = radiance
-    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
+    face_uv = getattr(loaded, "face_uv", None)
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv
 
 
 def _point_intensity(pl: dict, where: str):
@@ -372,6 +407,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         raise OclgiError("scene: no [[mesh]] given")
     materials: list[Material] = []
     verts, faces, fmats, fobjs, offset = [], [], [], [], 0
+    uvs, any_uv = [], False
     # Static meshes form object 0; each movable mesh is an object of its own
     # (an instance with a transform over its own BVH). Triangles are stored
     # object by object, static first, so each object is one contiguous run.
@@ -380,7 +416,9 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     objects: list[SceneObject] = []
     for i in order:
         m = meshes[i]
-        v, f, fm = _mesh(m, i, base_dir, materials, None)
+        v, f, fm, uv = _mesh(m, i, base_dir, materials, None)
+        uvs.append(uv if uv is not None else np.full((len(f), 3, 2), np.nan))
+        any_uv = any_uv or uv is not None
         if movable[i]:
             name = _object_name(m, i)
             if any(o.name == name for o in objects):
@@ -429,6 +467,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         tri_material=np.concatenate(fmats),
         materials=materials,
         tri_object=np.concatenate(fobjs),
+        tri_uv=np.concatenate(uvs) if any_uv else None,
         objects=objects,
         point_lights=lights,
         camera=camera,

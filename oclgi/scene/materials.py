@@ -10,7 +10,8 @@ study's bounds) and the conversion to Mitsuba 3 (``to_mitsuba``).
 ==================  ==========================================================
 kind                parameters (defaults)
 ==================  ==========================================================
-``diffuse``         ``albedo`` (0.5): Lambertian reflectance
+``diffuse``         ``albedo`` (0.5): Lambertian reflectance, times
+                    ``texture`` (an image file, oclgi/scene/textures.py)
 ``phong``           ``albedo`` (Kd), ``specular`` (Ks), ``exponent`` (Ns, 10):
                     the energy-conserving modified Phong of Lafortune and
                     Willems, ``Kd / pi + Ks (n + 2) / (2 pi) cos^n alpha``
@@ -67,7 +68,7 @@ DELTA = {"mirror", "dielectric"}
 DIFFUSE_PART = {"diffuse", "phong"}
 # The parameters each kind reads (besides emission and twosided).
 PARAMETERS = {
-    "diffuse": ("albedo",),
+    "diffuse": ("albedo", "texture"),
     "phong": ("albedo", "specular", "exponent"),
     "mirror": ("specular",),
     "dielectric": ("ior", "specular", "transmission"),
@@ -75,7 +76,7 @@ PARAMETERS = {
     "rough_dielectric": ("ior", "roughness", "specular", "transmission"),
 }
 TABLE_KEYS = {"kind", "albedo", "emission", "specular", "exponent", "ior", "roughness", "transmission",
-              "twosided"}
+              "twosided", "texture"}
 MAX_EXPONENT = 1e6  # a Phong lobe narrower than float32's cos^n can resolve is a mirror
 MIN_ROUGHNESS = 1e-3  # GGX alpha below this is numerically a mirror: say mirror
 MAX_IOR = 10.0
@@ -95,6 +96,9 @@ class Material:
     roughness: float = 0.1
     transmission: tuple[float, float, float] = (1.0, 1.0, 1.0)
     twosided: bool = True
+    # (H, W, 3) float32 linear reflectance multiplying the albedo
+    # (oclgi/scene/textures.py); diffuse surfaces only
+    texture: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def delta(self) -> bool:
@@ -135,6 +139,12 @@ class Material:
         if e.max() > 0 and self.kind not in DIFFUSE_PART:
             raise OclgiError(f"{where}: a {self.kind} surface cannot emit (emission goes with diffuse or "
                              "phong materials)")
+        if self.texture is not None:
+            if self.kind != "diffuse":
+                raise OclgiError(f"{where}: a texture goes with a diffuse material, not {self.kind}")
+            t = self.texture
+            if not (isinstance(t, np.ndarray) and t.dtype == np.float32 and t.ndim == 3 and t.shape[2] == 3):
+                raise OclgiError(f"{where}: texture must be an (H, W, 3) float32 array (oclgi.scene.textures)")
         if not isinstance(self.twosided, (bool, np.bool_)):
             raise OclgiError(f"{where}: twosided must be true or false, got {self.twosided!r}")
         if not (isinstance(self.exponent, (int, float)) and 0 <= self.exponent <= MAX_EXPONENT):
@@ -179,6 +189,8 @@ def from_table(name: str, table: dict, base: Material, read) -> Material:
         raise OclgiError(f"{name}.kind: expected one of {', '.join(KINDS)}, got {kind!r}")
     m = Material(**{f.name: getattr(base, f.name) for f in fields(Material)})
     m.kind = kind
+    if kind != "diffuse":
+        m.texture = None  # a file's texture went with the diffuse surface this table replaces
     for key in ("albedo", "specular", "transmission"):
         if key in table:
             setattr(m, key, read.vec3(table[key], f"{name}.{key}"))
@@ -187,6 +199,8 @@ def from_table(name: str, table: dict, base: Material, read) -> Material:
     for key in ("exponent", "ior", "roughness"):
         if key in table:
             setattr(m, key, read.number(table[key], f"{name}.{key}"))
+    if "texture" in table:
+        m.texture = read.texture(table["texture"], f"{name}.texture")
     if "twosided" in table:
         if not isinstance(table["twosided"], bool):
             raise OclgiError(f"{name}.twosided: expected true or false, got {table['twosided']!r}")
@@ -226,10 +240,16 @@ _ILLUM = {0: "diffuse", 1: "diffuse", 2: "phong", 3: "mirror", 4: "dielectric", 
           6: "dielectric", 7: "dielectric", 8: "mirror", 9: "dielectric"}
 
 
-def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: bool = False) -> Material:
+ALBEDO_TEXTURES = ("map_Kd", "baseColorTexture")
+
+
+def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: bool = False,
+              read_texture=None) -> Material:
     """The scene material for a mesh file's material ``label``; a property
     oclgi cannot honour is one warning naming it and the material (none
-    when ``quiet``: the scene file replaces the material)."""
+    when ``quiet``: the scene file replaces the material). ``read_texture(
+    value)``: the albedo texture a file names (``map_Kd``) or holds (glTF),
+    as oclgi/scene/textures.py returns it, or None when it is missing."""
     from .scene import OclgiWarning  # scene.py imports this module
 
     m = Material(**{f.name: getattr(default, f.name) for f in fields(Material)})
@@ -246,8 +266,16 @@ def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: boo
         if max(m.emission) > 0 and m.kind not in DIFFUSE_PART:
             ignored.append("emission (a " + m.kind + " surface does not emit)")
             m.emission = (0.0, 0.0, 0.0)
-    for key, name in sorted(fm.textures.items()):
-        ignored.append(f"{key} {name!r} (textures are not supported yet: the factor is used)")
+    for key, value in sorted(fm.textures.items(), key=lambda kv: kv[0]):
+        shown = repr(value) if isinstance(value, str) else "(embedded image)"
+        if key in ALBEDO_TEXTURES and m.kind == "diffuse" and read_texture is not None:
+            m.texture = read_texture(value)
+            if m.texture is None:
+                ignored.append(f"{key} {shown} (not found: the factor is used)")
+        elif key in ALBEDO_TEXTURES:
+            ignored.append(f"{key} {shown} (textures go with diffuse surfaces: the factor is used)")
+        else:
+            ignored.append(f"{key} {shown} (not supported: the factor is used)")
     if ignored and not quiet:
         warnings.warn(f"material {label!r}: ignored " + "; ".join(ignored), OclgiWarning, stacklevel=4)
     return m
@@ -321,8 +349,10 @@ def _from_gltf(m: Material, fm: FileMaterial, ignored: list) -> None:
         ignored.append("the dielectric highlight of metallic-roughness (a diffuse surface is used)")
 
 
-def record(materials: list[Material]) -> np.ndarray:
-    """The device's ``Material`` records (oclgi/cl/layout.py, kernels/bsdf.h)."""
+def record(materials: list[Material], texture_index: list[int] | None = None) -> np.ndarray:
+    """The device's ``Material`` records (oclgi/cl/layout.py, kernels/bsdf.h);
+    ``texture_index``: each material's texture in the scene's packed
+    textures (oclgi/scene/textures.py), -1 for none."""
     rec = np.zeros(len(materials), MaterialRecord)
     for i, m in enumerate(materials):
         r = rec[i]
@@ -336,7 +366,7 @@ def record(materials: list[Material]) -> np.ndarray:
         r["exponent"] = m.exponent
         r["ior"] = m.ior
         r["roughness"] = m.roughness
-        r["texture"] = -1
+        r["texture"] = texture_index[i] if texture_index is not None else -1
         if m.kind == "phong" and phong_weight_bound(r["albedo"], r["specular"], float(r["exponent"])) > 1.0 + 1e-6:
             raise OclgiError(f"material {m.name!r}: the Phong weight bound fails in float32")
     return rec

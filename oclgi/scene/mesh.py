@@ -39,6 +39,8 @@ class LoadedMesh:
     face_material: np.ndarray  # (F,) index into names
     names: list[str]
     materials: dict[str, FileMaterial]
+    face_uv: np.ndarray | None = None  # (F, 3, 2), NaN where a face has none
+    read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
 
 
 def is_file(path: Path, what: str) -> bool:
@@ -60,7 +62,7 @@ def load_mesh(path: Path) -> LoadedMesh:
     if suffix == ".zip":
         return _load_zip(path)
     if suffix == ".obj":
-        return _from_obj(read_obj(path))
+        return _from_obj(read_obj(path), _beside(path))
     if suffix in TRIMESH_TYPES:
         try:
             data = path.read_bytes()
@@ -70,9 +72,22 @@ def load_mesh(path: Path) -> LoadedMesh:
     raise OclgiError(f"{path}: unsupported mesh type {suffix!r} (use one of {sorted(MESH_TYPES | {'.zip'})})")
 
 
-def _from_obj(obj) -> LoadedMesh:
+def _from_obj(obj, read_file=None) -> LoadedMesh:
     names = [""] + obj.material_names
-    return LoadedMesh(obj.vertices, obj.faces, obj.face_material + 1, names, obj.materials)
+    return LoadedMesh(obj.vertices, obj.faces, obj.face_material + 1, names, obj.materials, obj.face_uv, read_file)
+
+
+def _beside(path: Path):
+    """Reads the files a mesh's materials name, relative to its folder."""
+    def read(name: str):
+        f = path.parent / name.replace("\\", "/")
+        if not is_file(f, "texture"):
+            return None
+        try:
+            return f.read_bytes()
+        except OSError as exc:
+            raise OclgiError(f"cannot read texture {f}: {exc.strerror or exc}") from None
+    return read
 
 
 def _load_zip(path: Path) -> LoadedMesh:
@@ -96,7 +111,11 @@ def _load_zip(path: Path) -> LoadedMesh:
                         return None
                     return reader.read(member).decode("utf-8", errors="replace")
 
-                return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib))
+                def read_member(name):
+                    member = (inner.parent / name.replace("\\", "/")).as_posix()
+                    return reader.read(member) if member in names else None
+
+                return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib), read_member)
             # a glTF's buffers and images are members beside it
             return _load_trimesh(path / inner, data, inner.suffix.lower(),
                                  lambda: resolvers.MemberResolver(reader, inner.parent.as_posix()))
@@ -150,7 +169,7 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
 
         loaded = trimesh.Scene(loaded)
     path = label
-    verts, faces, fmat, names, mats = [], [], [], [""], {}
+    verts, faces, fmat, names, mats, uvs = [], [], [], [""], {}, []
     offset = 0
     for name, geom in loaded.geometry.items():
         if not hasattr(geom, "faces") or len(geom.faces) == 0:
@@ -170,6 +189,9 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
             verts.append(v)
             faces.append(f + offset)
             offset += len(v)
+            uv = getattr(getattr(geom, "visual", None), "uv", None)
+            uvs.append(np.asarray(uv, np.float64)[f] if uv is not None and len(uv) == len(geom.vertices)
+                       else np.full((len(f), 3, 2), np.nan))
             mat = _trimesh_material(geom)
             if mat is not None:
                 names.append(name)
@@ -179,7 +201,8 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
                 fmat.append(np.zeros(len(f), dtype=np.int64))
     if not faces:
         raise OclgiError(f"{path}: no faces")
-    return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats)
+    face_uv = np.concatenate(uvs) if any(fm.textures for fm in mats.values()) else None
+    return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats, face_uv)
 
 
 def _trimesh_material(geom) -> FileMaterial | None:
@@ -200,5 +223,5 @@ def _trimesh_material(geom) -> FileMaterial | None:
         fm.roughness = float(mat.roughnessFactor)
     for key in ("baseColorTexture", "emissiveTexture", "metallicRoughnessTexture", "normalTexture"):
         if getattr(mat, key, None) is not None:
-            fm.textures[key] = "(embedded image)"
+            fm.textures[key] = getattr(mat, key)  # an image trimesh decoded (PIL)
     return fm

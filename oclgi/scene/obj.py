@@ -39,6 +39,7 @@ class ObjMesh:
     face_material: np.ndarray  # (F,) int64 index into material_names, -1 = none
     material_names: list[str] = field(default_factory=list)
     materials: dict[str, FileMaterial] = field(default_factory=dict)
+    face_uv: np.ndarray | None = None  # (F, 3, 2) texture coordinates, NaN where a face has none
 
 
 def _plain(words) -> bool:
@@ -132,7 +133,9 @@ def read_obj(path: Path, text: str | None = None,
         except OSError as exc:
             raise OclgiError(f"cannot read {path}: {exc.strerror}") from None
     verts: list[list[float]] = []
+    uvs: list[str] = []  # the vt records' lines
     faces: list[tuple[int, int, int]] = []
+    face_lines: list = []  # faces with a v/vt field: (line number, words, vt so far, faces after it)
     face_mat: list[int] = []
     names: list[str] = []
     name_index: dict[str, int] = {}
@@ -148,6 +151,8 @@ def read_obj(path: Path, text: str | None = None,
             if not all(math.isfinite(x) for x in xyz):
                 raise OclgiError(f"{path}:{lineno}: vertex coordinate is NaN or infinite: {' '.join(line[1:4])!r}")
             verts.append(xyz)
+        elif key == "vt":  # read only if a texture needs them (_face_uvs)
+            uvs.append(raw)  # a string: kept lists would slow the collector down (2-3x on Sponza)
         elif key == "f":
             if len(line) < 4:
                 raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
@@ -172,6 +177,8 @@ def read_obj(path: Path, text: str | None = None,
             for j in range(1, len(idx) - 1):
                 faces.append((idx[0], idx[j], idx[j + 1]))
                 face_mat.append(cur_mat)
+            if "/" in line[1]:  # texture coordinates, read at the end if a texture needs them
+                face_lines.append((lineno, raw, len(uvs), len(faces)))
         elif key == "usemtl":
             name = " ".join(line[1:])
             if name not in name_index:
@@ -192,10 +199,49 @@ def read_obj(path: Path, text: str | None = None,
                 materials.update(read_mtl(path.parent / lib, lib_text))
     if not faces:
         raise OclgiError(f"{path}: no faces")
+    face_uv = None
+    if uvs and face_lines and any(m.textures for m in materials.values()):
+        face_uv = _face_uvs(face_lines, uvs, len(faces), path)
     return ObjMesh(
         vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
         faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
         face_material=np.asarray(face_mat, dtype=np.int64),
         material_names=names,
         materials=materials,
+        face_uv=face_uv,
     )
+
+
+def _face_uvs(face_lines, uvs, n_faces: int, path) -> np.ndarray:
+    """(F, 3, 2) texture coordinates of the fan-triangulated faces, NaN
+    where a face gives none."""
+    corner = np.full((n_faces, 3), -1, np.int64)
+    for lineno, raw, n_uvs, end in face_lines:
+        words = raw.split("#", 1)[0].split()
+        plain = _plain(words[1:])
+        tex = [_uv_index(f[1], n_uvs, tok, path, lineno, plain) if len(f) > 1 and f[1] else -1
+               for tok in words[1:] for f in (tok.split("/"),)]
+        first = end - (len(tex) - 2)
+        for j in range(1, len(tex) - 1):
+            corner[first + j - 1] = (tex[0], tex[j], tex[j + 1])
+    table = np.full((len(uvs) + 1, 2), np.nan)  # the last row: a corner without one
+    for k, raw in enumerate(uvs):
+        words = raw.split("#", 1)[0].split()
+        lineno = f"vt {k + 1}"  # the k-th texture coordinate record
+        uv = _floats(words[1:], path, lineno, 1)
+        table[k] = (uv[0], _floats(words[1:], path, lineno, 2)[1] if len(words) > 2 else 0.0)
+    return table[corner]
+
+
+def _uv_index(text: str, n_uvs: int, tok: str, path, lineno: int, plain: bool) -> int:
+    """A face corner's texture coordinate index (the second field of v/vt/vn), 0-based."""
+    try:
+        if not plain and not _plain([text]):
+            raise ValueError
+        k = int(text)
+    except ValueError:
+        raise OclgiError(f"{path}:{lineno}: malformed texture coordinate index in {tok!r}") from None
+    j = n_uvs + k if k < 0 else k - 1
+    if k == 0 or j < 0 or j >= n_uvs:
+        raise OclgiError(f"{path}:{lineno}: {tok!r} refers to no texture coordinate (vt)")
+    return j

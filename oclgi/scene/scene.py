@@ -85,6 +85,7 @@ class Scene:
     tri_object: np.ndarray | None = None  # (F,) int64 into objects; None: one static object
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
     load_seconds: float = 0.0  # reading the scene and its meshes (load_file, load_dict)
+    tri_uv: np.ndarray | None = None  # (F, 3, 2) texture coordinates of the corners (textured scenes)
 
     def __post_init__(self):
         if self.tri_object is None:
@@ -155,6 +156,8 @@ class Scene:
             keep = ~degenerate
             self.faces, self.tri_material = self.faces[keep], self.tri_material[keep]
             self.tri_object = np.asarray(self.tri_object)[keep]
+            if self.tri_uv is not None:
+                self.tri_uv = np.asarray(self.tri_uv)[keep]
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
                           "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
@@ -170,6 +173,11 @@ class Scene:
             raise OclgiError(f"{self.name}: settings must be an oclgi.params.RunParams, "
                              f"got {type(self.settings).__name__}")
         self.tri_object = np.asarray(self.tri_object, dtype=np.int64)
+        if self.tri_uv is not None:
+            uv = np.asarray(self.tri_uv, np.float64)
+            if uv.shape != (len(self.faces), 3, 2):
+                raise OclgiError(f"{self.name}: tri_uv must be (F, 3, 2) texture coordinates, got {uv.shape}")
+            self.tri_uv = uv
         if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
             raise OclgiError(f"{self.name}: triangles must be grouped object by object")
         counts = np.bincount(self.tri_object, minlength=len(self.objects))

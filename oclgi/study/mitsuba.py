@@ -125,24 +125,36 @@ def max_depth_for(oclgi_max_depth: int) -> int:
     return int(oclgi_max_depth) + 1
 
 
-def _mesh(mi, name, tris, bsdf, emitter=None):
-    """A Mitsuba mesh of separate triangles (F, 3, 3), without vertex normals."""
+def _mesh(mi, name, tris, bsdf, emitter=None, uv=None):
+    """A Mitsuba mesh of separate triangles (F, 3, 3), without vertex
+    normals; ``uv`` (F, 3, 2): texture coordinates, v up as in OBJ and oclgi
+    (Mitsuba's v points down the image: 1 - v)."""
     props = mi.Properties()
     props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
     n = len(tris)
-    mesh = mi.Mesh(name, 3 * n, n, props=props, has_vertex_normals=False, has_vertex_texcoords=False)
+    mesh = mi.Mesh(name, 3 * n, n, props=props, has_vertex_normals=False, has_vertex_texcoords=uv is not None)
     params = mi.traverse(mesh)
     params["vertex_positions"] = type(params["vertex_positions"])(
         np.ascontiguousarray(tris, dtype=np.float32).ravel())
+    if uv is not None:
+        flipped = np.stack([uv[..., 0], 1.0 - uv[..., 1]], axis=-1)
+        params["vertex_texcoords"] = type(params["vertex_texcoords"])(
+            np.ascontiguousarray(np.nan_to_num(flipped), dtype=np.float32).ravel())
     params["faces"] = type(params["faces"])(np.arange(3 * n, dtype=np.uint32))
     params.update()
     return mesh
 
 
 def _bsdf(mi, material: Material):
-    return mi.load_dict(to_mitsuba(material))
+    d = to_mitsuba(material)
+    if material.texture is not None:  # albedo x texture (linear), looked up as oclgi does
+        inner = d["bsdf"] if d["type"] == "twosided" else d
+        pixels = np.ascontiguousarray(material.texture * np.asarray(material.albedo, np.float32))
+        inner["reflectance"] = {"type": "bitmap", "bitmap": mi.Bitmap(pixels), "raw": True,
+                                "filter_type": "bilinear", "wrap_mode": "repeat"}
+    return mi.load_dict(d)
 
 
 def scene_dict(mi, scene_or_engine) -> dict:
@@ -159,7 +171,8 @@ def scene_dict(mi, scene_or_engine) -> dict:
                 emitter = mi.load_dict({"type": "area",
                                         "radiance": {"type": "rgb", "value": [float(c) for c in m.emission]}})
             name = f"mesh_{obj}_{mat_id}"
-            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter)
+            uv = scene.tri_uv[sel] if scene.tri_uv is not None and m.texture is not None else None
+            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv)
     for i, pl in enumerate(scene.point_lights):
         if max(pl.intensity) > 0:
             out[f"point_light_{i}"] = {"type": "point", "position": [float(c) for c in pl.position],
