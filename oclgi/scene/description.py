@@ -13,6 +13,8 @@
     [mesh.materials.glass]          # any kind and its parameters (oclgi/scene/materials.py)
     kind = "dielectric"
     ior = 1.5
+    [mesh.materials.floor]
+    texture = "floor.png"           # a diffuse albedo's texture, relative to the TOML file
 
     [[point_light]]
     position = [0, 1.9, 0]
