@@ -69,9 +69,13 @@ GRID_HASH_MUL = 0x9E3779B97F4A7C15
 # have at most CELL_OUTSIDE_BIT cells.
 CELL_OUTSIDE_BIT = 127
 
-# Emitter.kind (oclgi/cl/layout.py Emitter).
+# Emitter.kind (oclgi/cl/layout.py Emitter; kernels/light.h samples each,
+# oclgi/scene/lights.py writes their records).
 EMITTER_TRIANGLE = 0
 EMITTER_POINT = 1
+EMITTER_SPOT = 2
+EMITTER_SUN = 3
+EMITTER_SKY = 4
 
 # name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
 # 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
@@ -92,6 +96,9 @@ DEFINES = {
     "cell_outside_bit": CELL_OUTSIDE_BIT,
     "emitter_triangle": EMITTER_TRIANGLE,
     "emitter_point": EMITTER_POINT,
+    "emitter_spot": EMITTER_SPOT,
+    "emitter_sun": EMITTER_SUN,
+    "emitter_sky": EMITTER_SKY,
 }
 
 

@@ -21,6 +21,7 @@ from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from .lights import emitter_rows, warn_escaping
 from .scene import Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
@@ -85,18 +86,23 @@ class CompiledScene:
         mats["emission"] = [m.emission for m in scene.materials]
         mats["survive"] = np.minimum(mats["albedo"].max(axis=1), 1.0)
 
-        kind, tri, p, e1, e2, power = scene.emitters()
+        rows = emitter_rows(scene)
+        power = rows.power
         weight = power.mean(axis=1)
         if not (weight.sum() > 0):
             raise OclgiError(f"{scene.name}: the emitters have zero power")
         prob = weight / weight.sum()
         cdf = np.cumsum(prob)
         cdf /= cdf[-1]
-        em = np.zeros(len(kind), dtype=Emitter)
-        em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = kind, tri, p, e1, e2
+        em = np.zeros(len(rows.kind), dtype=Emitter)
+        em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = rows.kind, rows.tri, rows.p, rows.e1, rows.e2
+        em["a"], em["b"] = rows.a, rows.b
         keep = prob > 0
+        # the largest power a photon path of each emitter carries (times
+        # n_paths): its mean, power / prob, times the kind's peak
+        # (oclgi/scene/lights.py; 1 but for spot lights)
         photon_power = np.zeros_like(power)
-        photon_power[keep] = power[keep] / prob[keep, None]  # watts a photon path carries, times n_paths
+        photon_power[keep] = power[keep] * rows.peak[keep, None] / prob[keep, None]
         self.n_emitters = len(em)
         self.total_power = power.sum(axis=0)  # RGB watts
         # phi_max, the largest power any photon path carries (times n_paths):
@@ -107,6 +113,7 @@ class CompiledScene:
             raise OclgiError(f"{scene.name}: the emitters' power ({weight.sum():.3g} W) is out of float32's range "
                              "on the device; scale the emission or intensity")
         em["power"] = photon_power / self.photon_power_max
+        warn_escaping(scene)  # an area light facing away from everything: a cheap check, once
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)

@@ -12,7 +12,25 @@
 
     [[point_light]]
     position = [0, 1.9, 0]
-    intensity = [1, 1, 1]           # W/sr
+    intensity = [1, 1, 1]           # W/sr (or candela = 100, colour = [1, 1, 1])
+
+    [[spot_light]]
+    position = [0, 1.9, 0]
+    direction = [0, -1, 0]          # the axis it points along
+    intensity = [5, 5, 5]           # W/sr on the axis (or candela, colour)
+    cone_angle = 30                 # half-angle, degrees
+    cone_delta = 5                  # falloff band inside the cone, degrees (smoothstep)
+
+    [[sun]]
+    direction = [0.3, -1, 0.2]      # the direction the light travels
+    irradiance = [3, 3, 3]          # W/m^2 perpendicular to it (or lux, colour)
+
+    [sky]
+    radiance = [0.5, 0.6, 0.8]      # W/m^2/sr, uniform
+    hemisphere = true               # from above the horizon only (false: every direction)
+    up = [0, 1, 0]
+
+(oclgi/scene/lights.py has the lights' parameters, defaults and power.)
 
     [camera]
     position = [0, 1, 3.94]
@@ -52,10 +70,11 @@ from ..errors import OclgiError
 from .. import params
 from .mesh import from_trimesh, is_file, load_mesh
 from .obj import MtlMaterial
-from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
+from . import lights as lights_mod
+from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
-_TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
+_TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "lumens", "materials",
          "transform", "movable", "name"}
 _MAT = {"albedo", "emission"}
@@ -270,24 +289,6 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat]
 
 
-def _point_intensity(pl: dict, where: str):
-    """``intensity`` (W/sr per channel), or ``candela`` with an optional
-    ``colour`` (oclgi/photometry.py's convention)."""
-    if "candela" in pl:
-        if "intensity" in pl:
-            raise OclgiError(f"{where}: give intensity (W/sr) or candela, not both")
-        from ..photometry import intensity_from_candela
-
-        cd = _number(pl["candela"], where + ".candela")
-        if not cd > 0:
-            raise OclgiError(f"{where}.candela: expected a luminous intensity > 0, got {pl['candela']!r}")
-        colour = _vec3(pl.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
-        return _radiant(intensity_from_candela(cd, colour), where + ".candela")
-    if "colour" in pl:
-        raise OclgiError(f"{where}.colour goes with candela; an intensity has its own colour")
-    return _radiant(pl.get("intensity"), where + ".intensity")
-
-
 def _face_materials(desc, n_faces: int, where: str):
     """Per-face ``face_albedo`` / ``face_emission`` ((F, 3) arrays) as one
     material per distinct (albedo, emission) pair, named ``#0``, ``#1``, ...
@@ -379,11 +380,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         fobjs.append(np.full(len(f), len(objects) - 1, np.int64))
         offset += len(v)
 
-    lights = []
-    for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
-        _check_keys(pl, {"position", "intensity", "candela", "colour"}, f"point_light[{i}]")
-        lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position", MAX_COORDINATE),
-                                 _point_intensity(pl, f"point_light[{i}]")))
+    point_lights, lights = lights_mod.read(desc)
 
     camera = None
     if "camera" in desc:
@@ -415,7 +412,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         materials=materials,
         tri_object=np.concatenate(fobjs),
         objects=objects,
-        point_lights=lights,
+        point_lights=point_lights,
+        lights=lights,
         camera=camera,
         settings=settings,
         name=str(desc.get("name", "scene")),

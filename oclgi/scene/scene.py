@@ -17,7 +17,9 @@ import numpy as np
 
 from ..errors import OclgiError
 from ..params import MAX_LENGTH, RunParams
+from . import lights as lights_mod
 from .degenerate import degenerate_triangles
+from .lights import PointLight  # noqa: F401  (oclgi.scene.scene.PointLight, as it always was)
 
 
 class OclgiWarning(UserWarning):
@@ -29,16 +31,6 @@ class Material:
     name: str
     albedo: tuple[float, float, float] = (0.5, 0.5, 0.5)
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass
-class PointLight:
-    position: tuple[float, float, float]
-    intensity: tuple[float, float, float]  # W/sr per channel
-
-    @property
-    def power(self) -> np.ndarray:
-        return 4.0 * math.pi * np.asarray(self.intensity, dtype=np.float64)
 
 
 @dataclass
@@ -85,6 +77,7 @@ class Scene:
     tri_material: np.ndarray  # (F,) int64 into materials
     materials: list[Material]
     point_lights: list[PointLight] = field(default_factory=list)
+    lights: list = field(default_factory=list)  # spot, sun and sky lights (oclgi.scene.lights)
     camera: Camera | None = None
     settings: RunParams = field(default_factory=RunParams)  # the run's defaults (radius None: 1% of the diagonal)
     name: str = "scene"
@@ -171,9 +164,7 @@ class Scene:
                 raise OclgiError(f"material {m.name!r}: albedo must be 3 numbers in [0, 1], got {m.albedo}")
             if e.shape != (3,) or not np.isfinite(e).all() or (e < 0).any():
                 raise OclgiError(f"material {m.name!r}: emission must be 3 numbers >= 0, got {m.emission}")
-        for pl in self.point_lights:
-            if not (np.isfinite(pl.position).all() and np.isfinite(pl.intensity).all()) or min(pl.intensity) < 0:
-                raise OclgiError(f"point light at {pl.position}: bad position or intensity")
+        lights_mod.validate(self)
         if not isinstance(self.settings, RunParams):  # a RunParams checks its values when made
             raise OclgiError(f"{self.name}: settings must be an oclgi.params.RunParams, "
                              f"got {type(self.settings).__name__}")
@@ -189,38 +180,21 @@ class Scene:
                 raise OclgiError(f"{self.name}: movable object {o.name!r} emits light; moving lights are not "
                                  "supported yet (they need path reuse, not incremental update)")
         if not self.has_emitter():
-            raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no point light)")
+            raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no light)")
 
     def has_emitter(self) -> bool:
-        if any(max(pl.intensity) > 0 for pl in self.point_lights):
+        if lights_mod.has_power(self):
             return True
         emissive = np.array([max(m.emission) > 0 for m in self.materials], dtype=bool)
         return bool(len(self.tri_material) and emissive[self.tri_material].any())
 
     # -- emitters -----------------------------------------------------------
     def emitters(self):
-        """Emissive triangles and point lights with their power (RGB, watts).
+        """Emissive triangles and the other lights with their power (RGB, watts).
 
-        Returns (kind, tri, p, e1, e2, power) arrays; an area light emits
+        Returns (kind, tri, p, e1, e2, power) arrays (oclgi.scene.lights.
+        emitter_rows has every field of the records); an area light emits
         pi * A * Le on the side of its normal.
         """
-        emission = np.array([m.emission for m in self.materials], dtype=np.float64)
-        tri_le = emission[self.tri_material]
-        tri_ids = np.nonzero(tri_le.max(axis=1) > 0)[0]
-        v = self.vertices[self.faces[tri_ids]]
-        areas = self.triangle_areas()[tri_ids]
-        power = math.pi * areas[:, None] * tri_le[tri_ids]
-        kind = [np.zeros(len(tri_ids), np.int32)]
-        tri = [tri_ids.astype(np.int32)]
-        p, e1, e2, pw = [v[:, 0]], [v[:, 1] - v[:, 0]], [v[:, 2] - v[:, 0]], [power]
-        for pl in self.point_lights:
-            if max(pl.intensity) <= 0:
-                continue
-            kind.append(np.ones(1, np.int32))
-            tri.append(np.full(1, -1, np.int32))
-            p.append(np.asarray([pl.position], np.float64))
-            e1.append(np.zeros((1, 3)))
-            e2.append(np.zeros((1, 3)))
-            pw.append(pl.power[None, :])
-        return (np.concatenate(kind), np.concatenate(tri), np.concatenate(p), np.concatenate(e1),
-                np.concatenate(e2), np.concatenate(pw))
+        r = lights_mod.emitter_rows(self)
+        return r.kind, r.tri, r.p, r.e1, r.e2, r.power

@@ -1,0 +1,563 @@
+"""Lights: the kinds, their parameters, power, device records and Mitsuba form.
+
+The device samples every kind in ``kernels/light.h``; this module is the
+host's one place for them. Area lights are emissive materials on triangles
+(``Material.emission``, a one-sided Lambertian radiance); the other kinds
+are objects of their own, read from the scene file's tables:
+
+==============  ============================================================
+table           parameters (defaults)
+==============  ============================================================
+[[point_light]] ``position``; ``intensity`` (W/sr) or ``candela`` (with
+                ``colour``, default white). Uniform over the sphere: power
+                4 pi I.
+[[spot_light]]  ``position``; ``direction`` (the axis it points along);
+                ``intensity`` (W/sr on the axis) or ``candela`` (+
+                ``colour``); ``cone_angle`` (half-angle, degrees, 30);
+                ``cone_delta`` (degrees, 5): full intensity within
+                cone_angle - cone_delta of the axis, then pbrt-v4's
+                smoothstep in cos(theta) down to 0 at cone_angle. Power
+                2 pi I ((1 - cos_start) + (cos_start - cos_end) / 2), exact
+                for that profile (the smoothstep integrates to a half).
+[[sun]]         ``direction`` (the direction the light travels, from the
+                sun into the scene); ``irradiance`` (W/m^2 on a plane
+                perpendicular to it) or ``lux`` (+ ``colour``). Photons
+                start on a disc of the scene's bounding-sphere radius R
+                outside that sphere: power E pi R^2.
+[sky]           ``radiance`` (W/m^2/sr, uniform); ``hemisphere`` (true):
+                light comes only from the directions above the horizon of
+                ``up`` ([0, 1, 0]), false: from every direction. Photons
+                travel along a direction uniform over the (half-)sphere from
+                a disc of radius R perpendicular to it, outside the bounding
+                sphere: power L pi R^2 times the solid angle (2 pi or 4 pi).
+                An unoccluded plane facing ``up`` receives pi L either way.
+==============  ============================================================
+
+Unknown keys are errors, as everywhere in a scene file. The sun and sky
+cover the scene's geometry as loaded (its bounding sphere): a movable
+object moved outside that sphere is not lit by them.
+
+Power and phi_max. Emitters are chosen in proportion to their (exact)
+power; a photon from emitter i carries at most peak_i power_i / p_i watts
+(times the photon count), where peak_i >= 1 is the ratio of the kind's
+largest photon to its mean (1 for every kind but the spot, whose photons
+leave uniformly over the cone and are weighted by its profile). The
+largest of these is phi_max (oclgi/scene/compiled.py), the device's unit,
+so no photon carries more than 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cl.constants import EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN, EMITTER_TRIANGLE
+from ..errors import OclgiError
+
+# The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
+TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
+_KEYS = {
+    "point_light": {"position", "intensity", "candela", "colour"},
+    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta"},
+    "sun": {"direction", "irradiance", "lux", "colour"},
+    "sky": {"radiance", "hemisphere", "up"},
+}
+SPOT_CONE_ANGLE = 30.0  # degrees, pbrt-v4's default coneangle
+SPOT_CONE_DELTA = 5.0  # degrees, pbrt-v4's default conedelta
+SKY_UP = (0.0, 1.0, 0.0)
+# Outside the bounding sphere by this fraction of its radius: the sun's and
+# sky's discs stay clear of the geometry after float32 rounding.
+SPHERE_MARGIN = 1e-3
+
+
+def _rgb(v) -> np.ndarray:
+    return np.asarray(v, dtype=np.float64)
+
+
+def _unit(v, where: str) -> np.ndarray:
+    d = np.asarray(v, dtype=np.float64)
+    n = float(np.linalg.norm(d)) if d.shape == (3,) and np.isfinite(d).all() else 0.0
+    if not n > 0:
+        raise OclgiError(f"{where}: expected a non-zero direction of 3 finite numbers, got {v!r}")
+    return d / n
+
+
+def _check_radiant(v, where: str):
+    from .. import params
+
+    a = np.asarray(v, dtype=object).ravel()
+    if a.shape != (3,):
+        raise OclgiError(f"{where}: expected 3 numbers, got {v!r}")
+    for x in a:
+        params.float32_real(x, where, 0.0)
+
+
+def _check_point(v, where: str):
+    from .scene import MAX_COORDINATE
+
+    a = np.asarray(v, dtype=np.float64) if np.asarray(v).dtype.kind in "iuf" else None
+    if a is None or a.shape != (3,) or not np.isfinite(a).all() or np.abs(a).max() > MAX_COORDINATE:
+        raise OclgiError(f"{where}: expected 3 finite numbers within {MAX_COORDINATE:.0e}, got {v!r}")
+
+
+@dataclass
+class PointLight:
+    """A point light, uniform over the sphere.
+
+    ==========  =========================================
+    position    3 numbers, world space
+    intensity   RGB radiant intensity, W/sr per channel
+    ==========  =========================================
+    """
+
+    position: tuple[float, float, float]
+    intensity: tuple[float, float, float]  # W/sr per channel
+
+    table = "point_light"
+
+    @property
+    def power(self) -> np.ndarray:
+        return 4.0 * math.pi * _rgb(self.intensity)
+
+    def validate(self, where: str):
+        if not (np.isfinite(self.position).all() and np.isfinite(self.intensity).all()) or min(self.intensity) < 0:
+            raise OclgiError(f"point light at {self.position}: bad position or intensity")
+
+    def record(self, sphere):
+        return EMITTER_POINT, self.position, (0, 0, 0), 0.0, 0.0, 1.0
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        return {"type": "point", "position": [float(c) for c in self.position],
+                "intensity": {"type": "rgb", "value": [float(c) for c in self.intensity]}}
+
+
+@dataclass
+class SpotLight:
+    """A spot light with pbrt-v4's profile (smoothstep in cos theta).
+
+    ===========  ==============================================================
+    position     3 numbers, world space
+    direction    the cone's axis (normalised here)
+    intensity    RGB radiant intensity on the axis, W/sr per channel
+    cone_angle   half-angle of the cone, degrees, in (0, 180]
+    cone_delta   width of the falloff band inside the cone, degrees, in
+                 [0, cone_angle]
+    ===========  ==============================================================
+    """
+
+    position: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    intensity: tuple[float, float, float]
+    cone_angle: float = SPOT_CONE_ANGLE
+    cone_delta: float = SPOT_CONE_DELTA
+
+    table = "spot_light"
+
+    @property
+    def cos_total(self) -> float:
+        return math.cos(math.radians(self.cone_angle))
+
+    @property
+    def cos_start(self) -> float:
+        return math.cos(math.radians(self.cone_angle - self.cone_delta))
+
+    def profile(self, cos_theta):
+        """The fraction of the axis intensity emitted at cos_theta (pbrt-v4's SpotLight::I)."""
+        c = np.asarray(cos_theta, np.float64)
+        lo, hi = self.cos_total, self.cos_start
+        if hi == lo:
+            return (c >= lo).astype(np.float64)
+        t = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
+        return t * t * (3 - 2 * t)
+
+    @property
+    def solid_angle_weight(self) -> float:
+        """The integral of the profile over the sphere (sr): the smoothstep
+        over [cos_total, cos_start] integrates to half the band's width."""
+        lo, hi = self.cos_total, self.cos_start
+        return 2.0 * math.pi * ((1.0 - hi) + (hi - lo) / 2.0)
+
+    @property
+    def power(self) -> np.ndarray:
+        return self.solid_angle_weight * _rgb(self.intensity)
+
+    def validate(self, where: str):
+        _check_point(self.position, where + ".position")
+        _unit(self.direction, where + ".direction")
+        _check_radiant(self.intensity, where + ".intensity")
+        a, d = self.cone_angle, self.cone_delta
+        if isinstance(a, bool) or not isinstance(a, (int, float)) or not 0 < a <= 180:
+            raise OclgiError(f"{where}.cone_angle: expected a half-angle in (0, 180] degrees, got {a!r}")
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0 <= d <= a:
+            raise OclgiError(f"{where}.cone_delta: expected degrees from 0 to cone_angle ({a}), got {d!r}")
+
+    def record(self, sphere):
+        # photons leave uniformly over the cone: the largest carries the
+        # cone's solid angle times I, the mean the power
+        peak = 2.0 * math.pi * (1.0 - self.cos_total) / self.solid_angle_weight
+        return (EMITTER_SPOT, self.position, _unit(self.direction, "spot_light.direction"),
+                self.cos_total, self.cos_start, peak)
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``spot``: the same intensity on the axis and the same
+        cone; within the falloff band Mitsuba ramps linearly in the angle,
+        oclgi by smoothstep in its cosine (equal with cone_delta = 0)."""
+        p = np.asarray(self.position, np.float64)
+        d = _unit(self.direction, "spot_light.direction")
+        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
+        return {"type": "spot", "intensity": {"type": "rgb", "value": [float(c) for c in self.intensity]},
+                "cutoff_angle": float(self.cone_angle),
+                "beam_width": float(self.cone_angle - self.cone_delta),
+                "to_world": mi.ScalarTransform4f().look_at(origin=[float(c) for c in p],
+                                                          target=[float(c) for c in p + d], up=up)}
+
+
+@dataclass
+class SunLight:
+    """A directional light (the sun): parallel rays over the whole scene.
+
+    ===========  ==============================================================
+    direction    the direction the light travels (normalised here)
+    irradiance   RGB irradiance on a plane perpendicular to it, W/m^2
+    ===========  ==============================================================
+    """
+
+    direction: tuple[float, float, float]
+    irradiance: tuple[float, float, float]
+
+    table = "sun"
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        return math.pi * r * r * _rgb(self.irradiance)
+
+    def validate(self, where: str):
+        _unit(self.direction, where + ".direction")
+        _check_radiant(self.irradiance, where + ".irradiance")
+
+    def record(self, sphere):
+        c, r = sphere
+        return EMITTER_SUN, c, _unit(self.direction, "sun.direction"), r, 0.0, 1.0
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        return {"type": "directional", "direction": [float(c) for c in _unit(self.direction, "sun.direction")],
+                "irradiance": {"type": "rgb", "value": [float(c) for c in self.irradiance]}}
+
+
+@dataclass
+class SkyLight:
+    """A uniform sky: radiance from every direction, or from those above the horizon.
+
+    ===========  ==============================================================
+    radiance     RGB radiance, W/m^2/sr per channel
+    hemisphere   true: only from directions w with w . up > 0; false: all
+    up           the sky's zenith (normalised here), for ``hemisphere``
+    ===========  ==============================================================
+    """
+
+    radiance: tuple[float, float, float]
+    hemisphere: bool = True
+    up: tuple[float, float, float] = SKY_UP
+
+    table = "sky"
+
+    @property
+    def solid_angle(self) -> float:
+        return (2.0 if self.hemisphere else 4.0) * math.pi
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        return math.pi * r * r * self.solid_angle * _rgb(self.radiance)
+
+    def validate(self, where: str):
+        _check_radiant(self.radiance, where + ".radiance")
+        if not isinstance(self.hemisphere, (bool, np.bool_)):
+            raise OclgiError(f"{where}.hemisphere: expected true or false, got {self.hemisphere!r}")
+        _unit(self.up, where + ".up")
+
+    def record(self, sphere):
+        c, r = sphere
+        return EMITTER_SKY, c, _unit(self.up, "sky.up"), r, 1.0 if self.hemisphere else 0.0, 1.0
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``constant`` for the whole sphere; for the hemisphere an
+        ``envmap`` bright above its equator and black below, turned so that
+        its +y is ``up``. Its rows are bilinearly filtered, so the last row
+        above the horizon blends a little (2 / rows of the sky's solid
+        angle): 512 rows keep that below 0.4%."""
+        rgb = [float(c) for c in self.radiance]
+        if not self.hemisphere:
+            return {"type": "constant", "radiance": {"type": "rgb", "value": rgb}}
+        rows, cols = 512, 8
+        img = np.zeros((rows, cols, 3), np.float32)
+        img[: rows // 2] = rgb
+        up = _unit(self.up, "sky.up")
+        other = [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0]
+        x = np.cross(up, other)
+        x /= np.linalg.norm(x)
+        z = np.cross(x, up)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2] = x, up, z  # the envmap's y axis onto up
+        return {"type": "envmap", "bitmap": mi.Bitmap(img), "to_world": mi.ScalarTransform4f(m.tolist())}
+
+
+LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight)
+
+
+def bounding_sphere(scene) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a sphere around the scene's geometry as loaded,
+    a little larger (SPHERE_MARGIN) than the one through its box's corners."""
+    lo, hi = scene.bounds()
+    centre = 0.5 * (lo + hi)
+    return centre, 0.5 * float(np.linalg.norm(hi - lo)) * (1.0 + SPHERE_MARGIN)
+
+
+def all_lights(scene) -> list:
+    """The scene's lights other than its area lights: point lights first, then the rest in order."""
+    return [*scene.point_lights, *scene.lights]
+
+
+def power(light, sphere) -> np.ndarray:
+    """RGB watts the light emits (the sun and sky: through their disc, radius of ``sphere``)."""
+    return light.power_for(sphere) if hasattr(light, "power_for") else light.power
+
+
+@dataclass
+class EmitterRows:
+    """Every emitter of a scene, one row each: area lights (its emissive
+    triangles) first, then the other lights (:func:`all_lights`, those
+    with power). ``power`` is exact (RGB watts); ``peak`` the ratio of the
+    kind's largest photon to its mean (module docstring)."""
+
+    kind: np.ndarray  # (E,) int32
+    tri: np.ndarray  # (E,) int32, -1 but for triangles
+    p: np.ndarray  # (E, 3)
+    e1: np.ndarray  # (E, 3)
+    e2: np.ndarray  # (E, 3)
+    a: np.ndarray  # (E,)
+    b: np.ndarray  # (E,)
+    power: np.ndarray  # (E, 3) watts
+    peak: np.ndarray  # (E,) >= 1
+
+
+def emitter_rows(scene) -> EmitterRows:
+    """The scene's emitters as the device's records need them (oclgi/scene/compiled.py)."""
+    emission = np.array([m.emission for m in scene.materials], dtype=np.float64)
+    tri_le = emission[scene.tri_material]
+    tri_ids = np.nonzero(tri_le.max(axis=1) > 0)[0]
+    v = scene.vertices[scene.faces[tri_ids]]
+    areas = scene.triangle_areas()[tri_ids]
+    n_tri = len(tri_ids)
+    kind, tri = [np.full(n_tri, EMITTER_TRIANGLE, np.int32)], [tri_ids.astype(np.int32)]
+    p, e1, e2 = [v[:, 0]], [v[:, 1] - v[:, 0]], [v[:, 2] - v[:, 0]]
+    a, b, pw, peak = [np.zeros(n_tri)], [np.zeros(n_tri)], [math.pi * areas[:, None] * tri_le[tri_ids]], [np.ones(n_tri)]
+    sphere = bounding_sphere(scene)
+    for light in all_lights(scene):
+        watts = power(light, sphere)
+        if not watts.max() > 0:
+            continue
+        k, lp, le1, la, lb, lpeak = light.record(sphere)
+        kind.append(np.array([k], np.int32))
+        tri.append(np.array([-1], np.int32))
+        p.append(np.asarray([lp], np.float64))
+        e1.append(np.asarray([le1], np.float64))
+        e2.append(np.zeros((1, 3)))
+        a.append(np.array([la], np.float64))
+        b.append(np.array([lb], np.float64))
+        pw.append(watts[None, :])
+        peak.append(np.array([lpeak], np.float64))
+    cat = np.concatenate
+    return EmitterRows(cat(kind), cat(tri), cat(p), cat(e1), cat(e2), cat(a), cat(b), cat(pw), cat(peak))
+
+
+def validate(scene) -> None:
+    """Each light's parameters, one line naming the bad one."""
+    for i, light in enumerate(scene.point_lights):
+        light.validate(f"point_light[{i}]")
+    counts = {}
+    for light in scene.lights:
+        if not isinstance(light, LIGHT_TYPES) or isinstance(light, PointLight):
+            raise OclgiError(f"{scene.name}: scene.lights holds spot, sun and sky lights "
+                             f"(oclgi.scene.lights), got {type(light).__name__}")
+        i = counts.get(light.table, 0)
+        counts[light.table] = i + 1
+        light.validate(light.table if not TABLES[light.table] else f"{light.table}[{i}]")
+    if counts.get("sky", 0) > 1:
+        raise OclgiError(f"{scene.name}: at most one sky, got {counts['sky']}")
+
+
+def has_power(scene) -> bool:
+    sphere = bounding_sphere(scene)
+    return any(power(light, sphere).max() > 0 for light in all_lights(scene))
+
+
+# -- the scene file ------------------------------------------------------------------------------------------------
+
+def read(desc: dict) -> tuple[list, list]:
+    """(point lights, other lights) from a scene description's light tables."""
+    from . import description as d
+
+    points, others = [], []
+    for name, many in TABLES.items():
+        if name not in desc:
+            continue
+        if many:
+            tables = [(f"{name}[{i}]", t) for i, t in enumerate(d._table_list(desc[name], name))]
+        else:
+            if not isinstance(desc[name], dict):
+                raise OclgiError(f"{name}: expected one [{name}] table, got {desc[name]!r}")
+            tables = [(name, desc[name])]
+        for where, t in tables:
+            d._check_keys(t, _KEYS[name], where)
+            light = _READERS[name](t, where)
+            (points if name == "point_light" else others).append(light)
+    return points, others
+
+
+def _required(t: dict, key: str, where: str):
+    if key not in t:
+        raise OclgiError(f"{where}.{key}: required")
+    return t[key]
+
+
+def _photometric(t: dict, where: str, radiometric: str, photometric: str, convert, unit: str):
+    """``radiometric`` (3 numbers), or ``photometric`` with an optional ``colour``."""
+    from . import description as d
+
+    if photometric in t:
+        if radiometric in t:
+            raise OclgiError(f"{where}: give {radiometric} or {photometric}, not both")
+        value = d._number(t[photometric], f"{where}.{photometric}")
+        if not value > 0:
+            raise OclgiError(f"{where}.{photometric}: expected {unit} > 0, got {t[photometric]!r}")
+        colour = d._vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
+        return d._radiant(convert(value, colour), f"{where}.{photometric}")
+    if "colour" in t:
+        raise OclgiError(f"{where}.colour goes with {photometric}; {radiometric} has its own colour")
+    return d._radiant(_required(t, radiometric, where), f"{where}.{radiometric}")
+
+
+def _direction(t: dict, key: str, where: str):
+    from . import description as d
+
+    v = d._vec3(_required(t, key, where), f"{where}.{key}")
+    return tuple(float(x) for x in _unit(v, f"{where}.{key}"))
+
+
+def _read_point(t: dict, where: str) -> PointLight:
+    from . import description as d
+    from ..photometry import intensity_from_candela
+    from .scene import MAX_COORDINATE
+
+    return PointLight(d._vec3(t.get("position"), where + ".position", MAX_COORDINATE),
+                      _photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"))
+
+
+def _read_spot(t: dict, where: str) -> SpotLight:
+    from . import description as d
+    from ..photometry import intensity_from_candela
+    from .scene import MAX_COORDINATE
+
+    light = SpotLight(
+        position=d._vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
+        direction=_direction(t, "direction", where),
+        intensity=_photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
+        cone_angle=d._number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
+        cone_delta=d._number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
+    )
+    if "cone_delta" not in t:  # the default band, within a narrow cone
+        light.cone_delta = min(light.cone_delta, light.cone_angle)
+    light.validate(where)
+    return light
+
+
+def _read_sun(t: dict, where: str) -> SunLight:
+    from ..photometry import irradiance_from_lux
+
+    return SunLight(direction=_direction(t, "direction", where),
+                    irradiance=_photometric(t, where, "irradiance", "lux", irradiance_from_lux, "an illuminance"))
+
+
+def _read_sky(t: dict, where: str) -> SkyLight:
+    from . import description as d
+
+    hemisphere = t.get("hemisphere", True)
+    if not isinstance(hemisphere, bool):
+        raise OclgiError(f"{where}.hemisphere: expected true or false, got {hemisphere!r}")
+    up = tuple(float(x) for x in _unit(d._vec3(t.get("up", SKY_UP), where + ".up"), where + ".up"))
+    return SkyLight(radiance=d._radiant(_required(t, "radiance", where), where + ".radiance"),
+                    hemisphere=hemisphere, up=up)
+
+
+_READERS = {"point_light": _read_point, "spot_light": _read_spot, "sun": _read_sun, "sky": _read_sky}
+
+
+# -- area lights that light nothing -----------------------------------------------------------------------------
+
+# The check below tests each distinct emitter plane against every vertex;
+# past this many vertex tests it stops (the planes left are not reported),
+# so that a finely tessellated curved light costs a fraction of a second.
+MAX_VERTEX_TESTS = 50_000_000
+
+
+def escaping_area_lights(scene) -> np.ndarray:
+    """Ids of the emissive triangles with no geometry in front of them: the
+    open half-space on the normal's side holds no vertex of the scene (as
+    loaded), so every photon they emit leaves the scene. The converse holds
+    too: geometry in front of a triangle is hit by some of its cosine-
+    distributed photons. Triangles are grouped by plane (a quad light is
+    one test), and the scene's box rules most planes out first."""
+    emission = np.array([m.emission for m in scene.materials], dtype=np.float64)
+    ids = np.nonzero(emission[scene.tri_material].max(axis=1) > 0)[0]
+    if not len(ids):
+        return ids
+    n = scene.triangle_normals()[ids]
+    v0 = scene.vertices[scene.faces[ids, 0]]
+    offset = np.einsum("ij,ij->i", n, v0)
+    tol = 1e-6 * max(scene.diagonal, 1e-30)
+    lo, hi = scene.bounds()
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    box_front = (corners @ n.T - offset).max(axis=0) > tol
+    suspects = np.nonzero(~box_front)[0]
+    # A box with nothing in front already proves it; the others need the vertices.
+    escaping = list(suspects)
+    rest = np.nonzero(box_front)[0]
+    key = np.round(np.hstack([n[rest], offset[rest, None] / tol]), 6)
+    planes, inverse = np.unique(key, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    first = np.zeros(len(planes), np.int64)
+    first[inverse[::-1]] = rest[::-1]  # a representative triangle per plane
+    verts = scene.vertices
+    for k in range(min(len(planes), max(1, MAX_VERTEX_TESTS // max(len(verts), 1)))):
+        j = first[k]
+        if not ((verts @ n[j]) - offset[j] > tol).any():
+            escaping.extend(rest[inverse == k])
+    return np.sort(ids[np.asarray(escaping, dtype=np.int64)])
+
+
+def warn_escaping(scene) -> None:
+    """One OclgiWarning line when some area lights emit only away from every surface."""
+    import warnings
+
+    from .scene import OclgiWarning
+
+    bad = escaping_area_lights(scene)
+    if len(bad):
+        names = sorted({scene.materials[m].name for m in scene.tri_material[bad]})
+        warnings.warn(f"{scene.name}: {len(bad)} emitting triangle(s) (material {', '.join(map(repr, names))}) "
+                      "emit only away from every surface: their light leaves the scene (flip the faces?)",
+                      OclgiWarning, stacklevel=3)
+
+
+def mitsuba_emitters(mi, scene) -> dict:
+    """Every light but the area lights as Mitsuba scene-dict entries (oclgi/study/mitsuba.py)."""
+    sphere = bounding_sphere(scene)
+    out, counts = {}, {}
+    for light in all_lights(scene):
+        i = counts.get(light.table, 0)
+        counts[light.table] = i + 1
+        if power(light, sphere).max() > 0:
+            out[f"{light.table}_{i}"] = light.to_mitsuba(mi, sphere)
+    return out
