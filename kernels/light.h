@@ -37,8 +37,8 @@
 #ifndef OCLGI_LIGHT_H
 #define OCLGI_LIGHT_H
 
+#include "oclgi_types.h" /* first: geometry.h uses its OCLGI_PI */
 #include "geometry.h"
-#include "oclgi_types.h"
 
 typedef struct {
     float3 o, d, power; /* the photon's first segment: origin, direction, power */

@@ -422,20 +422,23 @@ def _required(t: dict, key: str, where: str):
     return t[key]
 
 
+_UNITS = {"intensity": "W/sr", "irradiance": "W/m^2"}
+
+
 def _photometric(t: dict, where: str, radiometric: str, photometric: str, convert, unit: str):
     """``radiometric`` (3 numbers), or ``photometric`` with an optional ``colour``."""
     from . import description as d
 
     if photometric in t:
         if radiometric in t:
-            raise OclgiError(f"{where}: give {radiometric} or {photometric}, not both")
+            raise OclgiError(f"{where}: give {radiometric} ({_UNITS[radiometric]}) or {photometric}, not both")
         value = d._number(t[photometric], f"{where}.{photometric}")
         if not value > 0:
             raise OclgiError(f"{where}.{photometric}: expected {unit} > 0, got {t[photometric]!r}")
         colour = d._vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
         return d._radiant(convert(value, colour), f"{where}.{photometric}")
     if "colour" in t:
-        raise OclgiError(f"{where}.colour goes with {photometric}; {radiometric} has its own colour")
+        raise OclgiError(f"{where}.colour goes with {photometric}; an {radiometric} has its own colour")
     return d._radiant(_required(t, radiometric, where), f"{where}.{radiometric}")
 
 
