@@ -413,3 +413,79 @@ def test_mitsuba_conversion_of_every_kind():
         assert kind == ("envmap" if hemisphere else "constant")
         e = mitsuba_reference.irradiance(sky, p[:1], n[:1], spp=4096, max_depth=1)[:, 0]
         assert abs(e[0] / math.pi - 1) < 0.02, (hemisphere, e)
+
+
+# -- glTF KHR_lights_punctual -----------------------------------------------------------------------------------
+
+def _gltf(tmp_path, lights_ext, nodes):
+    """A .gltf: a 2 x 2 floor quad (y = 0, facing up), embedded buffer, plus ``nodes`` and the lights."""
+    import base64
+    import json
+
+    pos = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], np.float32)
+    idx = np.array([0, 2, 1, 0, 3, 2], np.uint16)
+    blob = pos.tobytes() + idx.tobytes()
+    children = {c for n in nodes for c in n.get("children", [])}
+    doc = {
+        "asset": {"version": "2.0"}, "extensionsUsed": ["KHR_lights_punctual"],
+        "extensions": {"KHR_lights_punctual": {"lights": lights_ext}},
+        "scene": 0, "scenes": [{"nodes": [i for i in range(len(nodes) + 1) if i not in children]}],
+        "nodes": [{"mesh": 0}, *nodes],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": len(blob),
+                     "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [-1, 0, -1], "max": [1, 0, 1]},
+                      {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+    }
+    (tmp_path / "lit.gltf").write_text(json.dumps(doc))
+    return tmp_path / "lit.gltf"
+
+
+DOWN = [-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5)]  # -90 deg about x: the node's -Z onto -Y
+
+
+def test_gltf_punctual_lights(tmp_path):
+    """Point, spot and directional lights, placed by their nodes (a parent's
+    translation, a rotation) and by the scene file's mesh transform."""
+    path = _gltf(tmp_path, [
+        {"type": "point", "intensity": 683.0, "color": [1, 1, 1]},
+        {"type": "spot", "intensity": 1366.0, "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.5}},
+        {"type": "directional", "intensity": 683.0},
+        {"type": "point", "intensity": 0.0},  # dark: dropped
+    ], [
+        {"translation": [0, 1, 0], "children": [5]},
+        {"rotation": DOWN, "translation": [0.2, 1.5, 0], "extensions": {"KHR_lights_punctual": {"light": 1}}},
+        {"rotation": DOWN, "extensions": {"KHR_lights_punctual": {"light": 2}}},
+        {"extensions": {"KHR_lights_punctual": {"light": 3}}},
+        {"translation": [0.5, 0, 0], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+    ])
+    sc = oclgi.load_dict({"mesh": [{"path": str(path), "transform": {"translate": [0, 0.5, 0]}}],
+                          "photons": {"count": 1000}})
+    (point,), (spot, sun) = sc.point_lights, sc.lights
+    np.testing.assert_allclose(point.position, [0.5, 1.5, 0])
+    np.testing.assert_allclose(point.intensity, 1.0)
+    np.testing.assert_allclose(spot.position, [0.2, 2.0, 0])
+    np.testing.assert_allclose(spot.direction, [0, -1, 0], atol=1e-12)
+    np.testing.assert_allclose(spot.intensity, 2.0)
+    assert spot.cone_angle == pytest.approx(math.degrees(0.5))
+    assert spot.cone_delta == pytest.approx(math.degrees(0.2))
+    np.testing.assert_allclose(sun.direction, [0, -1, 0], atol=1e-12)
+    np.testing.assert_allclose(sun.irradiance, 1.0)
+    # and they light the floor: the sun alone gives 1 W/m^2, the point and spot more
+    e = oclgi.Engine(sc).irradiance(_points([(0.0, 0.0)]) + [0, 0.5, 0, 0, 0, 0], radius=0.3, photons=200_000)
+    assert e.irradiance[0, 0] > 1.0
+
+
+@pytest.mark.parametrize("light, match", [
+    ({"type": "area"}, r"light 0\.type: expected 'point', 'spot' or 'directional'"),
+    ({"type": "spot", "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}, r"light 0\.spot: expected 0 <= inner"),
+    ({"type": "point", "intensity": -1}, r"light 0\.intensity: expected a number >= 0"),
+    ({"type": "point", "color": [1, 1]}, r"light 0\.color: expected 3 numbers"),
+])
+def test_gltf_bad_lights(tmp_path, light, match):
+    path = _gltf(tmp_path, [light], [{"extensions": {"KHR_lights_punctual": {"light": 0}}}])
+    with pytest.raises(OclgiError, match=match):
+        oclgi.load_dict({"mesh": [{"path": str(path)}], "photons": {"count": 1000}})

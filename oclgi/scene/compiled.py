@@ -21,8 +21,8 @@ from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from .lights import emitter_rows, warn_escaping
-from .scene import Scene
+from .lights import emitter_rows, escaping_area_lights
+from .scene import OclgiWarning, Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
 
@@ -54,6 +54,21 @@ def as_transform(matrix) -> np.ndarray:
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         raise OclgiError("the transform is singular (it flattens the object)")
     return m
+
+
+def _warn_escaping(scene: Scene) -> None:
+    """One line when area lights emit only away from every surface (their
+    light leaves the scene: flipped faces, most likely). A cheap exact test
+    on the geometry (oclgi/scene/lights.py escaping_area_lights), once per
+    compiled scene, rather than a look at the first batch's segments."""
+    import warnings
+
+    bad = escaping_area_lights(scene)
+    if len(bad):
+        names = sorted({scene.materials[m].name for m in scene.tri_material[bad]})
+        warnings.warn(f"{scene.name}: {len(bad)} emitting triangle(s) (material {', '.join(map(repr, names))}) "
+                      "emit only away from every surface: their light leaves the scene (flip the faces?)",
+                      OclgiWarning, stacklevel=4)
 
 
 class CompiledScene:
@@ -113,7 +128,7 @@ class CompiledScene:
             raise OclgiError(f"{scene.name}: the emitters' power ({weight.sum():.3g} W) is out of float32's range "
                              "on the device; scale the emission or intensity")
         em["power"] = photon_power / self.photon_power_max
-        warn_escaping(scene)  # an area light facing away from everything: a cheap check, once
+        _warn_escaping(scene)
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)

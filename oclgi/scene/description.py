@@ -30,7 +30,9 @@
     hemisphere = true               # from above the horizon only (false: every direction)
     up = [0, 1, 0]
 
-(oclgi/scene/lights.py has the lights' parameters, defaults and power.)
+(oclgi/scene/lights.py has the lights' parameters, defaults and power; a
+glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
+transform: oclgi/scene/gltf_lights.py.)
 
     [camera]
     position = [0, 1, 3.94]
@@ -71,6 +73,8 @@ from .. import params
 from .mesh import from_trimesh, is_file, load_mesh
 from .obj import MtlMaterial
 from . import lights as lights_mod
+from .values import check_keys as _check_keys, number as _number, radiant as _radiant, table_list as _table_list
+from .values import vec3 as _vec3
 from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
@@ -85,11 +89,6 @@ _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("pho
              ("estimator", "extension"): "extension", ("estimator", "count_emitted"): "count_emitted"}
 _PHOTONS = {key for table, key in _SETTINGS if table == "photons"}
 _ESTIMATOR = {key for table, key in _SETTINGS if table == "estimator"}
-# The device holds emission and intensity in float32: a positive value
-# outside its normal range would round to 0 or inf, and so would the
-# photons' power (a division by zero, or NaN everywhere).
-_F32_TINY = float(np.finfo(np.float32).tiny)  # 1.2e-38
-_F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 
 def load_file(path) -> Scene:
@@ -113,73 +112,6 @@ def load_file(path) -> Scene:
     return scene
 
 
-def _check_keys(d, allowed, where):
-    if not isinstance(d, dict):
-        raise OclgiError(f"{where}: expected a table, got {type(d).__name__}")
-    not_names = [k for k in d if not isinstance(k, str)]
-    if not_names:  # a dict made in Python may have any keys; TOML's are names
-        raise OclgiError(f"{where}: keys must be names (strings), got {_show_key(not_names[0])}")
-    unknown = set(d) - allowed
-    if unknown:
-        raise OclgiError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
-
-
-def _show_key(key) -> str:
-    text = repr(key)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _show(x: float) -> str:
-    return f"{x:.2g}".replace("e+", "e")
-
-
-def _vec3(value, where, limit=_F32_MAX):
-    """3 finite numbers, none beyond ``limit`` in size (by default float32's
-    range: the device would see infinity)."""
-    if isinstance(value, (str, bytes, dict)) or value is None:
-        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}")
-    try:
-        if any(isinstance(x, bool) for x in value):
-            raise TypeError
-        v = tuple(float(x) for x in value)
-    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond float's range
-        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
-    if len(v) != 3 or not all(math.isfinite(x) for x in v):
-        raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
-    if any(abs(x) > limit for x in v):
-        why = ("float32 on the device" if limit == _F32_MAX
-               else "as for vertex coordinates: the device squares them in float32")
-        raise OclgiError(f"{where}: expected 3 numbers, each from -{_show(limit)} to {_show(limit)} ({why}), "
-                         f"got {value!r}")
-    return v
-
-
-def _radiant(value, where):
-    """An emission or intensity: 3 numbers, each 0 or in float32's normal
-    range (negative ones are the scene's to refuse, with the material's name)."""
-    v = _vec3(value, where, math.inf)
-    if any(0 < x < _F32_TINY or x > _F32_MAX for x in v):
-        raise OclgiError(f"{where}: expected 3 numbers, each 0 or from 1.2e-38 to 3.4e38 "
-                         f"(float32 on the device), got {value!r}")
-    return v
-
-
-def _number(value, where, kind=float):
-    """A finite number within float32's range (the device's), as ``kind``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise OclgiError(f"{where}: expected a number, got {value!r}")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise OclgiError(f"{where}: expected a finite number, got {value!r}")
-    if abs(value) > _F32_MAX:  # an int is compared exactly: no float conversion to overflow
-        raise OclgiError(f"{where}: expected a number from -3.4e38 to 3.4e38 (float32 on the device), "
-                         f"got {value!r}")
-    if kind is int:
-        if float(value) != int(value):
-            raise OclgiError(f"{where}: expected an integer, got {value!r}")
-        return int(value)
-    return float(value)
-
-
 def _transform(t, where):
     _check_keys(t, {"scale", "rotate", "translate"}, where)
     m = np.eye(3)
@@ -201,7 +133,7 @@ def _transform(t, where):
     return m, shift
 
 
-def _mesh(desc, i, base_dir, materials, mat_index):
+def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
     default = Material(
@@ -212,6 +144,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
         raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
+    file_lights = []  # a glTF's punctual lights (the other formats have none)
     if "path" in desc:
         given = desc["path"]
         if isinstance(given, os.PathLike):  # pathlib.Path from Python
@@ -224,6 +157,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         loaded = load_mesh(path)
         vertices, faces, fmat, names, file_mats = (
             loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
+        file_lights = loaded.lights  # a glTF's punctual lights
         label = path.name
     elif "trimesh" in desc:
         loaded = from_trimesh(desc["trimesh"], where + ".trimesh")
@@ -270,9 +204,17 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     if bad.any():
         raise OclgiError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
                          f"(the first is vertex {int(np.argmax(bad)) + 1})")
+    m, shift = np.eye(3), np.zeros(3)
     if "transform" in desc:
         m, shift = _transform(desc["transform"], where + ".transform")
         vertices = vertices @ m.T + shift
+    if file_lights and lights is not None:
+        if _movable(desc, i):
+            raise OclgiError(f"mesh[{i}]: {label} has lights (KHR_lights_punctual) and the mesh is movable; "
+                             "moving lights are not supported yet")
+        from .gltf_lights import transformed
+
+        lights.extend(transformed(light, m, shift) for light in file_lights)
     if "lumens" in desc:  # every face of the mesh emits, its total luminous flux given
         from ..photometry import emission_from_lumens
 
@@ -364,9 +306,10 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     movable = [_movable(m, i) for i, m in enumerate(meshes)]
     order = [i for i in range(len(meshes)) if not movable[i]] + [i for i in range(len(meshes)) if movable[i]]
     objects: list[SceneObject] = []
+    file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm = _mesh(m, i, base_dir, materials, None)
+        v, f, fm = _mesh(m, i, base_dir, materials, None, file_lights)
         if movable[i]:
             name = _object_name(m, i)
             if any(o.name == name for o in objects):
@@ -381,6 +324,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         offset += len(v)
 
     point_lights, lights = lights_mod.read(desc)
+    point_lights += [x for x in file_lights if isinstance(x, lights_mod.PointLight)]
+    lights += [x for x in file_lights if not isinstance(x, lights_mod.PointLight)]
 
     camera = None
     if "camera" in desc:
@@ -437,15 +382,6 @@ def _object_name(desc, i) -> str:
     if "path" in desc and isinstance(desc["path"], str):
         return Path(desc["path"]).stem
     return f"mesh[{i}]"
-
-
-def _table_list(value, name):
-    """``[[name]]`` (a list of tables) or a single ``[name]`` table, as a list."""
-    if isinstance(value, dict):
-        return [value]
-    if not isinstance(value, list):
-        raise OclgiError(f"{name}: expected [[{name}]] tables, got {value!r}")
-    return value
 
 
 def validate_camera(c: Camera) -> Camera:

@@ -55,6 +55,8 @@ import numpy as np
 
 from ..cl.constants import EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN, EMITTER_TRIANGLE
 from ..errors import OclgiError
+from ..params import MAX_LENGTH as MAX_COORDINATE  # as for vertices (oclgi/scene/scene.py)
+from . import values
 
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
 TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
@@ -95,7 +97,6 @@ def _check_radiant(v, where: str):
 
 
 def _check_point(v, where: str):
-    from .scene import MAX_COORDINATE
 
     a = np.asarray(v, dtype=np.float64) if np.asarray(v).dtype.kind in "iuf" else None
     if a is None or a.shape != (3,) or not np.isfinite(a).all() or np.abs(a).max() > MAX_COORDINATE:
@@ -397,20 +398,19 @@ def has_power(scene) -> bool:
 
 def read(desc: dict) -> tuple[list, list]:
     """(point lights, other lights) from a scene description's light tables."""
-    from . import description as d
 
     points, others = [], []
     for name, many in TABLES.items():
         if name not in desc:
             continue
         if many:
-            tables = [(f"{name}[{i}]", t) for i, t in enumerate(d._table_list(desc[name], name))]
+            tables = [(f"{name}[{i}]", t) for i, t in enumerate(values.table_list(desc[name], name))]
         else:
             if not isinstance(desc[name], dict):
                 raise OclgiError(f"{name}: expected one [{name}] table, got {desc[name]!r}")
             tables = [(name, desc[name])]
         for where, t in tables:
-            d._check_keys(t, _KEYS[name], where)
+            values.check_keys(t, _KEYS[name], where)
             light = _READERS[name](t, where)
             (points if name == "point_light" else others).append(light)
     return points, others
@@ -427,48 +427,42 @@ _UNITS = {"intensity": "W/sr", "irradiance": "W/m^2"}
 
 def _photometric(t: dict, where: str, radiometric: str, photometric: str, convert, unit: str):
     """``radiometric`` (3 numbers), or ``photometric`` with an optional ``colour``."""
-    from . import description as d
 
     if photometric in t:
         if radiometric in t:
             raise OclgiError(f"{where}: give {radiometric} ({_UNITS[radiometric]}) or {photometric}, not both")
-        value = d._number(t[photometric], f"{where}.{photometric}")
+        value = values.number(t[photometric], f"{where}.{photometric}")
         if not value > 0:
             raise OclgiError(f"{where}.{photometric}: expected {unit} > 0, got {t[photometric]!r}")
-        colour = d._vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
-        return d._radiant(convert(value, colour), f"{where}.{photometric}")
+        colour = values.vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
+        return values.radiant(convert(value, colour), f"{where}.{photometric}")
     if "colour" in t:
         raise OclgiError(f"{where}.colour goes with {photometric}; an {radiometric} has its own colour")
-    return d._radiant(_required(t, radiometric, where), f"{where}.{radiometric}")
+    return values.radiant(_required(t, radiometric, where), f"{where}.{radiometric}")
 
 
 def _direction(t: dict, key: str, where: str):
-    from . import description as d
 
-    v = d._vec3(_required(t, key, where), f"{where}.{key}")
+    v = values.vec3(_required(t, key, where), f"{where}.{key}")
     return tuple(float(x) for x in _unit(v, f"{where}.{key}"))
 
 
 def _read_point(t: dict, where: str) -> PointLight:
-    from . import description as d
     from ..photometry import intensity_from_candela
-    from .scene import MAX_COORDINATE
 
-    return PointLight(d._vec3(t.get("position"), where + ".position", MAX_COORDINATE),
+    return PointLight(values.vec3(t.get("position"), where + ".position", MAX_COORDINATE),
                       _photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"))
 
 
 def _read_spot(t: dict, where: str) -> SpotLight:
-    from . import description as d
     from ..photometry import intensity_from_candela
-    from .scene import MAX_COORDINATE
 
     light = SpotLight(
-        position=d._vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
+        position=values.vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
         direction=_direction(t, "direction", where),
         intensity=_photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
-        cone_angle=d._number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
-        cone_delta=d._number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
+        cone_angle=values.number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
+        cone_delta=values.number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
     )
     if "cone_delta" not in t:  # the default band, within a narrow cone
         light.cone_delta = min(light.cone_delta, light.cone_angle)
@@ -484,13 +478,12 @@ def _read_sun(t: dict, where: str) -> SunLight:
 
 
 def _read_sky(t: dict, where: str) -> SkyLight:
-    from . import description as d
 
     hemisphere = t.get("hemisphere", True)
     if not isinstance(hemisphere, bool):
         raise OclgiError(f"{where}.hemisphere: expected true or false, got {hemisphere!r}")
-    up = tuple(float(x) for x in _unit(d._vec3(t.get("up", SKY_UP), where + ".up"), where + ".up"))
-    return SkyLight(radiance=d._radiant(_required(t, "radiance", where), where + ".radiance"),
+    up = tuple(float(x) for x in _unit(values.vec3(t.get("up", SKY_UP), where + ".up"), where + ".up"))
+    return SkyLight(radiance=values.radiant(_required(t, "radiance", where), where + ".radiance"),
                     hemisphere=hemisphere, up=up)
 
 
@@ -538,20 +531,6 @@ def escaping_area_lights(scene) -> np.ndarray:
         if not ((verts @ n[j]) - offset[j] > tol).any():
             escaping.extend(rest[inverse == k])
     return np.sort(ids[np.asarray(escaping, dtype=np.int64)])
-
-
-def warn_escaping(scene) -> None:
-    """One OclgiWarning line when some area lights emit only away from every surface."""
-    import warnings
-
-    from .scene import OclgiWarning
-
-    bad = escaping_area_lights(scene)
-    if len(bad):
-        names = sorted({scene.materials[m].name for m in scene.tri_material[bad]})
-        warnings.warn(f"{scene.name}: {len(bad)} emitting triangle(s) (material {', '.join(map(repr, names))}) "
-                      "emit only away from every surface: their light leaves the scene (flip the faces?)",
-                      OclgiWarning, stacklevel=3)
 
 
 def mitsuba_emitters(mi, scene) -> dict:
