@@ -100,8 +100,10 @@ typedef struct {
  *   SPOT      position     unit axis     0        cos(cone)   cos(falloff start)
  *   SUN       sphere c     unit travel   0        sphere R    0
  *   SKY       sphere c     unit up       0        sphere R    1: upper hemisphere, 0: sphere
+ *   ENVMAP    sphere c     0             (W,H,0)  sphere R    0
  * (c, R: the scene's bounding sphere, which the sun's and sky's discs lie
- * outside.) tri: the triangle's id (scene order), -1 for the other kinds.
+ * outside.) tri: the triangle's id (scene order); an ENVMAP's tables'
+ * offset in the emitter CDF buffer (light.h); -1 for the other kinds.
  * power: the largest power the kind gives a photon / its selection
  * probability, in units of phi_max, so never above 1. */
 typedef struct {

@@ -61,14 +61,14 @@ __kernel void constants_probe(__global ulong *u, __global float *f)
     u[i++] = OCLGI_RADIX_BITS; u[i++] = OCLGI_GRID_KEY_BITS; u[i++] = OCLGI_GRID_EMPTY;
     u[i++] = OCLGI_GRID_HASH_MUL; u[i++] = OCLGI_CELL_OUTSIDE_BIT; u[i++] = OCLGI_EMITTER_TRIANGLE;
     u[i++] = OCLGI_EMITTER_POINT; u[i++] = OCLGI_EMITTER_SPOT; u[i++] = OCLGI_EMITTER_SUN;
-    u[i++] = OCLGI_EMITTER_SKY;
+    u[i++] = OCLGI_EMITTER_SKY; u[i++] = OCLGI_EMITTER_ENVMAP;
     f[0] = OCLGI_FRONT_COS_EPS;
     f[1] = (float)OCLGI_SC_MU;
 }
 """
 INTEGERS = ("LANES", "BVH_STACK_SIZE", "BOX_BVH_STACK", "POINT_BVH_STACK", "FIXED_BITS", "SC_MAX_LEVELS",
             "RADIX_BITS", "GRID_KEY_BITS", "GRID_EMPTY", "GRID_HASH_MUL", "CELL_OUTSIDE_BIT",
-            "EMITTER_TRIANGLE", "EMITTER_POINT", "EMITTER_SPOT", "EMITTER_SUN", "EMITTER_SKY")
+            "EMITTER_TRIANGLE", "EMITTER_POINT", "EMITTER_SPOT", "EMITTER_SUN", "EMITTER_SKY", "EMITTER_ENVMAP")
 
 
 def test_kernels_see_the_host_values(cl_env):

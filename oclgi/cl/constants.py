@@ -76,6 +76,7 @@ EMITTER_POINT = 1
 EMITTER_SPOT = 2
 EMITTER_SUN = 3
 EMITTER_SKY = 4
+EMITTER_ENVMAP = 5
 
 # name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
 # 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
@@ -99,6 +100,7 @@ DEFINES = {
     "emitter_spot": EMITTER_SPOT,
     "emitter_sun": EMITTER_SUN,
     "emitter_sky": EMITTER_SKY,
+    "emitter_envmap": EMITTER_ENVMAP,
 }
 
 

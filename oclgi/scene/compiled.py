@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_STACK_SIZE, FIXED_ONE
+from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, FIXED_ONE
 from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Material, Tri
 from ..cl.programs import launch, programs
@@ -112,12 +112,16 @@ class CompiledScene:
         em = np.zeros(len(rows.kind), dtype=Emitter)
         em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = rows.kind, rows.tri, rows.p, rows.e1, rows.e2
         em["a"], em["b"] = rows.a, rows.b
+        # one buffer: the CDF, then the environment maps' tables (kernels/light.h;
+        # their records' tri is their offset in it)
+        em["tri"][rows.kind == EMITTER_ENVMAP] += len(em)
+        cdf_table = np.concatenate([cdf, rows.table]).astype(np.float32)
         keep = prob > 0
         # the largest power a photon path of each emitter carries (times
-        # n_paths): its mean, power / prob, times the kind's peak
-        # (oclgi/scene/lights.py; 1 but for spot lights)
+        # n_paths): its bound (oclgi/scene/lights.py; the power itself but
+        # for spot lights and environment maps) over its probability
         photon_power = np.zeros_like(power)
-        photon_power[keep] = power[keep] * rows.peak[keep, None] / prob[keep, None]
+        photon_power[keep] = rows.bound[keep] / prob[keep, None]
         self.n_emitters = len(em)
         self.total_power = power.sum(axis=0)  # RGB watts
         # phi_max, the largest power any photon path carries (times n_paths):
@@ -138,11 +142,11 @@ class CompiledScene:
         self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
         self.materials = _buffer(ctx, mats)
         self.emitters = _buffer(ctx, em)
-        self.emitter_cdf = _buffer(ctx, cdf.astype(np.float32))
+        self.emitter_cdf = _buffer(ctx, cdf_table)
         self.tri_areas = _buffer(ctx, self.areas)
         self.faces = _buffer(ctx, scene.faces.astype(np.int32))
         self.materials_host = mats
-        self.emitters_host, self.emitter_cdf_host = em, cdf.astype(np.float32)
+        self.emitters_host, self.emitter_cdf_host = em, cdf_table
         # scene scale for ray offsets and the DETP tolerance
         self.eps = 1e-5 * scene.diagonal
 

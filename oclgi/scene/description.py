@@ -29,6 +29,7 @@
     radiance = [0.5, 0.6, 0.8]      # W/m^2/sr, uniform
     hemisphere = true               # from above the horizon only (false: every direction)
     up = [0, 1, 0]
+    # or: map = "sky.exr"           # equirectangular radiance (+y at the top row), scale = 1.0
 
 (oclgi/scene/lights.py has the lights' parameters, defaults and power; a
 glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
@@ -323,7 +324,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         fobjs.append(np.full(len(f), len(objects) - 1, np.int64))
         offset += len(v)
 
-    point_lights, lights = lights_mod.read(desc)
+    point_lights, lights = lights_mod.read(desc, base_dir)
     point_lights += [x for x in file_lights if isinstance(x, lights_mod.PointLight)]
     lights += [x for x in file_lights if not isinstance(x, lights_mod.PointLight)]
 

@@ -31,6 +31,13 @@ table           parameters (defaults)
                 a disc of radius R perpendicular to it, outside the bounding
                 sphere: power L pi R^2 times the solid angle (2 pi or 4 pi).
                 An unoccluded plane facing ``up`` receives pi L either way.
+[sky] with map  ``map``: an equirectangular image (EXR, HDR, ... through
+                OpenImageIO; relative to the scene file) of radiance
+                (W/m^2/sr), Mitsuba's orientation (row 0 the zenith +y,
+                column u looking along (sin phi, ., -cos phi) at phi =
+                2 pi u); ``scale`` (1) multiplies it. Importance-sampled by
+                luminance x solid angle of its texels (piecewise constant):
+                power pi R^2 x the map's integral of radiance.
 ==============  ============================================================
 
 Unknown keys are errors, as everywhere in a scene file. The sun and sky
@@ -38,12 +45,14 @@ cover the scene's geometry as loaded (its bounding sphere): a movable
 object moved outside that sphere is not lit by them.
 
 Power and phi_max. Emitters are chosen in proportion to their (exact)
-power; a photon from emitter i carries at most peak_i power_i / p_i watts
-(times the photon count), where peak_i >= 1 is the ratio of the kind's
-largest photon to its mean (1 for every kind but the spot, whose photons
-leave uniformly over the cone and are weighted by its profile). The
-largest of these is phi_max (oclgi/scene/compiled.py), the device's unit,
-so no photon carries more than 1.
+power; a photon from emitter i carries at most bound_i / p_i watts (times
+the photon count), where bound_i is power_i for the kinds whose photons all
+carry the same, and more for the two whose photons vary: the spot (photons
+leave uniformly over the cone, weighted by its profile: bound = power x
+the cone's solid angle / the profile's integral) and the environment map
+(texels chosen by luminance, weighted by their colour). The largest of
+these is phi_max (oclgi/scene/compiled.py), the device's unit, so no
+photon carries more than 1.
 """
 
 from __future__ import annotations
@@ -53,9 +62,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cl.constants import EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN, EMITTER_TRIANGLE
+from ..cl.constants import (EMITTER_ENVMAP, EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN,
+                            EMITTER_TRIANGLE)
 from ..errors import OclgiError
 from ..params import MAX_LENGTH as MAX_COORDINATE  # as for vertices (oclgi/scene/scene.py)
+from ..photometry import LUMINANCE
 from . import values
 
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
@@ -64,8 +75,10 @@ _KEYS = {
     "point_light": {"position", "intensity", "candela", "colour"},
     "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta"},
     "sun": {"direction", "irradiance", "lux", "colour"},
-    "sky": {"radiance", "hemisphere", "up"},
+    "sky": {"radiance", "hemisphere", "up", "map", "scale"},
 }
+# An environment map's largest size (texels): its tables are 4 floats a texel on the device.
+ENVMAP_MAX_TEXELS = 1 << 24
 SPOT_CONE_ANGLE = 30.0  # degrees, pbrt-v4's default coneangle
 SPOT_CONE_DELTA = 5.0  # degrees, pbrt-v4's default conedelta
 SKY_UP = (0.0, 1.0, 0.0)
@@ -126,8 +139,8 @@ class PointLight:
         if not (np.isfinite(self.position).all() and np.isfinite(self.intensity).all()) or min(self.intensity) < 0:
             raise OclgiError(f"point light at {self.position}: bad position or intensity")
 
-    def record(self, sphere):
-        return EMITTER_POINT, self.position, (0, 0, 0), 0.0, 0.0, 1.0
+    def record(self, sphere) -> dict:
+        return {"kind": EMITTER_POINT, "p": self.position}
 
     def to_mitsuba(self, mi, sphere) -> dict:
         return {"type": "point", "position": [float(c) for c in self.position],
@@ -194,12 +207,15 @@ class SpotLight:
         if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0 <= d <= a:
             raise OclgiError(f"{where}.cone_delta: expected degrees from 0 to cone_angle ({a}), got {d!r}")
 
-    def record(self, sphere):
-        # photons leave uniformly over the cone: the largest carries the
-        # cone's solid angle times I, the mean the power
-        peak = 2.0 * math.pi * (1.0 - self.cos_total) / self.solid_angle_weight
-        return (EMITTER_SPOT, self.position, _unit(self.direction, "spot_light.direction"),
-                self.cos_total, self.cos_start, peak)
+    @property
+    def peak(self) -> float:
+        """Photons leave uniformly over the cone: the largest carries the
+        cone's solid angle times I, the mean the power."""
+        return 2.0 * math.pi * (1.0 - self.cos_total) / self.solid_angle_weight
+
+    def record(self, sphere) -> dict:
+        return {"kind": EMITTER_SPOT, "p": self.position, "e1": _unit(self.direction, "spot_light.direction"),
+                "a": self.cos_total, "b": self.cos_start}
 
     def to_mitsuba(self, mi, sphere) -> dict:
         """Mitsuba's ``spot``: the same intensity on the axis and the same
@@ -238,9 +254,9 @@ class SunLight:
         _unit(self.direction, where + ".direction")
         _check_radiant(self.irradiance, where + ".irradiance")
 
-    def record(self, sphere):
+    def record(self, sphere) -> dict:
         c, r = sphere
-        return EMITTER_SUN, c, _unit(self.direction, "sun.direction"), r, 0.0, 1.0
+        return {"kind": EMITTER_SUN, "p": c, "e1": _unit(self.direction, "sun.direction"), "a": r}
 
     def to_mitsuba(self, mi, sphere) -> dict:
         return {"type": "directional", "direction": [float(c) for c in _unit(self.direction, "sun.direction")],
@@ -278,9 +294,10 @@ class SkyLight:
             raise OclgiError(f"{where}.hemisphere: expected true or false, got {self.hemisphere!r}")
         _unit(self.up, where + ".up")
 
-    def record(self, sphere):
+    def record(self, sphere) -> dict:
         c, r = sphere
-        return EMITTER_SKY, c, _unit(self.up, "sky.up"), r, 1.0 if self.hemisphere else 0.0, 1.0
+        return {"kind": EMITTER_SKY, "p": c, "e1": _unit(self.up, "sky.up"), "a": r,
+                "b": 1.0 if self.hemisphere else 0.0}
 
     def to_mitsuba(self, mi, sphere) -> dict:
         """Mitsuba's ``constant`` for the whole sphere; for the hemisphere an
@@ -304,7 +321,79 @@ class SkyLight:
         return {"type": "envmap", "bitmap": mi.Bitmap(img), "to_world": mi.ScalarTransform4f(m.tolist())}
 
 
-LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight)
+@dataclass(eq=False)
+class EnvMapLight:
+    """An environment map: radiance from every direction, an equirectangular image.
+
+    ===========  ==============================================================
+    radiance     (H, W, 3) RGB radiance, W/m^2/sr, row 0 at the zenith (+y)
+                 (kernels/light.h has the directions of its texels)
+    name         where it came from (a file name), for messages
+    ===========  ==============================================================
+    """
+
+    radiance: np.ndarray
+    name: str = "map"
+
+    table = "sky"
+
+    def _omega(self) -> np.ndarray:
+        """(H,) solid angle of one texel of each row."""
+        h, w = self.radiance.shape[:2]
+        c = np.cos(np.pi * np.arange(h + 1) / h)
+        return 2 * np.pi / w * (c[:-1] - c[1:])
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        lrgb = np.asarray(self.radiance, np.float64)
+        return math.pi * r * r * np.einsum("hwc,h->c", lrgb, self._omega())
+
+    def validate(self, where: str):
+        a = np.asarray(self.radiance)
+        if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 1 or a.shape[1] < 1 or a.dtype.kind not in "iuf":
+            raise OclgiError(f"{where}.map: expected an (H, W, 3) image of numbers, got {a.dtype} {a.shape}")
+        if a.shape[0] * a.shape[1] > ENVMAP_MAX_TEXELS:
+            raise OclgiError(f"{where}.map: {a.shape[1]} x {a.shape[0]} texels; at most {ENVMAP_MAX_TEXELS:,}")
+        if not np.isfinite(a).all() or (a < 0).any() or (a > values.F32_MAX).any():
+            raise OclgiError(f"{where}.map: {self.name}: radiance must be finite, >= 0 and within float32")
+
+    def tables(self):
+        """(row CDF (H,), column CDFs (H, W), g (H, W, 3), bound): the
+        device's sampling tables (kernels/light.h) and the largest photon
+        power times the selection probability, per unit pi R^2."""
+        lrgb = np.asarray(self.radiance, np.float64)
+        lum = lrgb @ LUMINANCE
+        weight = lum * self._omega()[:, None]  # texel probability, unnormalised
+        total = float(weight.sum())
+        row = weight.sum(axis=1)
+        rows = np.cumsum(row) / total
+        rows[-1] = 1.0
+        cum = np.cumsum(weight, axis=1)
+        uniform = np.cumsum(np.ones_like(weight), axis=1) / weight.shape[1]  # a dark row: never chosen
+        cols = np.where(row[:, None] > 0, cum / np.where(row > 0, row, 1.0)[:, None], uniform)
+        cols[:, -1] = 1.0
+        ratio = np.divide(lrgb, lum[..., None], out=np.zeros_like(lrgb), where=lum[..., None] > 0)
+        m = float(ratio.max())
+        return rows, cols, ratio / m, total * m
+
+    def record(self, sphere) -> dict:
+        """The record, with its tables (row CDF, column CDFs, g) as one array
+        for the emitter CDF buffer, and the photons' bound."""
+        c, r = sphere
+        h, w = self.radiance.shape[:2]
+        rows, cols, g, bound = self.tables()
+        return {"kind": EMITTER_ENVMAP, "p": c, "e2": (float(w), float(h), 0.0), "a": r,
+                "table": np.concatenate([rows, cols.ravel(), g.ravel()]),
+                "bound": np.full(3, math.pi * r * r * bound)}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``envmap`` of the same image, in its own orientation
+        (which oclgi's follows); Mitsuba filters it bilinearly, oclgi holds
+        each texel constant."""
+        return {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(self.radiance, dtype=np.float32))}
+
+
+LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight, EnvMapLight)
 
 
 def bounding_sphere(scene) -> tuple[np.ndarray, float]:
@@ -329,18 +418,22 @@ def power(light, sphere) -> np.ndarray:
 class EmitterRows:
     """Every emitter of a scene, one row each: area lights (its emissive
     triangles) first, then the other lights (:func:`all_lights`, those
-    with power). ``power`` is exact (RGB watts); ``peak`` the ratio of the
-    kind's largest photon to its mean (module docstring)."""
+    with power). ``power`` is exact (RGB watts); ``bound`` the largest
+    power one photon of the emitter carries, times its selection
+    probability (= power for the kinds whose photons all carry the same:
+    all but the spot and the environment map). ``table``: the environment
+    maps' tables, which ``tri`` of their rows indexes (kernels/light.h)."""
 
     kind: np.ndarray  # (E,) int32
-    tri: np.ndarray  # (E,) int32, -1 but for triangles
+    tri: np.ndarray  # (E,) int32: the triangle's id, an environment map's table offset, else -1
     p: np.ndarray  # (E, 3)
     e1: np.ndarray  # (E, 3)
     e2: np.ndarray  # (E, 3)
     a: np.ndarray  # (E,)
     b: np.ndarray  # (E,)
     power: np.ndarray  # (E, 3) watts
-    peak: np.ndarray  # (E,) >= 1
+    bound: np.ndarray  # (E, 3) watts
+    table: np.ndarray  # (T,) float64
 
 
 def emitter_rows(scene) -> EmitterRows:
@@ -351,26 +444,31 @@ def emitter_rows(scene) -> EmitterRows:
     v = scene.vertices[scene.faces[tri_ids]]
     areas = scene.triangle_areas()[tri_ids]
     n_tri = len(tri_ids)
-    kind, tri = [np.full(n_tri, EMITTER_TRIANGLE, np.int32)], [tri_ids.astype(np.int32)]
-    p, e1, e2 = [v[:, 0]], [v[:, 1] - v[:, 0]], [v[:, 2] - v[:, 0]]
-    a, b, pw, peak = [np.zeros(n_tri)], [np.zeros(n_tri)], [math.pi * areas[:, None] * tri_le[tri_ids]], [np.ones(n_tri)]
+    tri_power = math.pi * areas[:, None] * tri_le[tri_ids]
+    cols = {"kind": [np.full(n_tri, EMITTER_TRIANGLE, np.int32)], "tri": [tri_ids.astype(np.int32)],
+            "p": [v[:, 0]], "e1": [v[:, 1] - v[:, 0]], "e2": [v[:, 2] - v[:, 0]], "a": [np.zeros(n_tri)],
+            "b": [np.zeros(n_tri)], "power": [tri_power], "bound": [tri_power]}
+    tables, n_table = [], 0
     sphere = bounding_sphere(scene)
     for light in all_lights(scene):
         watts = power(light, sphere)
         if not watts.max() > 0:
             continue
-        k, lp, le1, la, lb, lpeak = light.record(sphere)
-        kind.append(np.array([k], np.int32))
-        tri.append(np.array([-1], np.int32))
-        p.append(np.asarray([lp], np.float64))
-        e1.append(np.asarray([le1], np.float64))
-        e2.append(np.zeros((1, 3)))
-        a.append(np.array([la], np.float64))
-        b.append(np.array([lb], np.float64))
-        pw.append(watts[None, :])
-        peak.append(np.array([lpeak], np.float64))
-    cat = np.concatenate
-    return EmitterRows(cat(kind), cat(tri), cat(p), cat(e1), cat(e2), cat(a), cat(b), cat(pw), cat(peak))
+        rec = light.record(sphere)
+        tri = -1
+        if "table" in rec:
+            tri, n_table = n_table, n_table + len(rec["table"])
+            tables.append(rec["table"])
+        bound = rec.get("bound", watts * getattr(light, "peak", 1.0))
+        for key, value in (("kind", np.int32(rec["kind"])), ("tri", np.int32(tri)), ("p", rec["p"]),
+                           ("e1", rec.get("e1", (0.0, 0.0, 0.0))), ("e2", rec.get("e2", (0.0, 0.0, 0.0))),
+                           ("a", rec.get("a", 0.0)), ("b", rec.get("b", 0.0)), ("power", watts), ("bound", bound)):
+            cols[key].append(np.asarray([value]))
+    out = {k: np.concatenate(v) for k, v in cols.items()}
+    out["kind"], out["tri"] = out["kind"].astype(np.int32), out["tri"].astype(np.int32)
+    for k in ("p", "e1", "e2", "a", "b", "power", "bound"):
+        out[k] = out[k].astype(np.float64)
+    return EmitterRows(**out, table=np.concatenate(tables) if tables else np.zeros(0))
 
 
 def validate(scene) -> None:
@@ -385,7 +483,7 @@ def validate(scene) -> None:
         i = counts.get(light.table, 0)
         counts[light.table] = i + 1
         light.validate(light.table if not TABLES[light.table] else f"{light.table}[{i}]")
-    if counts.get("sky", 0) > 1:
+    if counts.get("sky", 0) > 1:  # a sky and a map, both from the sky's disc: one of them
         raise OclgiError(f"{scene.name}: at most one sky, got {counts['sky']}")
 
 
@@ -396,8 +494,9 @@ def has_power(scene) -> bool:
 
 # -- the scene file ------------------------------------------------------------------------------------------------
 
-def read(desc: dict) -> tuple[list, list]:
-    """(point lights, other lights) from a scene description's light tables."""
+def read(desc: dict, base_dir=None) -> tuple[list, list]:
+    """(point lights, other lights) from a scene description's light tables
+    (an environment map's file is relative to ``base_dir``)."""
 
     points, others = [], []
     for name, many in TABLES.items():
@@ -411,7 +510,7 @@ def read(desc: dict) -> tuple[list, list]:
             tables = [(name, desc[name])]
         for where, t in tables:
             values.check_keys(t, _KEYS[name], where)
-            light = _READERS[name](t, where)
+            light = _READERS[name](t, where) if name != "sky" else _read_sky(t, where, base_dir)
             (points if name == "point_light" else others).append(light)
     return points, others
 
@@ -477,8 +576,11 @@ def _read_sun(t: dict, where: str) -> SunLight:
                     irradiance=_photometric(t, where, "irradiance", "lux", irradiance_from_lux, "an illuminance"))
 
 
-def _read_sky(t: dict, where: str) -> SkyLight:
-
+def _read_sky(t: dict, where: str, base_dir=None):
+    if "map" in t:
+        return _read_envmap(t, where, base_dir)
+    if "scale" in t:
+        raise OclgiError(f"{where}.scale goes with map; a radiance has its own size")
     hemisphere = t.get("hemisphere", True)
     if not isinstance(hemisphere, bool):
         raise OclgiError(f"{where}.hemisphere: expected true or false, got {hemisphere!r}")
@@ -487,7 +589,61 @@ def _read_sky(t: dict, where: str) -> SkyLight:
                     hemisphere=hemisphere, up=up)
 
 
-_READERS = {"point_light": _read_point, "spot_light": _read_spot, "sun": _read_sun, "sky": _read_sky}
+def _read_envmap(t: dict, where: str, base_dir) -> EnvMapLight:
+    """``map`` (an image file, through OpenImageIO) times ``scale``."""
+    import os
+    from pathlib import Path
+
+    other = sorted({"radiance", "hemisphere", "up"} & set(t))
+    if other:
+        raise OclgiError(f"{where}: map takes no {', '.join(other)} (the image is the radiance, +y its zenith)")
+    given = t["map"]
+    if isinstance(given, os.PathLike):
+        given = os.fspath(given)
+    if not isinstance(given, str) or not given.strip():
+        raise OclgiError(f"{where}.map: expected an image file name, got {t['map']!r}")
+    path = Path(given)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    scale = values.number(t.get("scale", 1.0), where + ".scale")
+    if not scale > 0:
+        raise OclgiError(f"{where}.scale: expected a number > 0, got {t['scale']!r}")
+    light = EnvMapLight(read_image(path, where + ".map") * scale, name=path.name)
+    light.validate(where)
+    return light
+
+
+def read_image(path, where: str) -> np.ndarray:
+    """An image file as (H, W, 3) float64 (a grey one repeated to RGB; alpha dropped)."""
+    from pathlib import Path
+
+    import OpenImageIO as oiio
+
+    try:
+        found = Path(path).is_file()
+    except OSError as exc:  # a name too long for the file system, a permission
+        raise OclgiError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
+    if not found:
+        raise OclgiError(f"{where}: image file not found: {path}")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OclgiError(f"{where}: cannot read {path}: {oiio.geterror().strip() or 'not an image'}")
+    try:
+        spec = inp.spec()
+        if spec.width * spec.height > ENVMAP_MAX_TEXELS:
+            raise OclgiError(f"{where}: {path.name} has {spec.width} x {spec.height} texels; at most "
+                             f"{ENVMAP_MAX_TEXELS:,}")
+        pixels = inp.read_image(format="float")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise OclgiError(f"{where}: cannot read {path}: {oiio.geterror().strip()}")
+    a = np.asarray(pixels, np.float64).reshape(spec.height, spec.width, spec.nchannels)
+    a = np.repeat(a[..., :1], 3, axis=2) if spec.nchannels < 3 else a[..., :3]
+    return a
+
+
+_READERS = {"point_light": _read_point, "spot_light": _read_spot, "sun": _read_sun}
 
 
 # -- area lights that light nothing -----------------------------------------------------------------------------

@@ -77,13 +77,14 @@ class Scene:
     tri_material: np.ndarray  # (F,) int64 into materials
     materials: list[Material]
     point_lights: list[PointLight] = field(default_factory=list)
-    lights: list = field(default_factory=list)  # spot, sun and sky lights (oclgi.scene.lights)
     camera: Camera | None = None
     settings: RunParams = field(default_factory=RunParams)  # the run's defaults (radius None: 1% of the diagonal)
     name: str = "scene"
     tri_object: np.ndarray | None = None  # (F,) int64 into objects; None: one static object
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
     load_seconds: float = 0.0  # reading the scene and its meshes (load_file, load_dict)
+    # spot, sun and sky lights (oclgi.scene.lights); last, so that positional fields keep their places
+    lights: list = field(default_factory=list)
 
     def __post_init__(self):
         if self.tri_object is None:

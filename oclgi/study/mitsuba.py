@@ -27,7 +27,9 @@ carried over:
   linearly in the angle where oclgi follows pbrt's smoothstep in its
   cosine); a sun Mitsuba's ``directional`` with the same ``irradiance``; a
   sky over every direction ``constant``, one over the upper hemisphere an
-  ``envmap`` black below the horizon.
+  ``envmap`` black below the horizon; an environment map Mitsuba's
+  ``envmap`` of the same image (oclgi uses Mitsuba's orientation; Mitsuba
+  filters the texels bilinearly, oclgi holds each constant).
 * Camera: ``fov`` is the *vertical* field of view (``Camera.frame`` scales
   the up vector by ``tan(fov / 2)`` and the right vector by the aspect
   ratio), so Mitsuba's ``fov_axis = "y"``; rows run top to bottom and x to
