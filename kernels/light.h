@@ -158,9 +158,9 @@ inline LightSample light_sample_le(__global const Emitter *em, float4 r0, float4
  * solid-angle density for the point and spot kinds; for the kinds that
  * sample a position too, position density (per m^2) times direction
  * density (per sr). The sun's direction is a delta: its value is the
- * position density alone (the delta is implied, as in pbrt's
- * DistantLight::PDF_Le, which reports pdfDir = 0 for a separate
- * delta flag). Returns 0 for directions the light does not emit. */
+ * position density alone, the delta implied (pbrt-v3's
+ * DistantLight::Pdf_Le gives the same pdfPos, and pdfDir = 0 for the
+ * delta). Returns 0 for directions the light does not emit. */
 inline float light_pdf_dir(__global const Emitter *em, float3 d, __global const float *table)
 {
     int kind = em->kind;

@@ -91,9 +91,18 @@ def _rgb(v) -> np.ndarray:
     return np.asarray(v, dtype=np.float64)
 
 
+def _floats(v):
+    """v as a float64 array, or None when it is not numbers (a light made in Python)."""
+    try:
+        a = np.asarray(v)
+        return a.astype(np.float64) if a.dtype.kind in "iuf" else None
+    except (TypeError, ValueError):
+        return None
+
+
 def _unit(v, where: str) -> np.ndarray:
-    d = np.asarray(v, dtype=np.float64)
-    n = float(np.linalg.norm(d)) if d.shape == (3,) and np.isfinite(d).all() else 0.0
+    d = _floats(v)
+    n = float(np.linalg.norm(d)) if d is not None and d.shape == (3,) and np.isfinite(d).all() else 0.0
     if not n > 0:
         raise OclgiError(f"{where}: expected a non-zero direction of 3 finite numbers, got {v!r}")
     return d / n
@@ -102,16 +111,18 @@ def _unit(v, where: str) -> np.ndarray:
 def _check_radiant(v, where: str):
     from .. import params
 
-    a = np.asarray(v, dtype=object).ravel()
-    if a.shape != (3,):
+    try:
+        a = np.asarray(v, dtype=object).ravel()
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (3,):
         raise OclgiError(f"{where}: expected 3 numbers, got {v!r}")
     for x in a:
         params.float32_real(x, where, 0.0)
 
 
 def _check_point(v, where: str):
-
-    a = np.asarray(v, dtype=np.float64) if np.asarray(v).dtype.kind in "iuf" else None
+    a = _floats(v)
     if a is None or a.shape != (3,) or not np.isfinite(a).all() or np.abs(a).max() > MAX_COORDINATE:
         raise OclgiError(f"{where}: expected 3 finite numbers within {MAX_COORDINATE:.0e}, got {v!r}")
 
