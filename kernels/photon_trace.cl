@@ -16,10 +16,10 @@
  * path is the same whatever the batch, the device or the kernel tracing it.
  * Emission: emitter chosen from a CDF proportional to power, then sampled
  * by its kind in light.h (area, point, spot, sun, sky, environment map;
- * emitter_cdf holds the maps' tables after the n_emitters CDF values). Each photon carries
- * at most emitter.power, in units of the largest power any emitter gives a
- * photon (oclgi_types.h): the same for a path whatever the run's photon
- * count, which only its resolve divides by.
+ * emitter_cdf holds the maps' tables after its n_emitters CDF values).
+ * Each photon carries at most emitter.power, in units of the largest power
+ * any emitter gives a photon (oclgi_types.h): the same for a path whatever
+ * the run's photon count, which only its resolve divides by.
  * Scattering: Lambertian (cosine about the normal on the incoming side),
  * Russian roulette with survival = max albedo, so power never grows.
  */

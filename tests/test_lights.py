@@ -174,7 +174,7 @@ def test_uniform_sky_plane(hemisphere):
     e = _both(eng, _points(pts), 0.2)
     assert np.abs(e / math.pi - 1).max() < 0.04
     assert abs(np.mean(e) / math.pi - 1) < 0.015
-    c, r = lights.bounding_sphere(eng.scene)
+    _, r = lights.bounding_sphere(eng.scene)
     omega = 2 * math.pi if hemisphere else 4 * math.pi
     np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * omega * np.array([1, 0.5, 0.25]),
                                rtol=1e-12)
@@ -365,7 +365,7 @@ def test_environment_map_plane(envmap_file):
     down_e = eng.irradiance(down, method="detp", radius=0.2).irradiance.astype(np.float64)
     assert np.abs(up_e / (2 * math.pi * UPPER) - 1).max() < 0.04
     assert np.abs(down_e / (2 * math.pi * LOWER) - 1).max() < 0.04
-    c, r = lights.bounding_sphere(eng.scene)
+    _, r = lights.bounding_sphere(eng.scene)
     np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * 2 * 2 * math.pi * (UPPER + LOWER),
                                rtol=1e-6)
     s, _ = eng.trace(photons=20_000)

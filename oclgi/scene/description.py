@@ -31,10 +31,6 @@
     up = [0, 1, 0]
     # or: map = "sky.exr"           # equirectangular radiance (+y at the top row), scale = 1.0
 
-(oclgi/scene/lights.py has the lights' parameters, defaults and power; a
-glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
-transform: oclgi/scene/gltf_lights.py.)
-
     [camera]
     position = [0, 1, 3.94]
     look_at = [0, 1, 0]
@@ -53,6 +49,11 @@ transform: oclgi/scene/gltf_lights.py.)
     radius = 0.04                   # disc radius; default 1% of the scene diagonal
     extension = 0.0                 # DETP extension e past the hit point
     count_emitted = true            # segments leaving the lights count (direct light)
+
+oclgi/scene/lights.py has the lights' parameters, defaults and power; a
+glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
+transform (oclgi/scene/gltf_lights.py). The readers of single values
+(vectors, numbers, radiant values, keys) are oclgi/scene/values.py.
 
 In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
 ``path``. Unknown keys are errors, so a typo never passes silently.
