@@ -626,3 +626,19 @@ def test_gltf_bad_lights(tmp_path, light, match):
     path = _gltf(tmp_path, [light], [{"extensions": {"KHR_lights_punctual": {"light": 0}}}])
     with pytest.raises(OclgiError, match=match):
         oclgi.load_dict({"mesh": [{"path": str(path)}], "photons": {"count": 1000}})
+
+
+def test_gltf_binary_lights(tmp_path):
+    """A .glb's JSON chunk is read for its lights as a .gltf's text is."""
+    import struct
+
+    path = _gltf(tmp_path, [{"type": "directional", "intensity": 683.0, "color": [1, 1, 1]}],
+                 [{"rotation": DOWN, "extensions": {"KHR_lights_punctual": {"light": 0}}}])
+    text = path.read_bytes()
+    text += b" " * (-len(text) % 4)
+    glb = tmp_path / "lit.glb"
+    glb.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text)) + struct.pack("<I4s", len(text), b"JSON")
+                    + text)
+    sc = oclgi.load_dict({"mesh": [{"path": str(glb)}], "photons": {"count": 1000}})
+    (sun,) = sc.lights
+    np.testing.assert_allclose(sun.direction, [0, -1, 0], atol=1e-12)
