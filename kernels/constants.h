@@ -12,7 +12,9 @@
     !defined(OCLGI_POINT_BVH_STACK) || !defined(OCLGI_FIXED_BITS) || !defined(OCLGI_FRONT_COS_EPS) ||  \
     !defined(OCLGI_SC_MAX_LEVELS) || !defined(OCLGI_SC_MU) || !defined(OCLGI_RADIX_BITS) ||            \
     !defined(OCLGI_GRID_KEY_BITS) || !defined(OCLGI_GRID_EMPTY) || !defined(OCLGI_GRID_HASH_MUL) ||    \
-    !defined(OCLGI_CELL_OUTSIDE_BIT) || !defined(OCLGI_EMITTER_TRIANGLE) || !defined(OCLGI_EMITTER_POINT)
+    !defined(OCLGI_CELL_OUTSIDE_BIT) || !defined(OCLGI_EMITTER_TRIANGLE) || !defined(OCLGI_EMITTER_POINT) ||   \
+    !defined(OCLGI_EMITTER_SPOT) || !defined(OCLGI_EMITTER_SUN) || !defined(OCLGI_EMITTER_SKY) ||  \
+    !defined(OCLGI_EMITTER_ENVMAP)
 #error "oclgi's shared constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 

@@ -25,7 +25,7 @@ __kernel void layout_probe(__global int *out)
     OFF(Material, texture); OFF(Material, pad);
     SIZE(Texture); OFF(Texture, offset); OFF(Texture, width); OFF(Texture, height); OFF(Texture, pad);
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
-    OFF(Emitter, e2); OFF(Emitter, pad1); OFF(Emitter, power); OFF(Emitter, pad2);
+    OFF(Emitter, e2); OFF(Emitter, a); OFF(Emitter, power); OFF(Emitter, b);
     SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);
     OFF(DiscBlock, ny); OFF(DiscBlock, nz); OFF(DiscBlock, id);
     SIZE(PieceBlock); OFF(PieceBlock, ox); OFF(PieceBlock, oy); OFF(PieceBlock, oz); OFF(PieceBlock, wx);

@@ -108,15 +108,29 @@ typedef struct {
     int pad;
 } Texture;
 
+/* One light (kernels/light.h samples it; oclgi/scene/lights.py writes
+ * it). Fields by kind:
+ *             p            e1            e2       a           b
+ *   TRIANGLE  v0           v1 - v0       v2 - v0  0           0
+ *   POINT     position     0             0        0           0
+ *   SPOT      position     unit axis     0        cos(cone)   cos(falloff start)
+ *   SUN       sphere c     unit travel   0        sphere R    0
+ *   SKY       sphere c     unit up       0        sphere R    1: upper hemisphere, 0: sphere
+ *   ENVMAP    sphere c     0             (W,H,0)  sphere R    0
+ * (c, R: the scene's bounding sphere, which the sun's and sky's discs lie
+ * outside.) tri: the triangle's id (scene order); an ENVMAP's tables'
+ * offset in the emitter CDF buffer (light.h); -1 for the other kinds.
+ * power: the largest power the kind gives a photon / its selection
+ * probability, in units of phi_max, so never above 1. */
 typedef struct {
     float p[3];
-    int kind;        /* OCLGI_EMITTER_TRIANGLE or OCLGI_EMITTER_POINT */
+    int kind;       /* OCLGI_EMITTER_* (constants.h) */
     float e1[3];
     int tri;
     float e2[3];
-    int pad1;
-    float power[3]; /* emitter power / selection probability */
-    int pad2;
+    float a;
+    float power[3];
+    float b;
 } Emitter;
 
 /* The device's blocks: the accelerated DETP variants' leaves, tested

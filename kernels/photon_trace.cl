@@ -14,17 +14,18 @@
  *
  * Randomness comes from rng.h keyed by (seed, path, bounce, block), so a
  * path is the same whatever the batch, the device or the kernel tracing it.
- * Emission: emitter chosen from a CDF proportional to power; area lights
- * emit from a uniform point of the triangle with a cosine-distributed
- * direction about its normal (one-sided); point lights emit uniformly over
- * the sphere. Each photon carries emitter.power, in units of the largest
- * power any emitter gives a photon (oclgi_types.h): the same for a path
- * whatever the run's photon count, which only its resolve divides by.
+ * Emission: emitter chosen from a CDF proportional to power, then sampled
+ * by its kind in light.h (area, point, spot, sun, sky, environment map;
+ * emitter_cdf holds the maps' tables after its n_emitters CDF values).
+ * Each photon carries at most emitter.power, in units of the largest power
+ * any emitter gives a photon (oclgi_types.h): the same for a path whatever
+ * the run's photon count, which only its resolve divides by.
  * Scattering: by the surface's material (bsdf.h), with Russian roulette on
  * the sample's weight, so power never grows.
  */
 #include "bsdf.h"
 #include "bvh.h"
+#include "light.h"
 #include "rng.h"
 #include "segment.h"
 #include "texture.h"
@@ -41,34 +42,18 @@ typedef struct {
     float3 o, d, power; /* the next segment's origin, direction and power */
 } PathState;
 
-inline int emitter_pick(__global const float *cdf, int n, float u)
-{
-    int lo = 0, hi = n - 1;
-    while (lo < hi) {
-        int mid = (lo + hi) / 2;
-        if (u < cdf[mid]) hi = mid; else lo = mid + 1;
-    }
-    return lo;
-}
-
-/* Event 0: the photon leaves a light. */
+/* Event 0: the photon leaves a light (light.h, with this event's blocks 0
+ * and 1: r0.x chooses the emitter, the kind uses the rest). */
 inline PathState path_emit(TRACE_ARGS, uint path)
 {
     float4 r0 = rng_uniform4(seed_lo, seed_hi, path, 0, 0);
     float4 r1 = rng_uniform4(seed_lo, seed_hi, path, 0, 1);
-    __global const Emitter *em = &emitters[emitter_pick(emitter_cdf, n_emitters, r0.x)];
+    __global const Emitter *em = &emitters[light_pick(emitter_cdf, n_emitters, r0.x)];
+    LightSample l = light_sample_le(em, r0, r1, eps, emitter_cdf);
     PathState s;
-    if (em->kind == OCLGI_EMITTER_TRIANGLE) {
-        float3 e1 = vload3(0, em->e1), e2 = vload3(0, em->e2);
-        float3 n = normalize(cross(e1, e2));
-        float su = sqrt(r0.y);
-        s.o = vload3(0, em->p) + su * (1.0f - r0.z) * e1 + su * r0.z * e2 + eps * n;
-        s.d = sample_cosine(n, r0.w, r1.x);
-    } else {
-        s.o = vload3(0, em->p);
-        s.d = sample_sphere(r0.y, r0.z);
-    }
-    s.power = vload3(0, em->power);
+    s.o = l.o;
+    s.d = l.d;
+    s.power = l.power;
     return s;
 }
 

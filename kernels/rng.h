@@ -8,7 +8,9 @@
  *
  * Dimensions, by bounce:
  *   bounce 0 (emission): block 0 = (emitter choice, position u, position v,
- *                        direction u); block 1 = (direction v, -, -, -)
+ *                        direction u); block 1 = (direction v, -, -, -);
+ *                        an environment map also takes block 1's y and z
+ *                        (its texel's jitter, light.h)
  *   bounce b >= 1 (scattering at the end of segment b-1): block 0 =
  *                        (direction u, direction v, Russian roulette, -)
  */

@@ -25,6 +25,7 @@ _LAZY = {
     "load_dict": ".scene.description", "load_file": ".scene.description",
     "Camera": ".scene.scene", "Material": ".scene.scene", "OclgiWarning": ".scene.scene",
     "PointLight": ".scene.scene", "Scene": ".scene.scene",
+    "SpotLight": ".scene.lights", "SunLight": ".scene.lights", "SkyLight": ".scene.lights",
     "PhotonMapSession": ".incremental.photon_map_session",
     "Session": ".incremental.session", "UpdateStats": ".incremental.session",
 }
@@ -70,6 +71,6 @@ def save_render(result: "Render", path) -> tuple[_Path, _Path]:
 
 __all__ = [
     "Engine", "Estimate", "Render", "Stats", "OclgiError", "OclgiWarning", "QueryPoints",
-    "query_points", "read_points", "load_dict", "load_file", "Camera", "Material", "PointLight",
-    "Scene", "Session", "PhotonMapSession", "UpdateStats", "scene_path", "save_render", "__version__",
+    "query_points", "read_points", "load_dict", "load_file", "Camera", "Material", "PointLight", "SpotLight",
+    "SunLight", "SkyLight", "Scene", "Session", "PhotonMapSession", "UpdateStats", "scene_path", "save_render", "__version__",
 ]

@@ -33,6 +33,7 @@ from .scene.compiled import BVH_QUALITY, CompiledScene
 from .params import RunParams, flag, radius as read_radius
 from .scene.description import load_dict, validate_camera
 from .scene.mesh import is_trimesh
+from .scene import lights
 from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
@@ -133,6 +134,7 @@ def _check_float32(scene: Scene) -> None:
         for x in np.ravel(np.asarray(light.intensity, dtype=object)):
             params.float32_real(x, f"point light {i}: intensity", 0.0)
             params.float32_real(4 * math.pi * float(x), f"point light {i}: power (4 pi intensity)", 0.0)
+    lights.validate(scene)  # the spot, sun and sky lights' parameters, float32 included
 
 
 @dataclass

@@ -11,3 +11,7 @@ class OclgiError(Exception):
     """An error caused by the input or the environment, with a clear message."""
 
     exit_code = 2
+
+
+class OclgiWarning(UserWarning):
+    """Something in the input was fixed up (e.g. degenerate triangles dropped)."""

@@ -37,6 +37,12 @@ def intensity_from_candela(candela: float, colour=(1.0, 1.0, 1.0)) -> tuple:
     return _scaled(colour, candela / LUMENS_PER_WATT, "candela")
 
 
+def irradiance_from_lux(lux: float, colour=(1.0, 1.0, 1.0)) -> tuple:
+    """A sun's RGB irradiance (W/m^2 on a plane perpendicular to it) for
+    ``lux`` of light of ``colour`` (its luminance scaled to match)."""
+    return _scaled(colour, lux / LUMENS_PER_WATT, "lux")
+
+
 def emission_from_lumens(lumens: float, area: float, colour=(1.0, 1.0, 1.0)) -> tuple:
     """The RGB radiance (W/m^2/sr) of a one-sided Lambertian emitter of
     ``area`` that sends out ``lumens`` of light of ``colour``: the flux of

@@ -69,9 +69,14 @@ GRID_HASH_MUL = 0x9E3779B97F4A7C15
 # have at most CELL_OUTSIDE_BIT cells.
 CELL_OUTSIDE_BIT = 127
 
-# Emitter.kind (oclgi/cl/layout.py Emitter).
+# Emitter.kind (oclgi/cl/layout.py Emitter; kernels/light.h samples each,
+# oclgi/scene/lights.py writes their records).
 EMITTER_TRIANGLE = 0
 EMITTER_POINT = 1
+EMITTER_SPOT = 2
+EMITTER_SUN = 3
+EMITTER_SKY = 4
+EMITTER_ENVMAP = 5
 
 # Material.kind (oclgi/cl/layout.py Material; kernels/bsdf.h scatters by it,
 # oclgi/scene/materials.py names the kinds) and Material.flags.
@@ -117,6 +122,10 @@ DEFINES = {
     "material_twosided": MATERIAL_TWOSIDED,
     "material_delta": MATERIAL_DELTA,
     "camera_max_depth": CAMERA_MAX_DEPTH,
+    "emitter_spot": EMITTER_SPOT,
+    "emitter_sun": EMITTER_SUN,
+    "emitter_sky": EMITTER_SKY,
+    "emitter_envmap": EMITTER_ENVMAP,
 }
 
 

@@ -10,7 +10,8 @@ blocks are whole float8 / int8 (or float4) vectors, which have no padding.
 
 import numpy as np
 
-from .constants import EMITTER_POINT, EMITTER_TRIANGLE, LANES  # noqa: F401  (Emitter.kind's values, kept here)
+from .constants import (  # noqa: F401  (Emitter.kind's values, kept here)
+    EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN, EMITTER_TRIANGLE, LANES)
 
 f4, i4 = np.float32, np.int32
 
@@ -68,15 +69,18 @@ Material = np.dtype(
 # row-major, the top row first.
 Texture = np.dtype([("offset", i4), ("width", i4), ("height", i4), ("pad", i4)])
 
-# Emitter, 64 bytes. kind 0: triangle (p = v0, e1, e2 its edges); kind 1:
-# point light at p. power = emitter power / its selection probability, so a
-# photon carries power / n_paths.
+# Emitter, 64 bytes (kernels/oclgi_types.h has the fields of each kind,
+# kernels/light.h samples them, oclgi/scene/lights.py writes them): p, e1,
+# e2 the kind's points and vectors, a and b its two numbers (cone cosines,
+# the bounding sphere's radius, the sky's hemisphere flag), tri the area
+# light's triangle (-1 for the others). power = the largest power the kind
+# gives a photon / its selection probability, in units of phi_max (<= 1).
 Emitter = np.dtype(
     [
         ("p", f4, 3), ("kind", i4),
         ("e1", f4, 3), ("tri", i4),
-        ("e2", f4, 3), ("pad1", i4),
-        ("power", f4, 3), ("pad2", i4),
+        ("e2", f4, 3), ("a", f4),
+        ("power", f4, 3), ("b", f4),
     ]
 )
 

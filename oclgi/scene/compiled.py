@@ -16,13 +16,14 @@ import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_STACK_SIZE, FIXED_ONE
+from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, FIXED_ONE
 from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from . import materials, textures
-from .scene import Scene
+from .lights import emitter_rows, escaping_area_lights
+from .scene import OclgiWarning, Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
 
@@ -54,6 +55,21 @@ def as_transform(matrix) -> np.ndarray:
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         raise OclgiError("the transform is singular (it flattens the object)")
     return m
+
+
+def _warn_escaping(scene: Scene) -> None:
+    """One line when area lights emit only away from every surface (their
+    light leaves the scene: flipped faces, most likely). A cheap exact test
+    on the geometry (oclgi/scene/lights.py escaping_area_lights), once per
+    compiled scene, rather than a look at the first batch's segments."""
+    import warnings
+
+    bad = escaping_area_lights(scene)
+    if len(bad):
+        names = sorted({scene.materials[m].name for m in scene.tri_material[bad]})
+        warnings.warn(f"{scene.name}: {len(bad)} emitting triangle(s) (material {', '.join(map(repr, names))}) "
+                      "emit only away from every surface: their light leaves the scene (flip the faces?)",
+                      OclgiWarning, stacklevel=4)
 
 
 class CompiledScene:
@@ -91,18 +107,27 @@ class CompiledScene:
         uvmap = (textures.uv_maps(v, scene.tri_uv) if scene.tri_uv is not None and tex_list
                  else np.zeros((len(v), 8), np.float32))
 
-        kind, tri, p, e1, e2, power = scene.emitters()
+        rows = emitter_rows(scene)
+        power = rows.power
         weight = power.mean(axis=1)
         if not (weight.sum() > 0):
             raise OclgiError(f"{scene.name}: the emitters have zero power")
         prob = weight / weight.sum()
         cdf = np.cumsum(prob)
         cdf /= cdf[-1]
-        em = np.zeros(len(kind), dtype=Emitter)
-        em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = kind, tri, p, e1, e2
+        em = np.zeros(len(rows.kind), dtype=Emitter)
+        em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = rows.kind, rows.tri, rows.p, rows.e1, rows.e2
+        em["a"], em["b"] = rows.a, rows.b
+        # one buffer: the CDF, then the environment maps' tables (kernels/light.h;
+        # their records' tri is their offset in it)
+        em["tri"][rows.kind == EMITTER_ENVMAP] += len(em)
+        cdf_table = np.concatenate([cdf, rows.table]).astype(np.float32)
         keep = prob > 0
+        # the largest power a photon path of each emitter carries (times
+        # n_paths): its bound (oclgi/scene/lights.py; the power itself but
+        # for spot lights and environment maps) over its probability
         photon_power = np.zeros_like(power)
-        photon_power[keep] = power[keep] / prob[keep, None]  # watts a photon path carries, times n_paths
+        photon_power[keep] = rows.bound[keep] / prob[keep, None]
         self.n_emitters = len(em)
         self.total_power = power.sum(axis=0)  # RGB watts
         # phi_max, the largest power any photon path carries (times n_paths):
@@ -113,6 +138,7 @@ class CompiledScene:
             raise OclgiError(f"{scene.name}: the emitters' power ({weight.sum():.3g} W) is out of float32's range "
                              "on the device; scale the emission or intensity")
         em["power"] = photon_power / self.photon_power_max
+        _warn_escaping(scene)
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)
@@ -126,11 +152,11 @@ class CompiledScene:
         self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
         self.texels_host, self.uvmap_host = texels, uvmap
         self.emitters = _buffer(ctx, em)
-        self.emitter_cdf = _buffer(ctx, cdf.astype(np.float32))
+        self.emitter_cdf = _buffer(ctx, cdf_table)
         self.tri_areas = _buffer(ctx, self.areas)
         self.faces = _buffer(ctx, scene.faces.astype(np.int32))
         self.materials_host = mats
-        self.emitters_host, self.emitter_cdf_host = em, cdf.astype(np.float32)
+        self.emitters_host, self.emitter_cdf_host = em, cdf_table
         # scene scale for ray offsets and the DETP tolerance
         self.eps = 1e-5 * scene.diagonal
 

@@ -18,7 +18,24 @@
 
     [[point_light]]
     position = [0, 1.9, 0]
-    intensity = [1, 1, 1]           # W/sr
+    intensity = [1, 1, 1]           # W/sr (or candela = 100, colour = [1, 1, 1])
+
+    [[spot_light]]
+    position = [0, 1.9, 0]
+    direction = [0, -1, 0]          # the axis it points along
+    intensity = [5, 5, 5]           # W/sr on the axis (or candela, colour)
+    cone_angle = 30                 # half-angle, degrees
+    cone_delta = 5                  # falloff band inside the cone, degrees (smoothstep)
+
+    [[sun]]
+    direction = [0.3, -1, 0.2]      # the direction the light travels
+    irradiance = [3, 3, 3]          # W/m^2 perpendicular to it (or lux, colour)
+
+    [sky]
+    radiance = [0.5, 0.6, 0.8]      # W/m^2/sr, uniform
+    hemisphere = true               # from above the horizon only (false: every direction)
+    up = [0, 1, 0]
+    # or: map = "sky.exr"           # equirectangular radiance (+y at the top row), scale = 1.0
 
     [camera]
     position = [0, 1, 3.94]
@@ -39,6 +56,11 @@
     extension = 0.0                 # DETP extension e past the hit point
     count_emitted = true            # segments leaving the lights count (direct light)
 
+oclgi/scene/lights.py has the lights' parameters, defaults and power; a
+glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
+transform (oclgi/scene/gltf_lights.py). The readers of single values
+(vectors, numbers, radiant values, keys) are oclgi/scene/values.py.
+
 In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
 ``path``. Unknown keys are errors, so a typo never passes silently.
 """
@@ -58,10 +80,13 @@ from ..errors import OclgiError
 from .. import params
 from .mesh import from_trimesh, is_file, load_mesh
 from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
-from .scene import MAX_COORDINATE, Camera, Material, PointLight, Scene, SceneObject
+from . import lights as lights_mod
+from .values import check_keys as _check_keys, number as _number, radiant as _radiant, table_list as _table_list
+from .values import vec3 as _vec3
+from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
-_TOP = {"mesh", "point_light", "camera", "photons", "estimator", "name"}
+_TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name"}
 _MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "material",
          "lumens", "materials",
          "transform", "movable", "name"}
@@ -72,11 +97,6 @@ _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("pho
              ("estimator", "extension"): "extension", ("estimator", "count_emitted"): "count_emitted"}
 _PHOTONS = {key for table, key in _SETTINGS if table == "photons"}
 _ESTIMATOR = {key for table, key in _SETTINGS if table == "estimator"}
-# The device holds emission and intensity in float32: a positive value
-# outside its normal range would round to 0 or inf, and so would the
-# photons' power (a division by zero, or NaN everywhere).
-_F32_TINY = float(np.finfo(np.float32).tiny)  # 1.2e-38
-_F32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
 
 
 def load_file(path) -> Scene:
@@ -98,73 +118,6 @@ def load_file(path) -> Scene:
     scene = load_dict(desc, base_dir=path.parent)
     scene.load_seconds = time.perf_counter() - t0
     return scene
-
-
-def _check_keys(d, allowed, where):
-    if not isinstance(d, dict):
-        raise OclgiError(f"{where}: expected a table, got {type(d).__name__}")
-    not_names = [k for k in d if not isinstance(k, str)]
-    if not_names:  # a dict made in Python may have any keys; TOML's are names
-        raise OclgiError(f"{where}: keys must be names (strings), got {_show_key(not_names[0])}")
-    unknown = set(d) - allowed
-    if unknown:
-        raise OclgiError(f"{where}: unknown key(s) {sorted(unknown)} (allowed: {sorted(allowed)})")
-
-
-def _show_key(key) -> str:
-    text = repr(key)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _show(x: float) -> str:
-    return f"{x:.2g}".replace("e+", "e")
-
-
-def _vec3(value, where, limit=_F32_MAX):
-    """3 finite numbers, none beyond ``limit`` in size (by default float32's
-    range: the device would see infinity)."""
-    if isinstance(value, (str, bytes, dict)) or value is None:
-        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}")
-    try:
-        if any(isinstance(x, bool) for x in value):
-            raise TypeError
-        v = tuple(float(x) for x in value)
-    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond float's range
-        raise OclgiError(f"{where}: expected 3 numbers, got {value!r}") from None
-    if len(v) != 3 or not all(math.isfinite(x) for x in v):
-        raise OclgiError(f"{where}: expected 3 finite numbers, got {value!r}")
-    if any(abs(x) > limit for x in v):
-        why = ("float32 on the device" if limit == _F32_MAX
-               else "as for vertex coordinates: the device squares them in float32")
-        raise OclgiError(f"{where}: expected 3 numbers, each from -{_show(limit)} to {_show(limit)} ({why}), "
-                         f"got {value!r}")
-    return v
-
-
-def _radiant(value, where):
-    """An emission or intensity: 3 numbers, each 0 or in float32's normal
-    range (negative ones are the scene's to refuse, with the material's name)."""
-    v = _vec3(value, where, math.inf)
-    if any(0 < x < _F32_TINY or x > _F32_MAX for x in v):
-        raise OclgiError(f"{where}: expected 3 numbers, each 0 or from 1.2e-38 to 3.4e38 "
-                         f"(float32 on the device), got {value!r}")
-    return v
-
-
-def _number(value, where, kind=float):
-    """A finite number within float32's range (the device's), as ``kind``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise OclgiError(f"{where}: expected a number, got {value!r}")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise OclgiError(f"{where}: expected a finite number, got {value!r}")
-    if abs(value) > _F32_MAX:  # an int is compared exactly: no float conversion to overflow
-        raise OclgiError(f"{where}: expected a number from -3.4e38 to 3.4e38 (float32 on the device), "
-                         f"got {value!r}")
-    if kind is int:
-        if float(value) != int(value):
-            raise OclgiError(f"{where}: expected an integer, got {value!r}")
-        return int(value)
-    return float(value)
 
 
 class _Readers:
@@ -226,7 +179,7 @@ def _transform(t, where):
     return m, shift
 
 
-def _mesh(desc, i, base_dir, materials, mat_index):
+def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
     read = _Readers(base_dir)
@@ -246,6 +199,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     overrides = desc.get("materials", {})
     if not isinstance(overrides, dict):
         raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
+    file_lights = []  # a glTF's punctual lights (the other formats have none)
     if "path" in desc:
         given = desc["path"]
         if isinstance(given, os.PathLike):  # pathlib.Path from Python
@@ -258,6 +212,7 @@ def _mesh(desc, i, base_dir, materials, mat_index):
         loaded = load_mesh(path)
         vertices, faces, fmat, names, file_mats = (
             loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
+        file_lights = loaded.lights  # a glTF's punctual lights
         label = path.name
     elif "trimesh" in desc:
         loaded = from_trimesh(desc["trimesh"], where + ".trimesh")
@@ -302,9 +257,17 @@ def _mesh(desc, i, base_dir, materials, mat_index):
     if bad.any():
         raise OclgiError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
                          f"(the first is vertex {int(np.argmax(bad)) + 1})")
+    m, shift = np.eye(3), np.zeros(3)
     if "transform" in desc:
         m, shift = _transform(desc["transform"], where + ".transform")
         vertices = vertices @ m.T + shift
+    if file_lights and lights is not None:
+        if _movable(desc, i):
+            raise OclgiError(f"mesh[{i}]: {label} has lights (KHR_lights_punctual) and the mesh is movable; "
+                             "moving lights are not supported yet")
+        from .gltf_lights import transformed
+
+        lights.extend(transformed(light, m, shift) for light in file_lights)
     if "lumens" in desc:  # every face of the mesh emits, its total luminous flux given
         from ..photometry import emission_from_lumens
 
@@ -320,24 +283,6 @@ def _mesh(desc, i, base_dir, materials, mat_index):
             materials[k].emission = radiance
     face_uv = getattr(loaded, "face_uv", None)
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv
-
-
-def _point_intensity(pl: dict, where: str):
-    """``intensity`` (W/sr per channel), or ``candela`` with an optional
-    ``colour`` (oclgi/photometry.py's convention)."""
-    if "candela" in pl:
-        if "intensity" in pl:
-            raise OclgiError(f"{where}: give intensity (W/sr) or candela, not both")
-        from ..photometry import intensity_from_candela
-
-        cd = _number(pl["candela"], where + ".candela")
-        if not cd > 0:
-            raise OclgiError(f"{where}.candela: expected a luminous intensity > 0, got {pl['candela']!r}")
-        colour = _vec3(pl.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
-        return _radiant(intensity_from_candela(cd, colour), where + ".candela")
-    if "colour" in pl:
-        raise OclgiError(f"{where}.colour goes with candela; an intensity has its own colour")
-    return _radiant(pl.get("intensity"), where + ".intensity")
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -416,9 +361,10 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     movable = [_movable(m, i) for i, m in enumerate(meshes)]
     order = [i for i in range(len(meshes)) if not movable[i]] + [i for i in range(len(meshes)) if movable[i]]
     objects: list[SceneObject] = []
+    file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm, uv = _mesh(m, i, base_dir, materials, None)
+        v, f, fm, uv = _mesh(m, i, base_dir, materials, None, file_lights)
         uvs.append(uv if uv is not None else np.full((len(f), 3, 2), np.nan))
         any_uv = any_uv or uv is not None
         if movable[i]:
@@ -434,11 +380,9 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         fobjs.append(np.full(len(f), len(objects) - 1, np.int64))
         offset += len(v)
 
-    lights = []
-    for i, pl in enumerate(_table_list(desc.get("point_light", []), "point_light")):
-        _check_keys(pl, {"position", "intensity", "candela", "colour"}, f"point_light[{i}]")
-        lights.append(PointLight(_vec3(pl.get("position"), f"point_light[{i}].position", MAX_COORDINATE),
-                                 _point_intensity(pl, f"point_light[{i}]")))
+    point_lights, lights = lights_mod.read(desc, base_dir)
+    point_lights += [x for x in file_lights if isinstance(x, lights_mod.PointLight)]
+    lights += [x for x in file_lights if not isinstance(x, lights_mod.PointLight)]
 
     camera = None
     if "camera" in desc:
@@ -471,7 +415,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         tri_object=np.concatenate(fobjs),
         tri_uv=np.concatenate(uvs) if any_uv else None,
         objects=objects,
-        point_lights=lights,
+        point_lights=point_lights,
+        lights=lights,
         camera=camera,
         settings=settings,
         name=str(desc.get("name", "scene")),
@@ -495,15 +440,6 @@ def _object_name(desc, i) -> str:
     if "path" in desc and isinstance(desc["path"], str):
         return Path(desc["path"]).stem
     return f"mesh[{i}]"
-
-
-def _table_list(value, name):
-    """``[[name]]`` (a list of tables) or a single ``[name]`` table, as a list."""
-    if isinstance(value, dict):
-        return [value]
-    if not isinstance(value, list):
-        raise OclgiError(f"{name}: expected [[{name}]] tables, got {value!r}")
-    return value
 
 
 def validate_camera(c: Camera) -> Camera:

@@ -51,7 +51,7 @@ import numpy as np
 
 from ..cl import constants
 from ..cl.layout import Material as MaterialRecord
-from ..errors import OclgiError
+from ..errors import OclgiError, OclgiWarning
 
 KINDS = {
     "diffuse": constants.BSDF_DIFFUSE,
@@ -250,8 +250,6 @@ def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: boo
     when ``quiet``: the scene file replaces the material). ``read_texture(
     value)``: the albedo texture a file names (``map_Kd``) or holds (glTF),
     as oclgi/scene/textures.py returns it, or None when it is missing."""
-    from .scene import OclgiWarning  # scene.py imports this module
-
     m = Material(**{f.name: getattr(default, f.name) for f in fields(Material)})
     m.name = label
     if fm is None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import io
 import logging
 import zipfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +41,7 @@ class LoadedMesh:
     materials: dict[str, FileMaterial]
     face_uv: np.ndarray | None = None  # (F, 3, 2), NaN where a face has none
     read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
+    lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
 
 
 def is_file(path: Path, what: str) -> bool:
@@ -149,7 +150,12 @@ def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
     finally:
         log.removeHandler(hush)
         log.propagate = propagate
-    return from_trimesh(loaded, str(path))
+    mesh = from_trimesh(loaded, str(path))
+    if suffix in (".gltf", ".glb"):
+        from . import gltf_lights
+
+        mesh.lights = gltf_lights.read(data, suffix, str(path))
+    return mesh
 
 
 def is_trimesh(obj) -> bool:

@@ -15,24 +15,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import OclgiError
+from ..errors import OclgiError, OclgiWarning  # noqa: F401  (oclgi.scene.scene.OclgiWarning, as it always was)
 from ..params import MAX_LENGTH, RunParams
+from . import lights as lights_mod
 from .degenerate import degenerate_triangles
 from .materials import Material
-
-
-class OclgiWarning(UserWarning):
-    """Something in the input was fixed up (e.g. degenerate triangles dropped)."""
-
-
-@dataclass
-class PointLight:
-    position: tuple[float, float, float]
-    intensity: tuple[float, float, float]  # W/sr per channel
-
-    @property
-    def power(self) -> np.ndarray:
-        return 4.0 * math.pi * np.asarray(self.intensity, dtype=np.float64)
+from .lights import PointLight  # noqa: F401  (oclgi.scene.scene.PointLight, as it always was)
 
 
 @dataclass
@@ -86,6 +74,8 @@ class Scene:
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
     load_seconds: float = 0.0  # reading the scene and its meshes (load_file, load_dict)
     tri_uv: np.ndarray | None = None  # (F, 3, 2) texture coordinates of the corners (textured scenes)
+    # spot, sun and sky lights (oclgi.scene.lights); last, so that positional fields keep their places
+    lights: list = field(default_factory=list)
 
     def __post_init__(self):
         if self.tri_object is None:
@@ -166,9 +156,7 @@ class Scene:
             if not isinstance(m, Material):
                 raise OclgiError(f"{self.name}: materials must be oclgi.Material, got {type(m).__name__}")
             m.validate()
-        for pl in self.point_lights:
-            if not (np.isfinite(pl.position).all() and np.isfinite(pl.intensity).all()) or min(pl.intensity) < 0:
-                raise OclgiError(f"point light at {pl.position}: bad position or intensity")
+        lights_mod.validate(self)
         if not isinstance(self.settings, RunParams):  # a RunParams checks its values when made
             raise OclgiError(f"{self.name}: settings must be an oclgi.params.RunParams, "
                              f"got {type(self.settings).__name__}")
@@ -189,38 +177,21 @@ class Scene:
                 raise OclgiError(f"{self.name}: movable object {o.name!r} emits light; moving lights are not "
                                  "supported yet (they need path reuse, not incremental update)")
         if not self.has_emitter():
-            raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no point light)")
+            raise OclgiError(f"{self.name}: the scene has no emitter (no emissive material in use and no light)")
 
     def has_emitter(self) -> bool:
-        if any(max(pl.intensity) > 0 for pl in self.point_lights):
+        if lights_mod.has_power(self):
             return True
         emissive = np.array([max(m.emission) > 0 for m in self.materials], dtype=bool)
         return bool(len(self.tri_material) and emissive[self.tri_material].any())
 
     # -- emitters -----------------------------------------------------------
     def emitters(self):
-        """Emissive triangles and point lights with their power (RGB, watts).
+        """Emissive triangles and the other lights with their power (RGB, watts).
 
-        Returns (kind, tri, p, e1, e2, power) arrays; an area light emits
+        Returns (kind, tri, p, e1, e2, power) arrays (oclgi.scene.lights.
+        emitter_rows has every field of the records); an area light emits
         pi * A * Le on the side of its normal.
         """
-        emission = np.array([m.emission for m in self.materials], dtype=np.float64)
-        tri_le = emission[self.tri_material]
-        tri_ids = np.nonzero(tri_le.max(axis=1) > 0)[0]
-        v = self.vertices[self.faces[tri_ids]]
-        areas = self.triangle_areas()[tri_ids]
-        power = math.pi * areas[:, None] * tri_le[tri_ids]
-        kind = [np.zeros(len(tri_ids), np.int32)]
-        tri = [tri_ids.astype(np.int32)]
-        p, e1, e2, pw = [v[:, 0]], [v[:, 1] - v[:, 0]], [v[:, 2] - v[:, 0]], [power]
-        for pl in self.point_lights:
-            if max(pl.intensity) <= 0:
-                continue
-            kind.append(np.ones(1, np.int32))
-            tri.append(np.full(1, -1, np.int32))
-            p.append(np.asarray([pl.position], np.float64))
-            e1.append(np.zeros((1, 3)))
-            e2.append(np.zeros((1, 3)))
-            pw.append(pl.power[None, :])
-        return (np.concatenate(kind), np.concatenate(tri), np.concatenate(p), np.concatenate(e1),
-                np.concatenate(e2), np.concatenate(pw))
+        r = lights_mod.emitter_rows(self)
+        return r.kind, r.tri, r.p, r.e1, r.e2, r.power

@@ -25,8 +25,16 @@ carried over:
   cosine-distributed about the normal; the camera adds ``Le`` only where the
   normal faces it): Mitsuba's ``area`` emitter, one-sided about the same
   face normal, with ``radiance = Le``.
-* Point lights: ``intensity`` in W/sr (power ``4 pi I``), Mitsuba's
-  ``point`` emitter with the same ``intensity``.
+* The other lights (:mod:`oclgi.scene.lights`, each kind's ``to_mitsuba``):
+  a point light (``intensity`` in W/sr, power ``4 pi I``) is Mitsuba's
+  ``point`` with the same ``intensity``; a spot light Mitsuba's ``spot``
+  (the same axis intensity and cone; in the falloff band Mitsuba ramps
+  linearly in the angle where oclgi follows pbrt's smoothstep in its
+  cosine); a sun Mitsuba's ``directional`` with the same ``irradiance``; a
+  sky over every direction ``constant``, one over the upper hemisphere an
+  ``envmap`` black below the horizon; an environment map Mitsuba's
+  ``envmap`` of the same image (oclgi uses Mitsuba's orientation; Mitsuba
+  filters the texels bilinearly, oclgi holds each constant).
 * Camera: ``fov`` is the *vertical* field of view (``Camera.frame`` scales
   the up vector by ``tan(fov / 2)`` and the right vector by the aspect
   ratio), so Mitsuba's ``fov_axis = "y"``; rows run top to bottom and x to
@@ -65,6 +73,7 @@ import numpy as np
 from .. import params
 from ..scene.materials import Material, to_mitsuba
 from ..errors import OclgiError
+from ..scene import lights
 
 DEFAULT_VARIANT = "scalar_rgb"
 INSTALL_HINT = "pip install 'oclgi[mitsuba]'"
@@ -173,10 +182,7 @@ def scene_dict(mi, scene_or_engine) -> dict:
             name = f"mesh_{obj}_{mat_id}"
             uv = scene.tri_uv[sel] if scene.tri_uv is not None and m.texture is not None else None
             out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv)
-    for i, pl in enumerate(scene.point_lights):
-        if max(pl.intensity) > 0:
-            out[f"point_light_{i}"] = {"type": "point", "position": [float(c) for c in pl.position],
-                                       "intensity": {"type": "rgb", "value": [float(c) for c in pl.intensity]}}
+    out.update(lights.mitsuba_emitters(mi, scene))
     return out
 
 

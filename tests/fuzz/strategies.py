@@ -35,10 +35,15 @@ MATERIALS = ("floor", "ceiling", "backWall", "rightWall", "leftWall", "shortBox"
 
 def _base_scene() -> dict:
     """cornell_box.toml, with a small camera and photon count, so that a
-    case that drops the command line's limits still runs quickly."""
+    case that drops the command line's limits still runs quickly, and one
+    light of each other kind (oclgi/scene/lights.py), for their readers."""
     desc = tomllib.loads((SCENES / "cornell_box.toml").read_text())
     desc["camera"].update(width=8, height=8)
     desc["photons"]["count"] = 2000
+    desc["spot_light"] = [{"position": [0.0, 1.9, 0.0], "direction": [0.0, -1.0, 0.0], "intensity": [1.0, 1.0, 1.0],
+                           "cone_angle": 30.0, "cone_delta": 5.0}]
+    desc["sun"] = [{"direction": [0.3, -1.0, 0.2], "irradiance": [1.0, 1.0, 1.0]}]
+    desc["sky"] = {"radiance": [0.1, 0.1, 0.1], "hemisphere": True, "up": [0.0, 1.0, 0.0]}
     return desc
 
 
@@ -94,7 +99,8 @@ vec3 = st.one_of(st.lists(numbers, min_size=3, max_size=3), st.lists(st.floats(-
 KEYS = sorted({"mesh", "point_light", "camera", "photons", "estimator", "name", "path", "vertices", "faces",
                "albedo", "emission", "materials", "transform", "movable", "position", "look_at", "up", "fov",
                "width", "height", "count", "seed", "max_depth", "method", "radius", "extension",
-               "count_emitted", "scale", "rotate", "translate", "intensity"})
+               "count_emitted", "scale", "rotate", "translate", "intensity", "spot_light", "sun", "sky",
+               "direction", "cone_angle", "cone_delta", "irradiance", "radiance", "hemisphere", "lux", "candela"})
 keys = st.one_of(st.sampled_from(KEYS), texts)
 
 

@@ -1,0 +1,712 @@
+"""Lights: the kinds, their parameters, power, device records and Mitsuba form.
+
+The device samples every kind in ``kernels/light.h``; this module is the
+host's one place for them. Area lights are emissive materials on triangles
+(``Material.emission``, a one-sided Lambertian radiance); the other kinds
+are objects of their own, read from the scene file's tables:
+
+==============  ============================================================
+table           parameters (defaults)
+==============  ============================================================
+[[point_light]] ``position``; ``intensity`` (W/sr) or ``candela`` (with
+                ``colour``, default white). Uniform over the sphere: power
+                4 pi I.
+[[spot_light]]  ``position``; ``direction`` (the axis it points along);
+                ``intensity`` (W/sr on the axis) or ``candela`` (+
+                ``colour``); ``cone_angle`` (half-angle, degrees, 30);
+                ``cone_delta`` (degrees, 5): full intensity within
+                cone_angle - cone_delta of the axis, then pbrt-v4's
+                smoothstep in cos(theta) down to 0 at cone_angle. Power
+                2 pi I ((1 - cos_start) + (cos_start - cos_end) / 2), exact
+                for that profile (the smoothstep integrates to a half).
+[[sun]]         ``direction`` (the direction the light travels, from the
+                sun into the scene); ``irradiance`` (W/m^2 on a plane
+                perpendicular to it) or ``lux`` (+ ``colour``). Photons
+                start on a disc of the scene's bounding-sphere radius R
+                outside that sphere: power E pi R^2.
+[sky]           ``radiance`` (W/m^2/sr, uniform); ``hemisphere`` (true):
+                light comes only from the directions above the horizon of
+                ``up`` ([0, 1, 0]), false: from every direction. Photons
+                travel along a direction uniform over the (half-)sphere from
+                a disc of radius R perpendicular to it, outside the bounding
+                sphere: power L pi R^2 times the solid angle (2 pi or 4 pi).
+                An unoccluded plane facing ``up`` receives pi L either way.
+[sky] with map  ``map``: an equirectangular image (EXR, HDR, ... through
+                OpenImageIO; relative to the scene file) of radiance
+                (W/m^2/sr), Mitsuba's orientation (row 0 the zenith +y,
+                column u looking along (sin phi, ., -cos phi) at phi =
+                2 pi u); ``scale`` (1) multiplies it. Importance-sampled by
+                luminance x solid angle of its texels (piecewise constant):
+                power pi R^2 x the map's integral of radiance.
+==============  ============================================================
+
+Unknown keys are errors, as everywhere in a scene file. The sun and sky
+cover the scene's geometry as loaded (its bounding sphere): a movable
+object moved outside that sphere is not lit by them.
+
+Power and phi_max. Emitters are chosen in proportion to their (exact)
+power; a photon from emitter i carries at most bound_i / p_i watts (times
+the photon count), where bound_i is power_i for the kinds whose photons all
+carry the same, and more for the two whose photons vary: the spot (photons
+leave uniformly over the cone, weighted by its profile: bound = power x
+the cone's solid angle / the profile's integral) and the environment map
+(texels chosen by luminance, weighted by their colour). The largest of
+these is phi_max (oclgi/scene/compiled.py), the device's unit, so no
+photon carries more than 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cl.constants import (EMITTER_ENVMAP, EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN,
+                            EMITTER_TRIANGLE)
+from ..errors import OclgiError
+from ..params import MAX_LENGTH as MAX_COORDINATE  # as for vertices (oclgi/scene/scene.py)
+from ..photometry import LUMINANCE
+from . import values
+
+# The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
+TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
+_KEYS = {
+    "point_light": {"position", "intensity", "candela", "colour"},
+    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta"},
+    "sun": {"direction", "irradiance", "lux", "colour"},
+    "sky": {"radiance", "hemisphere", "up", "map", "scale"},
+}
+# An environment map's largest size (texels): its tables are 4 floats a texel on the device.
+ENVMAP_MAX_TEXELS = 1 << 24
+SPOT_CONE_ANGLE = 30.0  # degrees, pbrt-v4's default coneangle
+SPOT_CONE_DELTA = 5.0  # degrees, pbrt-v4's default conedelta
+SKY_UP = (0.0, 1.0, 0.0)
+# Outside the bounding sphere by this fraction of its radius: the sun's and
+# sky's discs stay clear of the geometry after float32 rounding.
+SPHERE_MARGIN = 1e-3
+
+
+def _rgb(v) -> np.ndarray:
+    return np.asarray(v, dtype=np.float64)
+
+
+def _floats(v):
+    """v as a float64 array, or None when it is not numbers (a light made in Python)."""
+    try:
+        a = np.asarray(v)
+        return a.astype(np.float64) if a.dtype.kind in "iuf" else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _unit(v, where: str) -> np.ndarray:
+    d = _floats(v)
+    n = float(np.linalg.norm(d)) if d is not None and d.shape == (3,) and np.isfinite(d).all() else 0.0
+    if not n > 0:
+        raise OclgiError(f"{where}: expected a non-zero direction of 3 finite numbers, got {v!r}")
+    return d / n
+
+
+def _check_radiant(v, where: str):
+    from .. import params
+
+    try:
+        a = np.asarray(v, dtype=object).ravel()
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (3,):
+        raise OclgiError(f"{where}: expected 3 numbers, got {v!r}")
+    for x in a:
+        params.float32_real(x, where, 0.0)
+
+
+def _check_point(v, where: str):
+    a = _floats(v)
+    if a is None or a.shape != (3,) or not np.isfinite(a).all() or np.abs(a).max() > MAX_COORDINATE:
+        raise OclgiError(f"{where}: expected 3 finite numbers within {MAX_COORDINATE:.0e}, got {v!r}")
+
+
+@dataclass
+class PointLight:
+    """A point light, uniform over the sphere.
+
+    ==========  =========================================
+    position    3 numbers, world space
+    intensity   RGB radiant intensity, W/sr per channel
+    ==========  =========================================
+    """
+
+    position: tuple[float, float, float]
+    intensity: tuple[float, float, float]  # W/sr per channel
+
+    table = "point_light"
+
+    @property
+    def power(self) -> np.ndarray:
+        return 4.0 * math.pi * _rgb(self.intensity)
+
+    def validate(self, where: str):
+        if not (np.isfinite(self.position).all() and np.isfinite(self.intensity).all()) or min(self.intensity) < 0:
+            raise OclgiError(f"point light at {self.position}: bad position or intensity")
+
+    def record(self, sphere) -> dict:
+        return {"kind": EMITTER_POINT, "p": self.position}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        return {"type": "point", "position": [float(c) for c in self.position],
+                "intensity": {"type": "rgb", "value": [float(c) for c in self.intensity]}}
+
+
+@dataclass
+class SpotLight:
+    """A spot light with pbrt-v4's profile (smoothstep in cos theta).
+
+    ===========  ==============================================================
+    position     3 numbers, world space
+    direction    the cone's axis (normalised here)
+    intensity    RGB radiant intensity on the axis, W/sr per channel
+    cone_angle   half-angle of the cone, degrees, in (0, 180]
+    cone_delta   width of the falloff band inside the cone, degrees, in
+                 [0, cone_angle]
+    ===========  ==============================================================
+    """
+
+    position: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    intensity: tuple[float, float, float]
+    cone_angle: float = SPOT_CONE_ANGLE
+    cone_delta: float = SPOT_CONE_DELTA
+
+    table = "spot_light"
+
+    @property
+    def cos_total(self) -> float:
+        return math.cos(math.radians(self.cone_angle))
+
+    @property
+    def cos_start(self) -> float:
+        return math.cos(math.radians(self.cone_angle - self.cone_delta))
+
+    def profile(self, cos_theta):
+        """The fraction of the axis intensity emitted at cos_theta (pbrt-v4's SpotLight::I)."""
+        c = np.asarray(cos_theta, np.float64)
+        lo, hi = self.cos_total, self.cos_start
+        if hi == lo:
+            return (c >= lo).astype(np.float64)
+        t = np.clip((c - lo) / (hi - lo), 0.0, 1.0)
+        return t * t * (3 - 2 * t)
+
+    @property
+    def solid_angle_weight(self) -> float:
+        """The integral of the profile over the sphere (sr): the smoothstep
+        over [cos_total, cos_start] integrates to half the band's width."""
+        lo, hi = self.cos_total, self.cos_start
+        return 2.0 * math.pi * ((1.0 - hi) + (hi - lo) / 2.0)
+
+    @property
+    def power(self) -> np.ndarray:
+        return self.solid_angle_weight * _rgb(self.intensity)
+
+    def validate(self, where: str):
+        _check_point(self.position, where + ".position")
+        _unit(self.direction, where + ".direction")
+        _check_radiant(self.intensity, where + ".intensity")
+        a, d = self.cone_angle, self.cone_delta
+        if isinstance(a, bool) or not isinstance(a, (int, float)) or not 0 < a <= 180:
+            raise OclgiError(f"{where}.cone_angle: expected a half-angle in (0, 180] degrees, got {a!r}")
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not 0 <= d <= a:
+            raise OclgiError(f"{where}.cone_delta: expected degrees from 0 to cone_angle ({a}), got {d!r}")
+
+    @property
+    def peak(self) -> float:
+        """Photons leave uniformly over the cone: the largest carries the
+        cone's solid angle times I, the mean the power."""
+        return 2.0 * math.pi * (1.0 - self.cos_total) / self.solid_angle_weight
+
+    def record(self, sphere) -> dict:
+        return {"kind": EMITTER_SPOT, "p": self.position, "e1": _unit(self.direction, "spot_light.direction"),
+                "a": self.cos_total, "b": self.cos_start}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``spot``: the same intensity on the axis and the same
+        cone; within the falloff band Mitsuba ramps linearly in the angle,
+        oclgi by smoothstep in its cosine (equal with cone_delta = 0)."""
+        p = np.asarray(self.position, np.float64)
+        d = _unit(self.direction, "spot_light.direction")
+        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
+        return {"type": "spot", "intensity": {"type": "rgb", "value": [float(c) for c in self.intensity]},
+                "cutoff_angle": float(self.cone_angle),
+                "beam_width": float(self.cone_angle - self.cone_delta),
+                "to_world": mi.ScalarTransform4f().look_at(origin=[float(c) for c in p],
+                                                          target=[float(c) for c in p + d], up=up)}
+
+
+@dataclass
+class SunLight:
+    """A directional light (the sun): parallel rays over the whole scene.
+
+    ===========  ==============================================================
+    direction    the direction the light travels (normalised here)
+    irradiance   RGB irradiance on a plane perpendicular to it, W/m^2
+    ===========  ==============================================================
+    """
+
+    direction: tuple[float, float, float]
+    irradiance: tuple[float, float, float]
+
+    table = "sun"
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        return math.pi * r * r * _rgb(self.irradiance)
+
+    def validate(self, where: str):
+        _unit(self.direction, where + ".direction")
+        _check_radiant(self.irradiance, where + ".irradiance")
+
+    def record(self, sphere) -> dict:
+        c, r = sphere
+        return {"kind": EMITTER_SUN, "p": c, "e1": _unit(self.direction, "sun.direction"), "a": r}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        return {"type": "directional", "direction": [float(c) for c in _unit(self.direction, "sun.direction")],
+                "irradiance": {"type": "rgb", "value": [float(c) for c in self.irradiance]}}
+
+
+@dataclass
+class SkyLight:
+    """A uniform sky: radiance from every direction, or from those above the horizon.
+
+    ===========  ==============================================================
+    radiance     RGB radiance, W/m^2/sr per channel
+    hemisphere   true: only from directions w with w . up > 0; false: all
+    up           the sky's zenith (normalised here), for ``hemisphere``
+    ===========  ==============================================================
+    """
+
+    radiance: tuple[float, float, float]
+    hemisphere: bool = True
+    up: tuple[float, float, float] = SKY_UP
+
+    table = "sky"
+
+    @property
+    def solid_angle(self) -> float:
+        return (2.0 if self.hemisphere else 4.0) * math.pi
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        return math.pi * r * r * self.solid_angle * _rgb(self.radiance)
+
+    def validate(self, where: str):
+        _check_radiant(self.radiance, where + ".radiance")
+        if not isinstance(self.hemisphere, (bool, np.bool_)):
+            raise OclgiError(f"{where}.hemisphere: expected true or false, got {self.hemisphere!r}")
+        _unit(self.up, where + ".up")
+
+    def record(self, sphere) -> dict:
+        c, r = sphere
+        return {"kind": EMITTER_SKY, "p": c, "e1": _unit(self.up, "sky.up"), "a": r,
+                "b": 1.0 if self.hemisphere else 0.0}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``constant`` for the whole sphere; for the hemisphere an
+        ``envmap`` bright above its equator and black below, turned so that
+        its +y is ``up``. Its rows are bilinearly filtered, so the last row
+        above the horizon blends a little (2 / rows of the sky's solid
+        angle): 512 rows keep that below 0.4%."""
+        rgb = [float(c) for c in self.radiance]
+        if not self.hemisphere:
+            return {"type": "constant", "radiance": {"type": "rgb", "value": rgb}}
+        rows, cols = 512, 8
+        img = np.zeros((rows, cols, 3), np.float32)
+        img[: rows // 2] = rgb
+        up = _unit(self.up, "sky.up")
+        other = [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0]
+        x = np.cross(up, other)
+        x /= np.linalg.norm(x)
+        z = np.cross(x, up)
+        m = np.eye(4)
+        m[:3, 0], m[:3, 1], m[:3, 2] = x, up, z  # the envmap's y axis onto up
+        return {"type": "envmap", "bitmap": mi.Bitmap(img), "to_world": mi.ScalarTransform4f(m.tolist())}
+
+
+@dataclass(eq=False)
+class EnvMapLight:
+    """An environment map: radiance from every direction, an equirectangular image.
+
+    ===========  ==============================================================
+    radiance     (H, W, 3) RGB radiance, W/m^2/sr, row 0 at the zenith (+y)
+                 (kernels/light.h has the directions of its texels)
+    name         where it came from (a file name), for messages
+    ===========  ==============================================================
+    """
+
+    radiance: np.ndarray
+    name: str = "map"
+
+    table = "sky"
+
+    def _omega(self) -> np.ndarray:
+        """(H,) solid angle of one texel of each row."""
+        h, w = self.radiance.shape[:2]
+        c = np.cos(np.pi * np.arange(h + 1) / h)
+        return 2 * np.pi / w * (c[:-1] - c[1:])
+
+    def power_for(self, sphere) -> np.ndarray:
+        _, r = sphere
+        lrgb = np.asarray(self.radiance, np.float64)
+        return math.pi * r * r * np.einsum("hwc,h->c", lrgb, self._omega())
+
+    def validate(self, where: str):
+        a = np.asarray(self.radiance)
+        if a.ndim != 3 or a.shape[2] != 3 or a.shape[0] < 1 or a.shape[1] < 1 or a.dtype.kind not in "iuf":
+            raise OclgiError(f"{where}.map: expected an (H, W, 3) image of numbers, got {a.dtype} {a.shape}")
+        if a.shape[0] * a.shape[1] > ENVMAP_MAX_TEXELS:
+            raise OclgiError(f"{where}.map: {a.shape[1]} x {a.shape[0]} texels; at most {ENVMAP_MAX_TEXELS:,}")
+        if not np.isfinite(a).all() or (a < 0).any() or (a > values.F32_MAX).any():
+            raise OclgiError(f"{where}.map: {self.name}: radiance must be finite, >= 0 and within float32")
+
+    def tables(self):
+        """(row CDF (H,), column CDFs (H, W), g (H, W, 3), bound): the
+        device's sampling tables (kernels/light.h) and the largest photon
+        power times the selection probability, per unit pi R^2."""
+        lrgb = np.asarray(self.radiance, np.float64)
+        lum = lrgb @ LUMINANCE
+        weight = lum * self._omega()[:, None]  # texel probability, unnormalised
+        total = float(weight.sum())
+        row = weight.sum(axis=1)
+        rows = np.cumsum(row) / total
+        rows[-1] = 1.0
+        cum = np.cumsum(weight, axis=1)
+        uniform = np.cumsum(np.ones_like(weight), axis=1) / weight.shape[1]  # a dark row: never chosen
+        cols = np.where(row[:, None] > 0, cum / np.where(row > 0, row, 1.0)[:, None], uniform)
+        cols[:, -1] = 1.0
+        ratio = np.divide(lrgb, lum[..., None], out=np.zeros_like(lrgb), where=lum[..., None] > 0)
+        m = float(ratio.max())
+        return rows, cols, ratio / m, total * m
+
+    def record(self, sphere) -> dict:
+        """The record, with its tables (row CDF, column CDFs, g) as one array
+        for the emitter CDF buffer, and the photons' bound."""
+        c, r = sphere
+        h, w = self.radiance.shape[:2]
+        rows, cols, g, bound = self.tables()
+        return {"kind": EMITTER_ENVMAP, "p": c, "e2": (float(w), float(h), 0.0), "a": r,
+                "table": np.concatenate([rows, cols.ravel(), g.ravel()]),
+                "bound": np.full(3, math.pi * r * r * bound)}
+
+    def to_mitsuba(self, mi, sphere) -> dict:
+        """Mitsuba's ``envmap`` of the same image, in its own orientation
+        (which oclgi's follows); Mitsuba filters it bilinearly, oclgi holds
+        each texel constant."""
+        return {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(self.radiance, dtype=np.float32))}
+
+
+LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight, EnvMapLight)
+
+
+def bounding_sphere(scene) -> tuple[np.ndarray, float]:
+    """(centre, radius) of a sphere around the scene's geometry as loaded,
+    a little larger (SPHERE_MARGIN) than the one through its box's corners."""
+    lo, hi = scene.bounds()
+    centre = 0.5 * (lo + hi)
+    return centre, 0.5 * float(np.linalg.norm(hi - lo)) * (1.0 + SPHERE_MARGIN)
+
+
+def all_lights(scene) -> list:
+    """The scene's lights other than its area lights: point lights first, then the rest in order."""
+    return [*scene.point_lights, *scene.lights]
+
+
+def power(light, sphere) -> np.ndarray:
+    """RGB watts the light emits (the sun and sky: through their disc, radius of ``sphere``)."""
+    return light.power_for(sphere) if hasattr(light, "power_for") else light.power
+
+
+@dataclass
+class EmitterRows:
+    """Every emitter of a scene, one row each: area lights (its emissive
+    triangles) first, then the other lights (:func:`all_lights`, those
+    with power). ``power`` is exact (RGB watts); ``bound`` the largest
+    power one photon of the emitter carries, times its selection
+    probability (= power for the kinds whose photons all carry the same:
+    all but the spot and the environment map). ``table``: the environment
+    maps' tables, which ``tri`` of their rows indexes (kernels/light.h)."""
+
+    kind: np.ndarray  # (E,) int32
+    tri: np.ndarray  # (E,) int32: the triangle's id, an environment map's table offset, else -1
+    p: np.ndarray  # (E, 3)
+    e1: np.ndarray  # (E, 3)
+    e2: np.ndarray  # (E, 3)
+    a: np.ndarray  # (E,)
+    b: np.ndarray  # (E,)
+    power: np.ndarray  # (E, 3) watts
+    bound: np.ndarray  # (E, 3) watts
+    table: np.ndarray  # (T,) float64
+
+
+def emitter_rows(scene) -> EmitterRows:
+    """The scene's emitters as the device's records need them (oclgi/scene/compiled.py)."""
+    emission = np.array([m.emission for m in scene.materials], dtype=np.float64)
+    tri_le = emission[scene.tri_material]
+    tri_ids = np.nonzero(tri_le.max(axis=1) > 0)[0]
+    v = scene.vertices[scene.faces[tri_ids]]
+    areas = scene.triangle_areas()[tri_ids]
+    n_tri = len(tri_ids)
+    tri_power = math.pi * areas[:, None] * tri_le[tri_ids]
+    cols = {"kind": [np.full(n_tri, EMITTER_TRIANGLE, np.int32)], "tri": [tri_ids.astype(np.int32)],
+            "p": [v[:, 0]], "e1": [v[:, 1] - v[:, 0]], "e2": [v[:, 2] - v[:, 0]], "a": [np.zeros(n_tri)],
+            "b": [np.zeros(n_tri)], "power": [tri_power], "bound": [tri_power]}
+    tables, n_table = [], 0
+    sphere = bounding_sphere(scene)
+    for light in all_lights(scene):
+        watts = power(light, sphere)
+        if not watts.max() > 0:
+            continue
+        rec = light.record(sphere)
+        tri = -1
+        if "table" in rec:
+            tri, n_table = n_table, n_table + len(rec["table"])
+            tables.append(rec["table"])
+        bound = rec.get("bound", watts * getattr(light, "peak", 1.0))
+        for key, value in (("kind", np.int32(rec["kind"])), ("tri", np.int32(tri)), ("p", rec["p"]),
+                           ("e1", rec.get("e1", (0.0, 0.0, 0.0))), ("e2", rec.get("e2", (0.0, 0.0, 0.0))),
+                           ("a", rec.get("a", 0.0)), ("b", rec.get("b", 0.0)), ("power", watts), ("bound", bound)):
+            cols[key].append(np.asarray([value]))
+    out = {k: np.concatenate(v) for k, v in cols.items()}
+    out["kind"], out["tri"] = out["kind"].astype(np.int32), out["tri"].astype(np.int32)
+    for k in ("p", "e1", "e2", "a", "b", "power", "bound"):
+        out[k] = out[k].astype(np.float64)
+    return EmitterRows(**out, table=np.concatenate(tables) if tables else np.zeros(0))
+
+
+def validate(scene) -> None:
+    """Each light's parameters, one line naming the bad one."""
+    for i, light in enumerate(scene.point_lights):
+        light.validate(f"point_light[{i}]")
+    counts = {}
+    for light in scene.lights:
+        if not isinstance(light, LIGHT_TYPES) or isinstance(light, PointLight):
+            raise OclgiError(f"{scene.name}: scene.lights holds spot, sun and sky lights "
+                             f"(oclgi.scene.lights), got {type(light).__name__}")
+        i = counts.get(light.table, 0)
+        counts[light.table] = i + 1
+        light.validate(light.table if not TABLES[light.table] else f"{light.table}[{i}]")
+    if counts.get("sky", 0) > 1:  # a sky and a map, both from the sky's disc: one of them
+        raise OclgiError(f"{scene.name}: at most one sky, got {counts['sky']}")
+
+
+def has_power(scene) -> bool:
+    sphere = bounding_sphere(scene)
+    return any(power(light, sphere).max() > 0 for light in all_lights(scene))
+
+
+# -- the scene file ------------------------------------------------------------------------------------------------
+
+def read(desc: dict, base_dir=None) -> tuple[list, list]:
+    """(point lights, other lights) from a scene description's light tables
+    (an environment map's file is relative to ``base_dir``)."""
+
+    points, others = [], []
+    for name, many in TABLES.items():
+        if name not in desc:
+            continue
+        if many:
+            tables = [(f"{name}[{i}]", t) for i, t in enumerate(values.table_list(desc[name], name))]
+        else:
+            if not isinstance(desc[name], dict):
+                raise OclgiError(f"{name}: expected one [{name}] table, got {desc[name]!r}")
+            tables = [(name, desc[name])]
+        for where, t in tables:
+            values.check_keys(t, _KEYS[name], where)
+            light = _READERS[name](t, where) if name != "sky" else _read_sky(t, where, base_dir)
+            (points if name == "point_light" else others).append(light)
+    return points, others
+
+
+def _required(t: dict, key: str, where: str):
+    if key not in t:
+        raise OclgiError(f"{where}.{key}: required")
+    return t[key]
+
+
+_UNITS = {"intensity": "W/sr", "irradiance": "W/m^2"}
+
+
+def _photometric(t: dict, where: str, radiometric: str, photometric: str, convert, unit: str):
+    """``radiometric`` (3 numbers), or ``photometric`` with an optional ``colour``."""
+
+    if photometric in t:
+        if radiometric in t:
+            raise OclgiError(f"{where}: give {radiometric} ({_UNITS[radiometric]}) or {photometric}, not both")
+        value = values.number(t[photometric], f"{where}.{photometric}")
+        if not value > 0:
+            raise OclgiError(f"{where}.{photometric}: expected {unit} > 0, got {t[photometric]!r}")
+        colour = values.vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour")
+        return values.radiant(convert(value, colour), f"{where}.{photometric}")
+    if "colour" in t:
+        raise OclgiError(f"{where}.colour goes with {photometric}; an {radiometric} has its own colour")
+    return values.radiant(_required(t, radiometric, where), f"{where}.{radiometric}")
+
+
+def _direction(t: dict, key: str, where: str):
+
+    v = values.vec3(_required(t, key, where), f"{where}.{key}")
+    return tuple(float(x) for x in _unit(v, f"{where}.{key}"))
+
+
+def _read_point(t: dict, where: str) -> PointLight:
+    from ..photometry import intensity_from_candela
+
+    return PointLight(values.vec3(t.get("position"), where + ".position", MAX_COORDINATE),
+                      _photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"))
+
+
+def _read_spot(t: dict, where: str) -> SpotLight:
+    from ..photometry import intensity_from_candela
+
+    light = SpotLight(
+        position=values.vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
+        direction=_direction(t, "direction", where),
+        intensity=_photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
+        cone_angle=values.number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
+        cone_delta=values.number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
+    )
+    if "cone_delta" not in t:  # the default band, within a narrow cone
+        light.cone_delta = min(light.cone_delta, light.cone_angle)
+    light.validate(where)
+    return light
+
+
+def _read_sun(t: dict, where: str) -> SunLight:
+    from ..photometry import irradiance_from_lux
+
+    return SunLight(direction=_direction(t, "direction", where),
+                    irradiance=_photometric(t, where, "irradiance", "lux", irradiance_from_lux, "an illuminance"))
+
+
+def _read_sky(t: dict, where: str, base_dir=None):
+    if "map" in t:
+        return _read_envmap(t, where, base_dir)
+    if "scale" in t:
+        raise OclgiError(f"{where}.scale goes with map; a radiance has its own size")
+    hemisphere = t.get("hemisphere", True)
+    if not isinstance(hemisphere, bool):
+        raise OclgiError(f"{where}.hemisphere: expected true or false, got {hemisphere!r}")
+    up = tuple(float(x) for x in _unit(values.vec3(t.get("up", SKY_UP), where + ".up"), where + ".up"))
+    return SkyLight(radiance=values.radiant(_required(t, "radiance", where), where + ".radiance"),
+                    hemisphere=hemisphere, up=up)
+
+
+def _read_envmap(t: dict, where: str, base_dir) -> EnvMapLight:
+    """``map`` (an image file, through OpenImageIO) times ``scale``."""
+    import os
+    from pathlib import Path
+
+    other = sorted({"radiance", "hemisphere", "up"} & set(t))
+    if other:
+        raise OclgiError(f"{where}: map takes no {', '.join(other)} (the image is the radiance, +y its zenith)")
+    given = t["map"]
+    if isinstance(given, os.PathLike):
+        given = os.fspath(given)
+    if not isinstance(given, str) or not given.strip():
+        raise OclgiError(f"{where}.map: expected an image file name, got {t['map']!r}")
+    path = Path(given)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    scale = values.number(t.get("scale", 1.0), where + ".scale")
+    if not scale > 0:
+        raise OclgiError(f"{where}.scale: expected a number > 0, got {t['scale']!r}")
+    light = EnvMapLight(read_image(path, where + ".map") * scale, name=path.name)
+    light.validate(where)
+    return light
+
+
+def read_image(path, where: str) -> np.ndarray:
+    """An image file as (H, W, 3) float64 (a grey one repeated to RGB; alpha dropped)."""
+    from pathlib import Path
+
+    import OpenImageIO as oiio
+
+    try:
+        found = Path(path).is_file()
+    except OSError as exc:  # a name too long for the file system, a permission
+        raise OclgiError(f"{where}: cannot read {path}: {exc.strerror or exc}") from None
+    if not found:
+        raise OclgiError(f"{where}: image file not found: {path}")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OclgiError(f"{where}: cannot read {path}: {oiio.geterror().strip() or 'not an image'}")
+    try:
+        spec = inp.spec()
+        if spec.width * spec.height > ENVMAP_MAX_TEXELS:
+            raise OclgiError(f"{where}: {path.name} has {spec.width} x {spec.height} texels; at most "
+                             f"{ENVMAP_MAX_TEXELS:,}")
+        pixels = inp.read_image(format="float")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise OclgiError(f"{where}: cannot read {path}: {oiio.geterror().strip()}")
+    a = np.asarray(pixels, np.float64).reshape(spec.height, spec.width, spec.nchannels)
+    a = np.repeat(a[..., :1], 3, axis=2) if spec.nchannels < 3 else a[..., :3]
+    return a
+
+
+_READERS = {"point_light": _read_point, "spot_light": _read_spot, "sun": _read_sun}
+
+
+# -- area lights that light nothing -----------------------------------------------------------------------------
+
+# The check below tests each distinct emitter plane against every vertex;
+# past this many vertex tests it stops (the planes left are not reported),
+# so that a finely tessellated curved light costs a fraction of a second.
+MAX_VERTEX_TESTS = 50_000_000
+
+
+def escaping_area_lights(scene) -> np.ndarray:
+    """Ids of the emissive triangles with no geometry in front of them: the
+    open half-space on the normal's side holds no vertex of the scene (as
+    loaded), so every photon they emit leaves the scene. The converse holds
+    too: geometry in front of a triangle is hit by some of its cosine-
+    distributed photons. Triangles are grouped by plane (a quad light is
+    one test), and the scene's box rules most planes out first."""
+    emission = np.array([m.emission for m in scene.materials], dtype=np.float64)
+    ids = np.nonzero(emission[scene.tri_material].max(axis=1) > 0)[0]
+    if not len(ids):
+        return ids
+    n = scene.triangle_normals()[ids]
+    v0 = scene.vertices[scene.faces[ids, 0]]
+    offset = np.einsum("ij,ij->i", n, v0)
+    tol = 1e-6 * max(scene.diagonal, 1e-30)
+    lo, hi = scene.bounds()
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    box_front = (corners @ n.T - offset).max(axis=0) > tol
+    suspects = np.nonzero(~box_front)[0]
+    # A box with nothing in front already proves it; the others need the vertices.
+    escaping = list(suspects)
+    rest = np.nonzero(box_front)[0]
+    key = np.round(np.hstack([n[rest], offset[rest, None] / tol]), 6)
+    planes, inverse = np.unique(key, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    first = np.zeros(len(planes), np.int64)
+    first[inverse[::-1]] = rest[::-1]  # a representative triangle per plane
+    verts = scene.vertices
+    for k in range(min(len(planes), max(1, MAX_VERTEX_TESTS // max(len(verts), 1)))):
+        j = first[k]
+        if not ((verts @ n[j]) - offset[j] > tol).any():
+            escaping.extend(rest[inverse == k])
+    return np.sort(ids[np.asarray(escaping, dtype=np.int64)])
+
+
+def mitsuba_emitters(mi, scene) -> dict:
+    """Every light but the area lights as Mitsuba scene-dict entries (oclgi/study/mitsuba.py)."""
+    sphere = bounding_sphere(scene)
+    out, counts = {}, {}
+    for light in all_lights(scene):
+        i = counts.get(light.table, 0)
+        counts[light.table] = i + 1
+        if power(light, sphere).max() > 0:
+            out[f"{light.table}_{i}"] = light.to_mitsuba(mi, sphere)
+    return out
