@@ -115,10 +115,22 @@ inline void rmk_finish(PmHeap *h, __global const float4 *power, int i, int inclu
     }
 }
 
-/* The lower bound of a node: its padded box's distance, capped by m2. */
-inline float rmk_node_bound(__global const BvhNode *nd, float3 x, float m2)
+/* The lower bound of a node: its padded box's distance, capped by m2. For
+ * the plane metric, a piece claims a crossing only inside its chord, or
+ * beyond B_M (at least M away): a box that does not meet x's tangent plane
+ * holds no crossing nearer than M, so its bound is m2 (most of a room's
+ * segments pass a wall point without crossing its plane nearby). The
+ * padding, far above float32 rounding, keeps the plane test conservative. */
+inline float rmk_node_bound(__global const BvhNode *nd, float3 x, float3 n, int metric, float m2)
 {
-    return fmin(pm_box_dist2(vload3(0, nd->lo), vload3(0, nd->hi), x), m2);
+    float3 lo = vload3(0, nd->lo), hi = vload3(0, nd->hi);
+    if (metric == RMK_PLANE) {
+        float3 c = 0.5f * (lo + hi), e = 0.5f * (hi - lo);
+        float s = (c.x - x.x) * n.x + (c.y - x.y) * n.y + (c.z - x.z) * n.z;
+        float r = e.x * fabs(n.x) + e.y * fabs(n.y) + e.z * fabs(n.z);
+        if (fabs(s) > r) return m2;
+    }
+    return fmin(pm_box_dist2(lo, hi, x), m2);
 }
 
 __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, int stride,
@@ -152,8 +164,8 @@ __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, 
                 rmk_scan(&h, &pc, nd->first, nd->count, x, n, metric);
             } else {
                 int c = nd->first;
-                float d0 = rmk_node_bound(&nodes[c], x, m2);
-                float d1 = rmk_node_bound(&nodes[c + 1], x, m2);
+                float d0 = rmk_node_bound(&nodes[c], x, n, metric, m2);
+                float d1 = rmk_node_bound(&nodes[c + 1], x, n, metric, m2);
                 float b = pm_bound(&h);
                 int v0 = d0 <= b, v1 = d1 <= b;
                 if (v0 && v1) { /* nearer first; the other waits with its bound */

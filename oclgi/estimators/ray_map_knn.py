@@ -81,7 +81,7 @@ Parameters:
                              build define (OCLGI_KNN_K): one program per k
     estimator     "k-1"      "k-1" (unbiased for a uniform density) or "k"
     metric        "plane"    "plane", "ray" or "line" (above)
-    leaf_size     8          pieces per BVH leaf, 1..64
+    leaf_size     16         pieces per BVH leaf, 1..64 (4, 8, 16, 32 measured)
     piece         0.05       longest piece, as a fraction of M (the diagonal
                              of the query points' and origins' box); 0 keeps
                              segments whole
@@ -176,7 +176,7 @@ class SegmentKnnIndex:
     """
 
     def __init__(self, queue, org, dirs, tmax, powers, bound_lo, bound_hi, metric: str = "plane",
-                 leaf_size: int = 8, piece: float = 0.05, count_work: bool = False):
+                 leaf_size: int = 16, piece: float = 0.05, count_work: bool = False):
         self.queue, self.ctx = queue, queue.context
         self.metric = metric
         self.count_work = bool(count_work)
@@ -319,7 +319,7 @@ class RayMapKnn(Estimator):
     incremental = False
 
     def __init__(self, queue, compiled, points, k: int = DEFAULT_K, estimator: str = "k-1", metric: str = "plane",
-                 leaf_size: int = 8, piece: float = 0.05, radius=None, extension: float = 0.0, **kw):
+                 leaf_size: int = 16, piece: float = 0.05, radius=None, extension: float = 0.0, **kw):
         # radius is DETP's; the k-th neighbour sets the radius here
         super().__init__(queue, compiled, points, **kw)
         check_options(k, estimator, metric, leaf_size, piece)
