@@ -262,3 +262,28 @@ def test_options_and_errors(cornell, monkeypatch):
     e = cornell.irradiance(pt, method="ray_map_knn", photons=1000, k=1, estimator="k", count_work=True)
     assert e.irradiance.shape == (1, 3)
     assert e.work["u"] >= 1 and e.work["nodes"] >= 1
+
+
+def test_split_runs_joined_equal_one_run(cornell):
+    """Two path ranges traced apart, their states joined as the ranks join
+    them (float arrays concatenated in range order), equal one run bit for
+    bit: the canonical order is the global slots' order."""
+    from oclgi.tracing.run import PathRange
+
+    pts = cornell.camera_points(width=12, height=12)
+    photons = 8000
+    whole = cornell.irradiance(pts, method="ray_map_knn", photons=photons, k=12)
+    states = []
+    for i in range(2):
+        run = cornell.run(pts, method="ray_map_knn", photons=photons, k=12, paths=PathRange(0, photons).split(2, i))
+        run.trace(False)
+        states.append(run.estimator.state())
+    joined = {key: np.concatenate([s[key] for s in states]) for key in states[0]}
+    run = cornell.run(pts, method="ray_map_knn", photons=photons, k=12)
+    run.estimator.restore(joined)
+    run.next_path = run.paths.end
+    est = run.finish()
+    assert np.array_equal(est.accumulators, whole.accumulators)
+    assert np.array_equal(est.irradiance, whole.irradiance)
+    with pytest.raises(OclgiError, match="ray_map_knn expects"):
+        run.estimator.restore({**joined, "segment_lengths": joined["segment_lengths"][:, None]})
