@@ -35,6 +35,8 @@
  * OCLGI_LANES entries of w = 0; ids alongside) and tested 8 at a time in
  * float8 lanes (PoCL does not vectorise loops across work-items).
  *
+ * Two passes (see rmk_knn): the first within the host's guess r0.
+ *
  * The result (rmk_finish): acc = the fixed-point sum of the K-1 nearest
  * segments' powers (the K nearest with include_kth), each quantised once by
  * segment_quantise (segment.h); r2 = the K-th nearest's d2 (INFINITY when
@@ -54,8 +56,16 @@ typedef struct {
     __global const int *id;
 } RmkPieces;
 
+/* The search's bound: the K-th nearest's d2 once the heap is full, the
+ * pass's guess r0sq before (INFINITY in the last pass). */
+inline float rmk_bound(const PmHeap *h, float r0sq)
+{
+    return h->n == PM_K ? h->d2[0] : r0sq;
+}
+
 /* Offer the pieces [start, start + count) to the heap of query x (normal n). */
-inline void rmk_scan(PmHeap *h, const RmkPieces *pc, int start, int count, float3 x, float3 n, int metric)
+inline void rmk_scan(PmHeap *h, const RmkPieces *pc, int start, int count, float3 x, float3 n, int metric,
+                     float r0sq)
 {
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
     for (int j = start; j < start + count; j += OCLGI_LANES) {
@@ -79,7 +89,7 @@ inline void rmk_scan(PmHeap *h, const RmkPieces *pc, int start, int count, float
         ok &= (t >= vload8(0, pc->lo + j)) & (t < vload8(0, pc->hi + j));
         float8 dx = t * wx - ax, dy = t * wy - ay, dz = t * wz - az;
         float8 d2 = dx * dx + dy * dy + dz * dz;
-        ok &= d2 <= (float8)(pm_bound(h));
+        ok &= d2 <= (float8)(rmk_bound(h, r0sq));
         if (!any(ok)) continue;
         float d[OCLGI_LANES];
         int m[OCLGI_LANES];
@@ -136,7 +146,8 @@ inline float rmk_node_bound(__global const BvhNode *nd, float3 x, float3 n, int 
 __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, int stride,
                       __global const int *pid, __global const float4 *power,
                       __global const float4 *qpos, __global const float4 *qnrm,
-                      __global const int *order, int n_points, int metric, float m2, int include_kth,
+                      __global const int *order, int n_points, int metric, float m2, float r0sq,
+                      int include_kth,
                       __global long *acc, __global float *r2, int write_ids,
                       __global int *ids, __global float *d2s, __global ulong *work)
 {
@@ -152,7 +163,17 @@ __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, 
     pc.id = pid;
     PmHeap h;
     h.n = 0;
-    if (n.x != 0.0f || n.y != 0.0f || n.z != 0.0f) {
+    /* Two passes: the first only looks within the host's guess r0 (a few
+     * times the k-th distance of the mean density), so that the search
+     * before the heap fills does not range over every box near enough to
+     * an empty bound; a point that finds fewer than K there searches again
+     * without it. Nothing beyond r0 is dropped from a full heap (a node or
+     * segment is skipped only when its bound exceeds r0^2 >= the K-th d2),
+     * so both passes give the one result. */
+    int has_normal = n.x != 0.0f || n.y != 0.0f || n.z != 0.0f;
+    for (int pass = 0; has_normal && pass < 2; ++pass) {
+        float guess = pass == 0 ? r0sq : INFINITY;
+        h.n = 0;
         int stack[OCLGI_POINT_BVH_STACK];
         float stack_d[OCLGI_POINT_BVH_STACK];
         int sp = 0, node = 0;
@@ -161,12 +182,12 @@ __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, 
             WORK_NODE(1);
             if (nd->count > 0) {
                 WORK_U(nd->count);
-                rmk_scan(&h, &pc, nd->first, nd->count, x, n, metric);
+                rmk_scan(&h, &pc, nd->first, nd->count, x, n, metric, guess);
             } else {
                 int c = nd->first;
                 float d0 = rmk_node_bound(&nodes[c], x, n, metric, m2);
                 float d1 = rmk_node_bound(&nodes[c + 1], x, n, metric, m2);
-                float b = pm_bound(&h);
+                float b = rmk_bound(&h, guess);
                 int v0 = d0 <= b, v1 = d1 <= b;
                 if (v0 && v1) { /* nearer first; the other waits with its bound */
                     stack[sp] = d0 <= d1 ? c + 1 : c;
@@ -177,11 +198,12 @@ __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, 
                 }
                 if (v0 || v1) { node = v0 ? c : c + 1; continue; }
             }
-            float b = pm_bound(&h);
+            float b = rmk_bound(&h, guess);
             while (sp > 0 && stack_d[sp - 1] > b) --sp;
             if (sp == 0) break;
             node = stack[--sp];
         }
+        if (h.n == PM_K || guess == INFINITY) break;
     }
     rmk_finish(&h, power, i, include_kth, acc, r2, write_ids, ids, d2s);
     WORK_FLUSH(work);

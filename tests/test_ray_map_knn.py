@@ -7,8 +7,8 @@
    candidate's edge (t at t_end + e, w.n at the front-side threshold); the
    distances agree to float32 rounding; the sums are the fixed-point sums of
    those neighbours' powers (k-1 or k of them).
-2. Bits: sums and radii do not depend on the batch size or the work-group
-   size, for every metric; count_emitted=False drops bounce 0; the k
+2. Bits: sums and radii do not depend on the batch size, the work-group
+   size or the search's first radius, for every metric; count_emitted=False drops bounce 0; the k
    estimator's sums over the k-1 one are exactly k / (k-1) with equal
    photon powers.
 3. A point light over a black plane (direct light only): the plane metric's
@@ -135,6 +135,10 @@ def test_neighbours_random_segments(queue, metric):
         got = index.neighbours(qp, qn, k)
         check_against_brute(got, org, dirs, tmax, power, qp, qn, k, metric)
         assert (got[0][::17] == -1).all() and np.isinf(got[3][::17]).all()
+        # the first pass's radius changes nothing, whether most points find k within it or few do
+        for r0 in (0.02, 0.1, 0.3):
+            again = index.neighbours(qp, qn, k, r0=r0)
+            assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(got, again))
 
 
 @pytest.fixture(scope="module")

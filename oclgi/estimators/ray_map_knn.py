@@ -52,9 +52,10 @@ parameter range (plane and ray: [0, t_end + e]; line: the whole line) is
 clipped to the box B_M, the box of the query points and the segments'
 origins grown by M (its diagonal) on every side, and cut into pieces no
 longer than ``piece`` times M (at most 64 per segment and 4 per segment on
-average, the length growing when needed, as :mod:`oclgi.estimators.detp_ray_map`'s: a segment's box is as
-long as the segment, and without pieces a segment across the scene is met by
-every query under it). A piece claims its own range of t, the end pieces
+average, the length growing when needed, as
+:mod:`oclgi.estimators.detp_ray_map`'s: a segment's box is as long as the
+segment, and without pieces a segment across the scene is met by every
+query under it). A piece claims its own range of t, the end pieces
 out to -inf and +inf, so each query's t is claimed by exactly one piece. A
 point outside B_M is at least M from every query point, so the traversal's
 lower bound of a node is min(box distance, M^2): escaping segments and whole
@@ -62,16 +63,26 @@ lines need no box to infinity. Leaves hold at most ``leaf_size`` pieces.
 For the plane metric a node whose box misses x's tangent plane holds no
 crossing nearer than M, so its bound is M^2.
 
+The search runs in two passes: the first looks only within r0 =
+R0_FACTOR (2) times the k-th distance of a uniform density (the run's
+segments over the scene's area), so that the search before the heap fills
+does not range over every box; a point that finds fewer than k there
+searches again without it. No result depends on r0 (a node is skipped only
+when its bound exceeds r0^2, which a full heap's k-th d2 does not).
+
 Cost, measured on the Cornell box (10^5 photon paths: 222,288 segments,
 3.6 pieces each; k = 50, r_k about 0.05 of the box's 0.55; 2-core AMD
-EPYC, pthread-haswell): the build is host work, about 1 s (half of it
-the BVH); the search of 128 x 128 camera points takes 1.5 to 2.5 s
-(Photon Maps' whole resolve: 0.2 s), testing 7,400 pieces and visiting
-1,650 nodes per point with leaves of 16 (leaves of 4, 8 and 32: 4,900 /
-6,100 / 8,600 pieces, slower or no faster; a binned SAH tree tested 10%
-fewer and took 4 s to build; uncut segments, ``piece=0``, 57,000). About
-770 pieces per point have a box within r_k that meets the plane: the rest
-is the search before the heap fills, when every box is near enough.
+EPYC, pthread-haswell, shared): the build is host work, about 1 s (half
+of it the BVH); the search of 128 x 128 camera points takes about 1.9 s
+(2.75 s in one pass; Photon Maps' whole resolve: 0.2 s), testing 5,900
+pieces and visiting 1,390 nodes per point with leaves of 16 (in one pass,
+leaves of 4, 8, 16 and 32: 4,900 / 6,100 / 7,400 / 8,600 pieces, 16 and 32
+the fastest; a binned SAH tree tested 10% fewer and took 4 s to build;
+uncut segments, ``piece=0``, 57,000). About 770 pieces per point have a
+box within r_k that meets the plane. A point that faces into a wall of a
+closed room has no candidates and searches the whole map (320,000 piece
+tests), as Photon Maps' do; camera and vertex points face the light they
+get.
 
 Memory bound. kNN needs every segment of the run at once. On the host a
 segment takes 40 bytes while gathering (origin, direction, length, power as
@@ -140,6 +151,7 @@ HOST_BYTES_PER_SEGMENT = 40  # origin, direction, length, power while gathering
 HOST_BYTES_PER_PIECE = 320  # the build's peak (module docstring)
 DEVICE_FRACTION = 0.75  # of global memory for the map; the rest: batch, scene, points
 NODE_BYTES = 32  # oclgi.cl.layout.BvhNode
+R0_FACTOR = 2.0  # the search's first radius over the uniform density's k-th distance (first_radius)
 M2_SHRINK = 1.0 - 1e-3  # M^2 a little smaller: the bound stays below float32 distances beyond B_M
 
 
@@ -292,16 +304,19 @@ class SegmentKnnIndex:
 
     def search(self, qpos: cl.Buffer, qnrm: cl.Buffer, order: cl.Buffer, n_points: int, k: int,
                include_kth: bool, acc: cl.Buffer, r2: cl.Buffer, ids: cl.Buffer | None = None,
-               d2: cl.Buffer | None = None, local_size: int | None = None):
-        """Run the search: acc (n, 3) int64 sums, r2 (n,) float32; ids/d2 (n, k) when given."""
+               d2: cl.Buffer | None = None, local_size: int | None = None, r0: float = math.inf):
+        """Run the search: acc (n, 3) int64 sums, r2 (n,) float32; ids/d2 (n, k) when given.
+        ``r0``: the first pass's radius (kernels/ray_map_knn.cl); it changes no result."""
         write = ids is not None
         dummy = ids if write else acc
         launch(self.queue, self.kernel(k), n_points, self.nodes, self.soa, self.stride, self.pid, self.power,
-               qpos, qnrm, order, n_points, METRICS.index(self.metric), self.m2, int(bool(include_kth)),
+               qpos, qnrm, order, n_points, METRICS.index(self.metric), self.m2, np.float32(float(r0) ** 2),
+               int(bool(include_kth)),
                acc, r2, int(write), dummy, d2 if write else dummy, self.work_buf,
                local_size=knn_local_size(k, local_size))
 
-    def neighbours(self, positions, normals, k: int, include_kth: bool = False, local_size: int | None = None):
+    def neighbours(self, positions, normals, k: int, include_kth: bool = False, local_size: int | None = None,
+                   r0: float = math.inf):
         """The k nearest front-side segments of each point: (ids, d2, acc,
         r2): ids and d2 (n, k) int32 and float32 in ascending (d2, id)
         order, -1 / inf past the last one found; the sums and radii of the
@@ -313,7 +328,7 @@ class SegmentKnnIndex:
         bufs = [self._upload(pos), self._upload(nrm), self._upload(query_order(pos))]
         rw = cl.mem_flags.READ_WRITE
         out = [cl.Buffer(self.ctx, rw, max(size, 8)) for size in (n * 24, n * 4, n * k * 4, n * k * 4)]
-        self.search(*bufs, n, k, include_kth, *out, local_size=local_size)
+        self.search(*bufs, n, k, include_kth, *out, local_size=local_size, r0=r0)
         host = [np.empty((n, 3), np.int64), np.empty(n, np.float32), np.empty((n, k), np.int32),
                 np.empty((n, k), np.float32)]
         for h, b in zip(host, out):
@@ -444,11 +459,21 @@ class RayMapKnn(Estimator):
         knn = self.build_index()
         t0 = time.perf_counter()
         knn.search(self.positions, self.normals, self.order, self.n, self.k, self.estimator == "k",
-                   self.acc, self.r2, local_size=self.local_size)
+                   self.acc, self.r2, local_size=self.local_size, r0=self.first_radius())
         launch(self.queue, self.k_resolve, self.n, self.acc, self.r2, self.n, 1.0 / (scale * math.pi), self.irr)
         self.queue.finish()
         self.query_seconds += time.perf_counter() - t0
         return self.irr
+
+    def first_radius(self) -> float:
+        """The search's first radius: R0_FACTOR times the k-th distance
+        where the run's segments end uniformly over the scene's area A,
+        sqrt(k A / (pi N)); points that find fewer than k within it search
+        again without it (no result depends on it)."""
+        area = float(np.sum(self.compiled.areas, dtype=np.float64))
+        if not area > 0 or not self.n_segments:
+            return math.inf
+        return R0_FACTOR * math.sqrt(self.k * area / (math.pi * self.n_segments))
 
     def replace_points(self, index: np.ndarray, new) -> None:
         """Points ``index`` moved; the map's box holds the old points only, so it is built again."""
