@@ -132,7 +132,7 @@ import numpy as np
 import pyopencl as cl
 
 from .. import budget
-from ..accel.boxes import PAD
+from ..accel.boxes import PAD, active_discs
 from ..accel.bvh_build import build_bvh
 from ..accel.point_index import knn_local_size, query_order
 from ..cl.constants import LANES, POINT_BVH_STACK
@@ -447,7 +447,10 @@ class RayMapKnn(Estimator):
                 _fail(f"only {self.n_segments:,} segments for k = {self.k}; trace more photons or lower k")
             t0 = time.perf_counter()
             org, dirs, t_end, power = self.segments()
-            pos = self.points.positions[:, :3]
+            # the box of the points that search (a zero normal, a camera ray's miss, finds nothing)
+            pos = self.points.positions[active_discs(self.points), :3]
+            if not len(pos):
+                pos = org
             self.knn = SegmentKnnIndex(self.queue, org, dirs, t_end + self.ext, power,
                                        pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64),
                                        self.metric, self.leaf_size, self.piece, self.count_work)
