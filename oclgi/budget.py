@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from . import params
 from .errors import OclgiError
 
-DEFAULT_K = 50  # Photon Maps' default k (oclgi/estimators/photon_map.py)
+DEFAULT_K = 50  # Photon Maps' and Ray Maps' default k (oclgi/estimators/photon_map.py)
 
 GIB = float(1 << 30)
 SEGMENT_BYTES = 48  # oclgi.cl.layout.Segment
@@ -46,7 +46,10 @@ POINT_BUFFERS = {
     "detp": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16},
     "impact": {"positions": 16, "barycentrics": 8, "irradiance": 16},
     "photon_map": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16, "query order": 4, "radii": 4},
+    "ray_map_knn": {"positions": 16, "normals": 16, "sums": 24, "irradiance": 16, "query order": 4, "radii": 4},
 }
+# The k-nearest methods, whose tests and studies may read k neighbours per point.
+KNN_METHODS = ("photon_map", "ray_map_knn")
 INDEX_BYTES = {"detp_disc_index": 64, "detp_ray_map": 48, "detp_sphere_cache": 32}  # the variants' index
 # Host bytes per query point of one estimate: its irradiance and sums read
 # back (16 + 24) and the temporaries of checking and packing points.
@@ -163,7 +166,7 @@ def point_buffers(method: str, n: int, k: int | None = None) -> dict:
     per_point = dict(POINT_BUFFERS.get(method, POINT_BUFFERS["detp"]))
     if method in INDEX_BYTES:
         per_point["index over the points"] = INDEX_BYTES[method]
-    if method == "photon_map":  # k ids and k distances per point
+    if method in KNN_METHODS:  # k ids and k distances per point
         k = int(k) if params.integral(k) else DEFAULT_K
         per_point["neighbour ids"] = per_point["neighbour distances"] = 4 * k
     return {name: n * size for name, size in per_point.items()}

@@ -32,7 +32,7 @@ from .errors import OclgiError
 # The estimator names; oclgi/estimators/__init__.py maps each to its class
 # (and checks that the two lists agree). Kept here so that the scene layer
 # can check a method name without importing the estimators.
-METHODS = ("detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact", "photon_map")
+METHODS = ("detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact", "photon_map", "ray_map_knn")
 
 MAX_PHOTONS = 1 << 31
 MAX_DEPTH_LIMIT = 256  # keeps fixed-point sums of 10^9 photons below 2^63

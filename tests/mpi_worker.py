@@ -25,7 +25,7 @@ HERE = Path(__file__).resolve().parent
 SCENES = HERE.parent / "scenes"
 
 # shared with the test, which computes the same in one process
-METHODS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact", "photon_map"]
+METHODS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact", "photon_map", "ray_map_knn"]
 INCREMENTAL = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache", "impact"]
 PHOTONS = 20_000
 RADIUS = 0.1

@@ -7,6 +7,9 @@ resolves them to irradiance at the query points (see base.py).
     detp_sphere_cache  DETP with a cache of nested spheres along a Hilbert order
     impact             Impact Count with vertex averaging and linear interpolation
     photon_map         Photon Maps: the k nearest impacts over pi r_k^2 (Jensen 1995)
+    ray_map_knn        Ray Maps' k nearest segments (Havran et al. 2005): the k nearest
+                       tangent-plane crossings (or distances to the rays or lines) over
+                       pi r_k^2, as Photon Maps with segments
 """
 
 import functools
@@ -20,6 +23,7 @@ from .detp_ray_map import DetpRayMap
 from .detp_sphere_cache import DetpSphereCache
 from .impact_count import ImpactCount
 from .photon_map import PhotonMap
+from .ray_map_knn import RayMapKnn
 
 ESTIMATORS = {
     "detp": Detp,
@@ -28,6 +32,7 @@ ESTIMATORS = {
     "detp_sphere_cache": DetpSphereCache,
     "impact": ImpactCount,
     "photon_map": PhotonMap,
+    "ray_map_knn": RayMapKnn,
 }
 assert tuple(ESTIMATORS) == METHODS, "oclgi/params.py's METHODS must list every estimator"
 

@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import budget, params, queries
+from ..budget import KNN_METHODS
 from ..engine import as_query_points
 from ..errors import OclgiError
 from ..estimators import check_options
@@ -93,7 +94,7 @@ class Config:
             r = self.radius if self.radius is not None else scene_radius
             if r is not None:
                 parts.append(f"d={r:.4g}")
-        if self.method == "photon_map":
+        if self.method in KNN_METHODS:
             parts.append(f"k={self.options.get('k', study_bounds.DEFAULT_K)}")
             parts.append(str(self.options.get("estimator", "k-1")))
         parts += [f"{k}={v}" for k, v in sorted(self.options.items()) if k not in ("k", "estimator")]
@@ -468,8 +469,8 @@ def summarise(result: StudyResult, row: Row) -> dict:
         "method": c.method,
         "photons": row.photons,
         "radius": row.radius if row.radius is not None else "",
-        "k": c.options.get("k", study_bounds.DEFAULT_K) if c.method == "photon_map" else "",
-        "estimator": c.options.get("estimator", "k-1") if c.method == "photon_map" else "",
+        "k": c.options.get("k", study_bounds.DEFAULT_K) if c.method in KNN_METHODS else "",
+        "estimator": c.options.get("estimator", "k-1") if c.method in KNN_METHODS else "",
         "seeds": n_seeds,
         "points": int(valid.any(axis=1).sum()),
         "segments": row.segments,
