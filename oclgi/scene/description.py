@@ -281,7 +281,10 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
                             where + ".lumens")
         for k in set(local):
             materials[k].emission = radiance
-    face_uv = getattr(loaded, "face_uv", None)
+    textured = loaded is not None and any(materials[k].texture is not None for k in set(local))
+    face_uv = loaded.face_uv() if textured else None  # read only when a texture needs them
+    if textured and face_uv is None:
+        raise OclgiError(f"{label}: a material has a texture but the mesh has no texture coordinates")
     return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv
 
 

@@ -39,7 +39,7 @@ class LoadedMesh:
     face_material: np.ndarray  # (F,) index into names
     names: list[str]
     materials: dict[str, FileMaterial]
-    face_uv: np.ndarray | None = None  # (F, 3, 2), NaN where a face has none
+    face_uv: object = lambda: None  # () -> (F, 3, 2) texture coordinates (NaN where a face has none) or None
     read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
 
@@ -207,8 +207,9 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
                 fmat.append(np.zeros(len(f), dtype=np.int64))
     if not faces:
         raise OclgiError(f"{path}: no faces")
-    face_uv = np.concatenate(uvs) if any(fm.textures for fm in mats.values()) else None
-    return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats, face_uv)
+    face_uv = np.concatenate(uvs)
+    return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats,
+                      lambda: face_uv)
 
 
 def _trimesh_material(geom) -> FileMaterial | None:

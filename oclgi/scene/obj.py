@@ -9,7 +9,9 @@ fan-triangulated, ``usemtl`` names the material of the faces that follow and
 texture names (``map_*``), which :func:`oclgi.scene.materials.from_file`
 turns into a kind. A material library that cannot be found is a warning
 (its materials keep the defaults); a NaN or infinite vertex coordinate is an
-error naming its line.
+error naming its line. A file without any ``usemtl`` takes its groups
+(``g``) as the material names of their faces, each with the mesh's default
+material until a scene file says otherwise.
 """
 
 from __future__ import annotations
@@ -39,7 +41,9 @@ class ObjMesh:
     face_material: np.ndarray  # (F,) int64 index into material_names, -1 = none
     material_names: list[str] = field(default_factory=list)
     materials: dict[str, FileMaterial] = field(default_factory=dict)
-    face_uv: np.ndarray | None = None  # (F, 3, 2) texture coordinates, NaN where a face has none
+    # () -> (F, 3, 2) texture coordinates, NaN where a face has none, or None
+    # when the file has none: read when a texture needs them
+    face_uv: Callable[[], np.ndarray | None] = lambda: None
 
 
 def _plain(words) -> bool:
@@ -141,6 +145,10 @@ def read_obj(path: Path, text: str | None = None,
     name_index: dict[str, int] = {}
     materials: dict[str, FileMaterial] = {}
     cur_mat = -1
+    groups: list[str] = []
+    group_index: dict[str, int] = {}
+    face_group: list[int] = []
+    cur_group = -1
     for lineno, raw in enumerate(text.splitlines(), 1):
         line = raw.split("#", 1)[0].split()
         if not line:
@@ -177,8 +185,15 @@ def read_obj(path: Path, text: str | None = None,
             for j in range(1, len(idx) - 1):
                 faces.append((idx[0], idx[j], idx[j + 1]))
                 face_mat.append(cur_mat)
+                face_group.append(cur_group)
             if "/" in line[1]:  # texture coordinates, read at the end if a texture needs them
                 face_lines.append((lineno, raw, len(uvs), len(faces)))
+        elif key == "g":  # a group: the material name of its faces when the file uses no usemtl
+            group = " ".join(line[1:]) or "default"
+            if group not in group_index:
+                group_index[group] = len(groups)
+                groups.append(group)
+            cur_group = group_index[group]
         elif key == "usemtl":
             name = " ".join(line[1:])
             if name not in name_index:
@@ -199,9 +214,12 @@ def read_obj(path: Path, text: str | None = None,
                 materials.update(read_mtl(path.parent / lib, lib_text))
     if not faces:
         raise OclgiError(f"{path}: no faces")
-    face_uv = None
-    if uvs and face_lines and any(m.textures for m in materials.values()):
-        face_uv = _face_uvs(face_lines, uvs, len(faces), path)
+    if not names and groups:
+        # no usemtl at all (Sponza's OBJ): the groups name the faces' materials,
+        # so a scene file can give each its own ([mesh.materials.floors])
+        names, face_mat = groups, face_group
+    def face_uv():
+        return _face_uvs(face_lines, uvs, len(faces), path) if uvs and face_lines else None
     return ObjMesh(
         vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
         faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
