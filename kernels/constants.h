@@ -21,7 +21,7 @@
 #if !defined(OCLGI_BSDF_DIFFUSE) || !defined(OCLGI_BSDF_PHONG) || !defined(OCLGI_BSDF_MIRROR) ||         \
     !defined(OCLGI_BSDF_DIELECTRIC) || !defined(OCLGI_BSDF_CONDUCTOR) ||                                \
     !defined(OCLGI_BSDF_ROUGH_DIELECTRIC) || !defined(OCLGI_MATERIAL_TWOSIDED) ||                       \
-    !defined(OCLGI_MATERIAL_DELTA) || !defined(OCLGI_CAMERA_MAX_DEPTH)
+    !defined(OCLGI_MATERIAL_DELTA) || !defined(OCLGI_CAMERA_MAX_DEPTH) || !defined(OCLGI_MATERIAL_VERTEX_COLOUR)
 #error "oclgi's material constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 

@@ -71,8 +71,9 @@ inline int path_scatter(TRACE_ARGS, __global const Instance *instances, uint pat
     float4 r = rng_uniform4(seed_lo, seed_hi, path, (uint)b, 0);
     float3 n = tri_normals[tri].xyz;
     BsdfSample bs = bsdf_sample(m, n, -d, r, 1);
-    if (m->texture >= 0) /* only diffuse materials have textures (oclgi/scene/materials.py) */
-        bs.weight *= texture_rgb(TEXTURE_PASS, m->texture, texture_uv(TEXTURE_PASS, instances, tri, o + t * d));
+    /* only diffuse materials have textures and vertex colours (oclgi/scene/materials.py) */
+    if (m->texture >= 0 || (m->flags & OCLGI_MATERIAL_VERTEX_COLOUR))
+        bs.weight *= albedo_tint(TEXTURE_PASS, instances, m, tri, o + t * d);
     float q = fmin(1.0f, fmax(bs.weight.x, fmax(bs.weight.y, bs.weight.z)));
     if (!(r.z < q)) return 0;
     s->power = power * bs.weight / q;

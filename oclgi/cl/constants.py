@@ -88,6 +88,7 @@ BSDF_CONDUCTOR = 4
 BSDF_ROUGH_DIELECTRIC = 5
 MATERIAL_TWOSIDED = 1  # both sides scatter alike (else the back is black)
 MATERIAL_DELTA = 2  # scatters into single directions: no density estimation there
+MATERIAL_VERTEX_COLOUR = 4  # the albedo times the mesh's vertex colours (kernels/texture.h)
 
 # Camera rays pass through mirrors and glass and sample glossy surfaces to
 # a surface with a diffuse part: at most this many surfaces along the way
@@ -121,6 +122,7 @@ DEFINES = {
     "bsdf_rough_dielectric": BSDF_ROUGH_DIELECTRIC,
     "material_twosided": MATERIAL_TWOSIDED,
     "material_delta": MATERIAL_DELTA,
+    "material_vertex_colour": MATERIAL_VERTEX_COLOUR,
     "camera_max_depth": CAMERA_MAX_DEPTH,
     "emitter_spot": EMITTER_SPOT,
     "emitter_sun": EMITTER_SUN,

@@ -149,8 +149,11 @@ class CompiledScene:
         self.materials = _buffer(ctx, mats)
         self.textures, self.texels = _buffer(ctx, tex_records), _buffer(ctx, texels)
         self.tri_uvmap = _buffer(ctx, uvmap)
+        coloured = scene.tri_colour is not None and any(m.vertex_colours for m in scene.materials)
+        colourmap = (textures.colour_maps(v, scene.tri_colour) if coloured else np.zeros((3 * len(v), 4), np.float32))
+        self.tri_colourmap = _buffer(ctx, colourmap)
         self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
-        self.texels_host, self.uvmap_host = texels, uvmap
+        self.texels_host, self.uvmap_host, self.colourmap_host = texels, uvmap, colourmap
         self.emitters = _buffer(ctx, em)
         self.emitter_cdf = _buffer(ctx, cdf_table)
         self.tri_areas = _buffer(ctx, self.areas)
@@ -167,6 +170,7 @@ class CompiledScene:
         equal paths; a checkpoint records it (oclgi/checkpoint.py)."""
         h = hashlib.sha256()
         for a in (self._nodes, self._tris, self.instances_host, self.materials_host, self.texels_host, self.uvmap_host,
+                  self.colourmap_host,
                   self.emitters_host,
                   self.emitter_cdf_host, self.scene.tri_material.astype(np.int32),
                   np.array([self.photon_power_max, self.eps], np.float64)):

@@ -281,11 +281,15 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
                             where + ".lumens")
         for k in set(local):
             materials[k].emission = radiance
+    face_colour = getattr(loaded, "face_colour", None)
+    if face_colour is not None:  # the mesh's diffuse materials take its vertex colours
+        for k in set(local):
+            materials[k].vertex_colours = materials[k].kind == "diffuse"
     textured = loaded is not None and any(materials[k].texture is not None for k in set(local))
     face_uv = loaded.face_uv() if textured else None  # read only when a texture needs them
     if textured and face_uv is None:
         raise OclgiError(f"{label}: a material has a texture but the mesh has no texture coordinates")
-    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -357,7 +361,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         raise OclgiError("scene: no [[mesh]] given")
     materials: list[Material] = []
     verts, faces, fmats, fobjs, offset = [], [], [], [], 0
-    uvs, any_uv = [], False
+    uvs, any_uv, colours, any_colour = [], False, [], False
     # Static meshes form object 0; each movable mesh is an object of its own
     # (an instance with a transform over its own BVH). Triangles are stored
     # object by object, static first, so each object is one contiguous run.
@@ -367,9 +371,11 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm, uv = _mesh(m, i, base_dir, materials, None, file_lights)
+        v, f, fm, uv, colour = _mesh(m, i, base_dir, materials, None, file_lights)
         uvs.append(uv if uv is not None else np.full((len(f), 3, 2), np.nan))
         any_uv = any_uv or uv is not None
+        colours.append(colour if colour is not None else np.full((len(f), 3, 3), np.nan))
+        any_colour = any_colour or colour is not None
         if movable[i]:
             name = _object_name(m, i)
             if any(o.name == name for o in objects):
@@ -417,6 +423,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         materials=materials,
         tri_object=np.concatenate(fobjs),
         tri_uv=np.concatenate(uvs) if any_uv else None,
+        tri_colour=np.concatenate(colours) if any_colour else None,
         objects=objects,
         point_lights=point_lights,
         lights=lights,

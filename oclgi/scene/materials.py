@@ -99,6 +99,8 @@ class Material:
     # (H, W, 3) float32 linear reflectance multiplying the albedo
     # (oclgi/scene/textures.py); diffuse surfaces only
     texture: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # the albedo times the mesh's vertex colours (glTF COLOR_0, PLY colours); diffuse surfaces only
+    vertex_colours: bool = False
 
     @property
     def delta(self) -> bool:
@@ -145,6 +147,8 @@ class Material:
             t = self.texture
             if not (isinstance(t, np.ndarray) and t.dtype == np.float32 and t.ndim == 3 and t.shape[2] == 3):
                 raise OclgiError(f"{where}: texture must be an (H, W, 3) float32 array (oclgi.scene.textures)")
+        if self.vertex_colours and self.kind != "diffuse":
+            raise OclgiError(f"{where}: vertex colours go with a diffuse material, not {self.kind}")
         if not isinstance(self.twosided, (bool, np.bool_)):
             raise OclgiError(f"{where}: twosided must be true or false, got {self.twosided!r}")
         if not (isinstance(self.exponent, (int, float)) and 0 <= self.exponent <= MAX_EXPONENT):
@@ -190,7 +194,8 @@ def from_table(name: str, table: dict, base: Material, read) -> Material:
     m = Material(**{f.name: getattr(base, f.name) for f in fields(Material)})
     m.kind = kind
     if kind != "diffuse":
-        m.texture = None  # a file's texture went with the diffuse surface this table replaces
+        m.texture = None  # a file's texture and colours went with the diffuse surface this table replaces
+        m.vertex_colours = False
     for key in ("albedo", "specular", "transmission"):
         if key in table:
             setattr(m, key, read.vec3(table[key], f"{name}.{key}"))
@@ -355,8 +360,8 @@ def record(materials: list[Material], texture_index: list[int] | None = None) ->
     for i, m in enumerate(materials):
         r = rec[i]
         r["kind"] = KINDS[m.kind]
-        r["flags"] = (constants.MATERIAL_TWOSIDED if m.twosided else 0) | (
-            constants.MATERIAL_DELTA if m.delta else 0)
+        r["flags"] = ((constants.MATERIAL_TWOSIDED if m.twosided else 0) | (constants.MATERIAL_DELTA if m.delta else 0)
+                      | (constants.MATERIAL_VERTEX_COLOUR if m.vertex_colours else 0))
         # dielectrics read their transmission tint from the albedo slot
         r["albedo"] = m.transmission if m.kind in ("dielectric", "rough_dielectric") else m.diffuse_albedo
         r["emission"] = m.emission

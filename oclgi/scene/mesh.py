@@ -40,6 +40,7 @@ class LoadedMesh:
     names: list[str]
     materials: dict[str, FileMaterial]
     face_uv: object = lambda: None  # () -> (F, 3, 2) texture coordinates (NaN where a face has none) or None
+    face_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (NaN where none), or None
     read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
 
@@ -75,7 +76,8 @@ def load_mesh(path: Path) -> LoadedMesh:
 
 def _from_obj(obj, read_file=None) -> LoadedMesh:
     names = [""] + obj.material_names
-    return LoadedMesh(obj.vertices, obj.faces, obj.face_material + 1, names, obj.materials, obj.face_uv, read_file)
+    return LoadedMesh(obj.vertices, obj.faces, obj.face_material + 1, names, obj.materials, face_uv=obj.face_uv,
+                      read_file=read_file)
 
 
 def _beside(path: Path):
@@ -175,7 +177,9 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
 
         loaded = trimesh.Scene(loaded)
     path = label
-    verts, faces, fmat, names, mats, uvs = [], [], [], [""], {}, []
+    verts, faces, fmat, names, mats, uvs, colours = [], [], [], [""], {}, [], []
+    # glTF's COLOR_0 is linear; PLY's colours are 8-bit display (sRGB) values
+    srgb = str(label).lower().endswith(".ply")
     offset = 0
     for name, geom in loaded.geometry.items():
         if not hasattr(geom, "faces") or len(geom.faces) == 0:
@@ -195,6 +199,7 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
             verts.append(v)
             faces.append(f + offset)
             offset += len(v)
+            colours.append(_corner_colours(geom, f, srgb))
             uv = getattr(getattr(geom, "visual", None), "uv", None)
             uvs.append(np.asarray(uv, np.float64)[f] if uv is not None and len(uv) == len(geom.vertices)
                        else np.full((len(f), 3, 2), np.nan))
@@ -208,8 +213,29 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
     if not faces:
         raise OclgiError(f"{path}: no faces")
     face_uv = np.concatenate(uvs)
+    face_colour = np.concatenate(colours) if any(not np.isnan(c).all() for c in colours) else None
     return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats,
-                      lambda: face_uv)
+                      lambda: face_uv, face_colour=face_colour)
+
+
+def _corner_colours(geom, f, srgb: bool) -> np.ndarray:
+    """(F, 3, 3) linear RGB at each face corner from trimesh's vertex or face
+    colours, NaN when the geometry has none."""
+    visual = getattr(geom, "visual", None)
+    kind = getattr(visual, "kind", None)
+    if kind == "vertex":
+        c = np.asarray(visual.vertex_colors, np.float64)[:, :3] / 255.0
+        corner = c[f]
+    elif kind == "face":
+        c = np.asarray(visual.face_colors, np.float64)[:, :3] / 255.0
+        corner = np.repeat(c[:, None, :], 3, axis=1)
+    else:
+        return np.full((len(f), 3, 3), np.nan)
+    if srgb:
+        from .textures import srgb_to_linear
+
+        corner = srgb_to_linear(corner)
+    return corner
 
 
 def _trimesh_material(geom) -> FileMaterial | None:

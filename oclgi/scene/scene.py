@@ -74,6 +74,7 @@ class Scene:
     objects: list[SceneObject] = field(default_factory=lambda: [SceneObject("static")])
     load_seconds: float = 0.0  # reading the scene and its meshes (load_file, load_dict)
     tri_uv: np.ndarray | None = None  # (F, 3, 2) texture coordinates of the corners (textured scenes)
+    tri_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (vertex colours), NaN: none
     # spot, sun and sky lights (oclgi.scene.lights); last, so that positional fields keep their places
     lights: list = field(default_factory=list)
 
@@ -148,6 +149,8 @@ class Scene:
             self.tri_object = np.asarray(self.tri_object)[keep]
             if self.tri_uv is not None:
                 self.tri_uv = np.asarray(self.tri_uv)[keep]
+            if self.tri_colour is not None:
+                self.tri_colour = np.asarray(self.tri_colour)[keep]
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
                           "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
@@ -166,6 +169,13 @@ class Scene:
             if uv.shape != (len(self.faces), 3, 2):
                 raise OclgiError(f"{self.name}: tri_uv must be (F, 3, 2) texture coordinates, got {uv.shape}")
             self.tri_uv = uv
+        if self.tri_colour is not None:
+            col = np.asarray(self.tri_colour, np.float64)
+            if col.shape != (len(self.faces), 3, 3):
+                raise OclgiError(f"{self.name}: tri_colour must be (F, 3, 3) corner colours, got {col.shape}")
+            if ((col < 0) | (col > 1)).any():
+                raise OclgiError(f"{self.name}: vertex colours must lie in [0, 1]")
+            self.tri_colour = col
         if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
             raise OclgiError(f"{self.name}: triangles must be grouped object by object")
         counts = np.bincount(self.tri_object, minlength=len(self.objects))

@@ -117,12 +117,13 @@ def pack(textures: list) -> tuple[np.ndarray, np.ndarray]:
     return records, texels
 
 
-def uv_maps(tri_vertices: np.ndarray, tri_uv: np.ndarray) -> np.ndarray:
-    """(F, 8) float32: per triangle, the affine map from a point of its plane
-    (object space) to its texture coordinates, rows (m_u, c_u, m_v, c_v):
-    uv = (m_u . p + c_u, m_v . p + c_v). A point's barycentrics are linear
-    in it, so the map is exact on the triangle; the device needs no
-    barycentrics to texture a photon's hit (kernels/texture.h)."""
+def affine_maps(tri_vertices: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(F, k, 4) float64: per triangle and per component of ``values`` (F,
+    3, k), given at its corners, the affine map (m, c) from a point p of
+    its plane (object space) to the value there, m . p + c. A point's
+    barycentrics are linear in it, so the map is exact on the triangle: the
+    device needs no barycentrics to texture or colour a photon's hit
+    (kernels/texture.h). NaN values (a corner without one) count as 0."""
     v0 = tri_vertices[:, 0]
     e1, e2 = tri_vertices[:, 1] - v0, tri_vertices[:, 2] - v0
     # the dual basis of (e1, e2) in the plane: g1 . e1 = 1, g1 . e2 = 0, ...
@@ -131,11 +132,24 @@ def uv_maps(tri_vertices: np.ndarray, tri_uv: np.ndarray) -> np.ndarray:
     det = np.where(det > 0, det, 1.0)
     g1 = (c[:, None] * e1 - b[:, None] * e2) / det[:, None]
     g2 = (a[:, None] * e2 - b[:, None] * e1) / det[:, None]
-    uv = np.nan_to_num(tri_uv, nan=0.0)
-    du1, du2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    out = np.zeros((len(v0), 8), np.float64)
-    for k in range(2):  # uv_k(p) = uv0_k + (p - v0) . (du1_k g1 + du2_k g2)
-        m = du1[:, k:k + 1] * g1 + du2[:, k:k + 1] * g2
-        out[:, 4 * k:4 * k + 3] = m
-        out[:, 4 * k + 3] = uv[:, 0, k] - (m * v0).sum(1)
-    return out.astype(np.float32)
+    val = np.nan_to_num(values, nan=0.0)
+    d1, d2 = val[:, 1] - val[:, 0], val[:, 2] - val[:, 0]
+    out = np.zeros((len(v0), val.shape[2], 4), np.float64)
+    for k in range(val.shape[2]):  # value_k(p) = value0_k + (p - v0) . (d1_k g1 + d2_k g2)
+        m = d1[:, k:k + 1] * g1 + d2[:, k:k + 1] * g2
+        out[:, k, :3] = m
+        out[:, k, 3] = val[:, 0, k] - (m * v0).sum(1)
+    return out
+
+
+def uv_maps(tri_vertices: np.ndarray, tri_uv: np.ndarray) -> np.ndarray:
+    """(F, 8) float32: the affine maps (:func:`affine_maps`) to texture
+    coordinates, rows (m_u, c_u, m_v, c_v)."""
+    return affine_maps(tri_vertices, tri_uv).reshape(len(tri_uv), 8).astype(np.float32)
+
+
+def colour_maps(tri_vertices: np.ndarray, tri_colour: np.ndarray) -> np.ndarray:
+    """(3 F, 4) float32: the affine maps to the vertex colours' R, G and B,
+    three float4 rows per triangle; corners without a colour are white."""
+    colour = np.where(np.isnan(tri_colour), 1.0, tri_colour)
+    return affine_maps(tri_vertices, colour).reshape(3 * len(tri_colour), 4).astype(np.float32)

@@ -134,7 +134,7 @@ def max_depth_for(oclgi_max_depth: int) -> int:
     return int(oclgi_max_depth) + 1
 
 
-def _mesh(mi, name, tris, bsdf, emitter=None, uv=None):
+def _mesh(mi, name, tris, bsdf, emitter=None, uv=None, colour=None):
     """A Mitsuba mesh of separate triangles (F, 3, 3), without vertex
     normals; ``uv`` (F, 3, 2): texture coordinates, v up as in OBJ and oclgi
     (Mitsuba's v points down the image: 1 - v)."""
@@ -147,6 +147,8 @@ def _mesh(mi, name, tris, bsdf, emitter=None, uv=None):
     params = mi.traverse(mesh)
     params["vertex_positions"] = type(params["vertex_positions"])(
         np.ascontiguousarray(tris, dtype=np.float32).ravel())
+    if colour is not None:  # corner colours times the albedo: the reflectance (_bsdf)
+        mesh.add_attribute("vertex_color", 3, np.ascontiguousarray(colour, np.float32).ravel())
     if uv is not None:
         flipped = np.stack([uv[..., 0], 1.0 - uv[..., 1]], axis=-1)
         params["vertex_texcoords"] = type(params["vertex_texcoords"])(
@@ -158,6 +160,12 @@ def _mesh(mi, name, tris, bsdf, emitter=None, uv=None):
 
 def _bsdf(mi, material: Material):
     d = to_mitsuba(material)
+    if material.vertex_colours:
+        if material.texture is not None:
+            raise OclgiError(f"material {material.name!r}: the Mitsuba conversion takes a texture or vertex "
+                             "colours, not both")
+        inner = d["bsdf"] if d["type"] == "twosided" else d
+        inner["reflectance"] = {"type": "mesh_attribute", "name": "vertex_color"}
     if material.texture is not None:  # albedo x texture (linear), looked up as oclgi does
         inner = d["bsdf"] if d["type"] == "twosided" else d
         pixels = np.ascontiguousarray(material.texture * np.asarray(material.albedo, np.float32))
@@ -181,7 +189,10 @@ def scene_dict(mi, scene_or_engine) -> dict:
                                         "radiance": {"type": "rgb", "value": [float(c) for c in m.emission]}})
             name = f"mesh_{obj}_{mat_id}"
             uv = scene.tri_uv[sel] if scene.tri_uv is not None and m.texture is not None else None
-            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv)
+            colour = None
+            if m.vertex_colours and scene.tri_colour is not None:
+                colour = np.where(np.isnan(scene.tri_colour[sel]), 1.0, scene.tri_colour[sel]) * np.asarray(m.albedo)
+            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv, colour)
     out.update(lights.mitsuba_emitters(mi, scene))
     return out
 

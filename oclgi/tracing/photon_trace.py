@@ -59,7 +59,7 @@ class PhotonTracer:
     def _trace_args(self) -> tuple:
         """TRACE_ARGS of kernels/photon_trace.cl."""
         c = self.compiled
-        return (c.tri_normals, c.tri_material, c.materials, c.tri_uvmap, c.tri_object, c.textures, c.texels,
+        return (c.tri_normals, c.tri_material, c.materials, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
                 c.emitters, c.emitter_cdf, c.n_emitters,
                 self.seed & 0xFFFFFFFF, self.seed >> 32, self.max_depth, c.eps)
 
