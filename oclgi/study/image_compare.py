@@ -100,6 +100,8 @@ def edge_mask(points: QueryPoints, edge_px: int = 3, scene=None, spp: int = 1) -
     if isinstance(edge_px, bool) or not isinstance(edge_px, (int, np.integer)) or edge_px < 0:
         raise OclgiError(f"edge_px must be an integer >= 0, got {edge_px!r}")
     spp = params.samples_per_pixel(spp)
+    if spp == 1 or getattr(points, "shape", None) is None:  # (discontinuities checks the points)
+        return dilate(discontinuities(points, scene), int(edge_px))
     h, w = points.shape
     if h % spp:
         raise OclgiError(f"edge_mask: {h} rows of points are not {spp} samples of an image")
