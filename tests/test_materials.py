@@ -168,3 +168,32 @@ def test_photon_maps_store_no_impacts_on_mirrors(cl_env):
     np.testing.assert_allclose(impacts[:, 2], -3.0, atol=1e-4)  # all on the wall
     seg, _ = engine.trace(20_000)
     assert ((seg["tri"] >= 0) & (seg["tri"] < 2)).sum() > 1000  # photons did hit the mirror
+
+
+def test_gltf_materials_are_named_by_material_and_read_as_kinds(tmp_path):
+    """glTF metallic-roughness: a metal becomes a GGX conductor (alpha =
+    roughness^2), a dielectric a diffuse surface; overrides are keyed by
+    the material's name, which geometries sharing it share."""
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    def quad(y, material):
+        q = trimesh.Trimesh([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1]], [[0, 2, 1], [0, 3, 2]], process=False)
+        q.visual = TextureVisuals(material=material)
+        return q
+
+    gold = PBRMaterial(name="gold", baseColorFactor=[255, 200, 80, 255], metallicFactor=1.0, roughnessFactor=0.5)
+    paint = PBRMaterial(name="paint", baseColorFactor=[128, 128, 255, 255], metallicFactor=0.0, roughnessFactor=0.9)
+    lamp = PBRMaterial(name="lamp", baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 1, 1])
+    trimesh.Scene({"a": quad(0.0, gold), "b": quad(0.5, gold), "c": quad(1.0, paint),
+                   "light": quad(2.0, lamp)}).export(tmp_path / "s.glb")
+    scene = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb"),
+                                       "materials": {"paint": {"albedo": [0.2, 0.3, 0.4]}}}]})
+    by_name = {m.name.split(":")[-1]: m for m in scene.materials}
+    assert set(by_name) >= {"gold", "paint", "lamp"}
+    g = by_name["gold"]
+    assert g.kind == "conductor" and g.roughness == pytest.approx(0.25)
+    assert g.specular == pytest.approx((1.0, 200 / 255, 80 / 255))
+    assert by_name["paint"].kind == "diffuse" and by_name["paint"].albedo == (0.2, 0.3, 0.4)
+    assert np.bincount(scene.tri_material)[[m.name.endswith("gold") for m in scene.materials].index(True)] == 4

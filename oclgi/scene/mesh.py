@@ -205,9 +205,13 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
                        else np.full((len(f), 3, 2), np.nan))
             mat = _trimesh_material(geom)
             if mat is not None:
-                names.append(name)
-                mats[name] = mat
-                fmat.append(np.full(len(f), len(names) - 1))
+                # named by the material (a scene file's [mesh.materials.NAME]), or by the
+                # geometry when the material has no name; geometries sharing one share it
+                key = _material_name(geom) or name
+                if key not in mats:
+                    names.append(key)
+                    mats[key] = mat
+                fmat.append(np.full(len(f), names.index(key)))
             else:
                 fmat.append(np.zeros(len(f), dtype=np.int64))
     if not faces:
@@ -236,6 +240,12 @@ def _corner_colours(geom, f, srgb: bool) -> np.ndarray:
 
         corner = srgb_to_linear(corner)
     return corner
+
+
+def _material_name(geom) -> str:
+    mat = getattr(getattr(geom, "visual", None), "material", None)
+    name = getattr(mat, "name", None)
+    return name.strip() if isinstance(name, str) else ""
 
 
 def _trimesh_material(geom) -> FileMaterial | None:
