@@ -197,3 +197,21 @@ def test_gltf_materials_are_named_by_material_and_read_as_kinds(tmp_path):
     assert g.specular == pytest.approx((1.0, 200 / 255, 80 / 255))
     assert by_name["paint"].kind == "diffuse" and by_name["paint"].albedo == (0.2, 0.3, 0.4)
     assert np.bincount(scene.tri_material)[[m.name.endswith("gold") for m in scene.materials].index(True)] == 4
+
+
+def test_a_gltf_camera_is_used_when_the_scene_names_none(tmp_path):
+    import trimesh
+
+    s = trimesh.Scene(trimesh.creation.box())
+    s.set_camera(angles=(0, 0, 0), distance=5, fov=(60, 45))
+    s.export(tmp_path / "s.glb")
+    scene = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb"), "emission": [1, 1, 1],
+                                       "transform": {"translate": [0, 1, 0]}}]})
+    cam = scene.camera
+    assert cam is not None and cam.fov == pytest.approx(45.0)
+    np.testing.assert_allclose(cam.position, [0, 1, 5], atol=1e-9)  # the node's place, moved with the mesh
+    np.testing.assert_allclose(np.subtract(cam.look_at, cam.position), [0, 0, -1], atol=1e-9)
+    assert cam.width == round(256 * 4 / 3) and cam.height == 256
+    named = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb"), "emission": [1, 1, 1]}],
+                             "camera": {"position": [0, 0, 9], "look_at": [0, 0, 0]}})
+    assert named.camera.position == (0.0, 0.0, 9.0)

@@ -289,7 +289,12 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
     face_uv = loaded.face_uv() if textured else None  # read only when a texture needs them
     if textured and face_uv is None:
         raise OclgiError(f"{label}: a material has a texture but the mesh has no texture coordinates")
-    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour
+    camera = getattr(loaded, "camera", None)
+    if camera is not None and "transform" in desc:  # the file's camera moves with its mesh
+        camera = replace(camera, position=tuple(m @ np.asarray(camera.position) + shift),
+                         look_at=tuple(m @ np.asarray(camera.look_at) + shift),
+                         up=tuple(m @ np.asarray(camera.up)))
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour, camera
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -362,6 +367,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     materials: list[Material] = []
     verts, faces, fmats, fobjs, offset = [], [], [], [], 0
     uvs, any_uv, colours, any_colour = [], False, [], False
+    cameras = []  # the meshes' own (glTF) cameras
     # Static meshes form object 0; each movable mesh is an object of its own
     # (an instance with a transform over its own BVH). Triangles are stored
     # object by object, static first, so each object is one contiguous run.
@@ -371,7 +377,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm, uv, colour = _mesh(m, i, base_dir, materials, None, file_lights)
+        v, f, fm, uv, colour, file_camera = _mesh(m, i, base_dir, materials, None, file_lights)
+        cameras.append(file_camera)
         uvs.append(uv if uv is not None else np.full((len(f), 3, 2), np.nan))
         any_uv = any_uv or uv is not None
         colours.append(colour if colour is not None else np.full((len(f), 3, 3), np.nan))
@@ -408,6 +415,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
             height=_number(c.get("height", 256), "camera.height", int),
         )
         camera = validate_camera(camera)
+    elif any(c is not None for c in cameras):  # none named: the first mesh file's own (glTF)
+        camera = validate_camera(next(c for c in cameras if c is not None))
 
     tables = {"photons": desc.get("photons", {}), "estimator": desc.get("estimator", {})}
     _check_keys(tables["photons"], _PHOTONS, "photons")

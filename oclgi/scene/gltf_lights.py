@@ -1,4 +1,5 @@
-"""A glTF file's punctual lights (KHR_lights_punctual) as oclgi lights.
+"""A glTF file's punctual lights (KHR_lights_punctual) as oclgi lights, and
+its camera (``read_camera``).
 
 trimesh reads a glTF's meshes but not this extension, so the file's JSON is
 read here once more, for its lights and the nodes that place them:
@@ -90,26 +91,20 @@ def _local(node: dict, where: str) -> np.ndarray:
     return m
 
 
-def read(data: bytes, suffix: str, label: str) -> list:
-    """The punctual lights of a glTF file's default scene, in its world space."""
-    doc = _json(data, suffix)
-    if doc is None:
-        return []
-    table = (doc.get("extensions") or {}).get(EXTENSION) if isinstance(doc.get("extensions"), dict) else None
-    if not isinstance(table, dict) or not table.get("lights"):
-        return []
-    defs, nodes = table["lights"], doc.get("nodes") or []
-    if not isinstance(defs, list) or not isinstance(nodes, list):
-        raise OclgiError(f"{label}: {EXTENSION}: malformed lights or nodes")
+def walk(doc: dict, label: str):
+    """(index, node, world matrix) of every node of the default scene, depth
+    first in the file's order (glTF's node graph, checked as it is read)."""
+    nodes = doc.get("nodes") or []
+    if not isinstance(nodes, list):
+        raise OclgiError(f"{label}: malformed nodes")
     scenes = doc.get("scenes") or [{"nodes": list(range(len(nodes)))}]
     scene = doc.get("scene", 0)
     if not isinstance(scene, int) or not 0 <= scene < len(scenes) or not isinstance(scenes[scene], dict):
         raise OclgiError(f"{label}: scene {scene!r} is not one of the file's scenes")
-    out = []
     roots = scenes[scene].get("nodes", [])
     if not isinstance(roots, list):
         raise OclgiError(f"{label}: scene {scene}: malformed nodes")
-    stack = [(i, np.eye(4)) for i in reversed(roots)]  # depth first, in the file's order
+    stack = [(i, np.eye(4)) for i in reversed(roots)]
     seen = set()
     while stack:
         i, parent = stack.pop()
@@ -120,19 +115,69 @@ def read(data: bytes, suffix: str, label: str) -> list:
         seen.add(i)
         node, where = nodes[i], f"{label}: node {i}"
         world = parent @ _local(node, where)
-        ext = (node.get("extensions") or {}).get(EXTENSION) if isinstance(node.get("extensions"), dict) else None
-        if isinstance(ext, dict) and "light" in ext:
-            k = ext["light"]
-            if not isinstance(k, int) or not 0 <= k < len(defs):
-                raise OclgiError(f"{where}: {EXTENSION} light {k!r} is not one of the file's {len(defs)}")
-            light = _light(defs[k], world, f"{label}: {EXTENSION} light {k}")
-            if light is not None:
-                out.append(light)
+        yield i, node, world
         children = node.get("children", [])
         if not isinstance(children, list):
             raise OclgiError(f"{where}.children: expected a list of node indices, got {children!r}")
         stack.extend((c, world) for c in reversed(children))
+
+
+def read(data: bytes, suffix: str, label: str) -> list:
+    """The punctual lights of a glTF file's default scene, in its world space."""
+    doc = _json(data, suffix)
+    if doc is None:
+        return []
+    table = (doc.get("extensions") or {}).get(EXTENSION) if isinstance(doc.get("extensions"), dict) else None
+    if not isinstance(table, dict) or not table.get("lights"):
+        return []
+    defs = table["lights"]
+    if not isinstance(defs, list):
+        raise OclgiError(f"{label}: {EXTENSION}: malformed lights")
+    out = []
+    for i, node, world in walk(doc, label):
+        ext = (node.get("extensions") or {}).get(EXTENSION) if isinstance(node.get("extensions"), dict) else None
+        if isinstance(ext, dict) and "light" in ext:
+            k = ext["light"]
+            if not isinstance(k, int) or not 0 <= k < len(defs):
+                raise OclgiError(f"{label}: node {i}: {EXTENSION} light {k!r} is not one of the file's {len(defs)}")
+            light = _light(defs[k], world, f"{label}: {EXTENSION} light {k}")
+            if light is not None:
+                out.append(light)
     return out
+
+
+def read_camera(data: bytes, suffix: str, label: str, height: int = 256):
+    """The first perspective camera of a glTF file's default scene as an
+    oclgi Camera (looking along its node's -Z, +Y up; ``yfov`` the vertical
+    field of view; the image ``height`` pixels high and as wide as its
+    ``aspectRatio`` says, square without one), or None."""
+    from .scene import Camera
+
+    doc = _json(data, suffix)
+    cameras = doc.get("cameras") if doc is not None else None
+    if not isinstance(cameras, list) or not cameras:
+        return None
+    for i, node, world in walk(doc, label):
+        k = node.get("camera")
+        if not isinstance(k, int) or not 0 <= k < len(cameras) or not isinstance(cameras[k], dict):
+            continue
+        persp = cameras[k].get("perspective")
+        if cameras[k].get("type") != "perspective" or not isinstance(persp, dict):
+            continue
+        yfov = persp.get("yfov")
+        aspect = persp.get("aspectRatio", 1.0)
+        if not (isinstance(yfov, (int, float)) and 0 < yfov < math.pi and isinstance(aspect, (int, float))
+                and 0.01 < aspect < 100):
+            raise OclgiError(f"{label}: camera {k}: yfov must be in (0, pi) and aspectRatio positive")
+        eye = world[:3, 3]
+        forward = -world[:3, 2]
+        up = world[:3, 1]
+        if not (np.isfinite(world).all() and np.linalg.norm(forward) > 0 and np.linalg.norm(up) > 0):
+            raise OclgiError(f"{label}: camera {k}'s node {i} has a degenerate transform")
+        return Camera(position=tuple(float(x) for x in eye), look_at=tuple(float(x) for x in eye + forward),
+                      up=tuple(float(x) for x in up / np.linalg.norm(up)), fov=math.degrees(yfov),
+                      width=max(1, int(round(height * aspect))), height=height)
+    return None
 
 
 def _light(d, world: np.ndarray, where: str):

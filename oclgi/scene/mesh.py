@@ -43,6 +43,7 @@ class LoadedMesh:
     face_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (NaN where none), or None
     read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
+    camera: object = None  # a glTF's camera (gltf_lights.read_camera), or None
 
 
 def is_file(path: Path, what: str) -> bool:
@@ -157,6 +158,7 @@ def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
         from . import gltf_lights
 
         mesh.lights = gltf_lights.read(data, suffix, str(path))
+        mesh.camera = gltf_lights.read_camera(data, suffix, str(path))
     return mesh
 
 
