@@ -215,3 +215,47 @@ def test_a_gltf_camera_is_used_when_the_scene_names_none(tmp_path):
     named = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb"), "emission": [1, 1, 1]}],
                              "camera": {"position": [0, 0, 9], "look_at": [0, 0, 0]}})
     assert named.camera.position == (0.0, 0.0, 9.0)
+
+
+def _patch_glb(path, edit):
+    """Rewrite a .glb's JSON chunk through ``edit(doc)`` (its binary chunk kept)."""
+    import json
+    import struct
+
+    data = path.read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + n])
+    rest = data[20 + n:]
+    edit(doc)
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    body = struct.pack("<II", len(js), 0x4E4F534A) + js + rest
+    path.write_bytes(b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body)
+
+
+def test_gltf_material_extensions_make_glass_and_bright_lamps(tmp_path):
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    def quad(y, material):
+        q = trimesh.Trimesh([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1]], [[0, 2, 1], [0, 3, 2]], process=False)
+        q.visual = TextureVisuals(material=material)
+        return q
+
+    glass = PBRMaterial(name="glass", baseColorFactor=[255, 255, 255, 255], metallicFactor=0.0, roughnessFactor=0.0)
+    lamp = PBRMaterial(name="lamp", baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 0.5, 0.25])
+    trimesh.Scene({"g": quad(0.0, glass), "l": quad(2.0, lamp)}).export(tmp_path / "s.glb")
+
+    def edit(doc):
+        for m in doc["materials"]:
+            if m["name"] == "glass":
+                m["extensions"] = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
+                                   "KHR_materials_ior": {"ior": 1.45}}
+            if m["name"] == "lamp":
+                m["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": 8.0}}
+    _patch_glb(tmp_path / "s.glb", edit)
+    scene = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb")}]})
+    by_name = {m.name.split(":")[-1]: m for m in scene.materials}
+    assert by_name["glass"].kind == "dielectric" and by_name["glass"].ior == pytest.approx(1.45)
+    np.testing.assert_allclose(by_name["lamp"].emission, [8.0, 4.0, 2.0], rtol=1e-6)

@@ -37,7 +37,7 @@ from .lights import PointLight, SpotLight, SunLight
 EXTENSION = "KHR_lights_punctual"
 
 
-def _json(data: bytes, suffix: str):
+def document(data: bytes, suffix: str):
     """The glTF JSON of a .gltf (text) or .glb (its first chunk), or None."""
     try:
         if suffix == ".glb":
@@ -124,7 +124,7 @@ def walk(doc: dict, label: str):
 
 def read(data: bytes, suffix: str, label: str) -> list:
     """The punctual lights of a glTF file's default scene, in its world space."""
-    doc = _json(data, suffix)
+    doc = document(data, suffix)
     if doc is None:
         return []
     table = (doc.get("extensions") or {}).get(EXTENSION) if isinstance(doc.get("extensions"), dict) else None
@@ -153,7 +153,7 @@ def read_camera(data: bytes, suffix: str, label: str, height: int = 256):
     ``aspectRatio`` says, square without one), or None."""
     from .scene import Camera
 
-    doc = _json(data, suffix)
+    doc = document(data, suffix)
     cameras = doc.get("cameras") if doc is not None else None
     if not isinstance(cameras, list) or not cameras:
         return None

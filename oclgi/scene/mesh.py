@@ -159,6 +159,9 @@ def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
 
         mesh.lights = gltf_lights.read(data, suffix, str(path))
         mesh.camera = gltf_lights.read_camera(data, suffix, str(path))
+        from . import gltf_materials
+
+        gltf_materials.apply(mesh.materials, gltf_materials.extensions(data, suffix))
     return mesh
 
 
