@@ -17,10 +17,12 @@
  * product of the sample weights on the way; 1 for a direct view). A
  * modified Phong surface is the point with probability p_d (its diffuse
  * lobe's share, bsdf.h phong_p_diffuse), weight / p_d, and otherwise
- * reflects through its highlight. Misses: tri = -1 when the camera ray
- * itself sees nothing; a ray lost later (escaping, absorbed, or past
- * OCLGI_CAMERA_MAX_DEPTH surfaces) keeps the first surface's point with a
- * zero normal (nothing is estimated there) and weight 0: covered, black.
+ * reflects through its highlight. A ray that leaves the scene (from the
+ * eye, or after mirrors and glass) ends as tri = -1, position = its
+ * direction (what background.h looks up), a zero normal (nothing is
+ * estimated there) and weight (the path's weight, w = 1 when it met a
+ * surface first: covered); a ray absorbed on the way, or still going past
+ * OCLGI_CAMERA_MAX_DEPTH surfaces, sees black: weight (0, 0, 0, 1).
  *
  * Random numbers: rng.h keyed by the camera's own seed, the pixel, and
  * sample * OCLGI_CAMERA_MAX_DEPTH + surface, so a pixel's path is the same
@@ -52,14 +54,18 @@ __kernel void camera_visible_points(SCENE_ARGS,
     float3 o = eye.xyz;
     float3 d = normalize(forward.xyz + sx * right.xyz + sy * up.xyz);
     float3 weight = (float3)(1.0f);
-    float4 first = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
     uint pixel = (uint)(py * width + px);
     for (int depth = 0; depth < OCLGI_CAMERA_MAX_DEPTH; ++depth) {
         Hit h;
         scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
-        if (h.tri < 0) break;
+        if (h.tri < 0) { /* left the scene along d: the background's */
+            positions[i] = (float4)(d, as_float(-1));
+            normals[i] = (float4)(0.0f);
+            barys[i] = (float2)(0.0f);
+            weights[i] = (float4)(weight, depth > 0 ? 1.0f : 0.0f);
+            return;
+        }
         float3 p = o + h.t * d;
-        if (depth == 0) first = (float4)(p, as_float(h.tri));
         __global const Material *m = &materials[tri_material[h.tri]];
         float3 n = tri_normals[h.tri].xyz;
         float front = dot(n, d) < 0.0f ? 1.0f : 0.0f;
@@ -88,9 +94,9 @@ __kernel void camera_visible_points(SCENE_ARGS,
         if (!(fmax(weight.x, fmax(weight.y, weight.z)) > 0.0f)) break;
         o = p + eps * (dot(d, ns) < 0.0f ? -ns : ns);
     }
-    /* lost on the way (or nothing seen: first.w is -1) */
-    positions[i] = first;
+    /* absorbed, or still on its way: covered, black */
+    positions[i] = (float4)(0.0f, 0.0f, 0.0f, as_float(-1));
     normals[i] = (float4)(0.0f);
     barys[i] = (float2)(0.0f);
-    weights[i] = (float4)(0.0f);
+    weights[i] = (float4)(0.0f, 0.0f, 0.0f, 1.0f);
 }

@@ -24,6 +24,9 @@ __kernel void layout_probe(__global int *out)
     OFF(Material, specular); OFF(Material, exponent); OFF(Material, roughness); OFF(Material, ior);
     OFF(Material, texture); OFF(Material, pad);
     SIZE(Texture); OFF(Texture, offset); OFF(Texture, width); OFF(Texture, height); OFF(Texture, pad);
+    SIZE(Background); OFF(Background, radiance); OFF(Background, kind); OFF(Background, up);
+    OFF(Background, hemisphere); OFF(Background, offset); OFF(Background, width); OFF(Background, height);
+    OFF(Background, pad);
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
     OFF(Emitter, e2); OFF(Emitter, a); OFF(Emitter, power); OFF(Emitter, b);
     SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);

@@ -108,6 +108,18 @@ typedef struct {
     int pad;
 } Texture;
 
+/* What a camera ray leaving the scene sees (background.h). */
+typedef struct {
+    float radiance[3]; /* a uniform sky's */
+    int kind;          /* -1: black; OCLGI_EMITTER_SKY or OCLGI_EMITTER_ENVMAP */
+    float up[3];
+    int hemisphere;    /* 1: the sky is above the plane normal to up only */
+    int offset;        /* an environment map's texels */
+    int width;
+    int height;
+    int pad;
+} Background;
+
 /* One light (kernels/light.h samples it; oclgi/scene/lights.py writes
  * it). Fields by kind:
  *             p            e1            e2       a           b

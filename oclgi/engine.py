@@ -468,7 +468,8 @@ class Engine:
         wts = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=points.weights4())
         alb = cl.Buffer(self.ctx, mf.WRITE_ONLY, n * 16)
         launch(self.queue, prog.image_shade, n, pos, nrm, irradiance, c.tri_material, c.materials, wts, c.instances,
-               c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels, n, rad, alb)
+               c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels, c.background, c.background_texels,
+               n, rad, alb)
 
         if spp > 1:  # the box filter over a pixel's samples, in a fixed order (the same bits every run)
             samples = np.empty((spp, h // spp, w, 4), np.float32)

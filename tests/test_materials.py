@@ -102,11 +102,19 @@ def test_a_mirror_shows_the_points_it_reflects(cl_env):
 
 
 def test_camera_paths_are_the_same_for_diffuse_scenes(scenes_dir):
-    """All-diffuse scenes: every visible point has weight 1, and a lost ray does not exist."""
+    """All-diffuse scenes: every visible point has weight 1; a pixel that
+    sees nothing holds its ray's direction, weight 1 and no coverage."""
     engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
+    cam = engine.view_camera(width=32, height=32)
     pts = engine.camera_points(width=32, height=32)
     hit = pts.tri >= 0
-    assert (pts.weights[hit] == 1).all() and (pts.weights[~hit] == 0).all()
+    assert hit.sum() > 500 and (~hit).sum() > 50
+    assert (pts.weights[hit] == 1).all()
+    np.testing.assert_array_equal(pts.weights[~hit], np.tile([1, 1, 1, 0], ((~hit).sum(), 1)))
+    d = pts.positions[~hit, :3].astype(np.float64)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-6)
+    assert (d @ (np.subtract(cam.look_at, cam.position) / np.linalg.norm(np.subtract(cam.look_at, cam.position)))
+            > 0.8).all()
 
 
 @pytest.mark.parametrize("kind", ["dielectric", "mirror", "rough_dielectric"])
@@ -150,6 +158,20 @@ def test_retrace_through_glass_equals_a_fresh_trace(scenes_dir, rng):
     stored = seg.copy()
     stored["power"] *= engine.photon_watts(10_000)
     assert stored.tobytes() == fresh_seg.tobytes()
+
+
+def test_the_sky_is_seen_where_rays_leave_the_scene():
+    """A camera looking up from under a mirror-less open box sees the sky's
+    radiance above the horizon, black below it; with a sky every pixel is
+    covered (alpha 1)."""
+    floor = {"vertices": [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], "faces": [[0, 2, 1], [0, 3, 2]]}
+    scene = oclgi.load_dict({"mesh": [floor], "sky": {"radiance": [0.2, 0.3, 0.5]},
+                             "camera": {"position": [0, 0.5, 3], "look_at": [0, 0.5, 0], "width": 16, "height": 16,
+                                        "fov": 90}})
+    r = oclgi.Engine(scene).render(photons=20_000, radius=0.1)
+    assert (r.pixels[..., 3] == 255).all()
+    np.testing.assert_allclose(r.radiance[0, 0], [0.2, 0.3, 0.5], rtol=1e-6)  # the top corner: sky
+    assert r.radiance[-1, 0].max() == 0  # below the horizon, past the floor: black
 
 
 def test_photon_maps_store_no_impacts_on_mirrors(cl_env):

@@ -54,7 +54,7 @@ Segment = np.dtype(
 # reflectance (a dielectric's transmission tint); specular the highlight's,
 # mirror's or conductor's reflectance (a dielectric's reflection tint);
 # exponent the Phong lobe's n, roughness GGX's alpha, ior the dielectric's
-# index (inside over outside); texture -1 (none yet).
+# index (inside over outside); texture the albedo's (a Texture index), -1: none.
 Material = np.dtype(
     [
         ("albedo", f4, 3), ("kind", i4),
@@ -68,6 +68,19 @@ Material = np.dtype(
 # texels are width x height float4 from offset in the scene's texel array,
 # row-major, the top row first.
 Texture = np.dtype([("offset", i4), ("width", i4), ("height", i4), ("pad", i4)])
+
+# Background, 48 bytes (kernels/background.h; oclgi/scene/background.py
+# writes it): what a camera ray that leaves the scene sees. kind -1: black;
+# EMITTER_SKY: radiance (from above the plane normal to up when hemisphere
+# is 1); EMITTER_ENVMAP: the width x height radiance texels from offset in
+# the background's texel array (Mitsuba's equirectangular convention).
+Background = np.dtype(
+    [
+        ("radiance", f4, 3), ("kind", i4),
+        ("up", f4, 3), ("hemisphere", i4),
+        ("offset", i4), ("width", i4), ("height", i4), ("pad", i4),
+    ]
+)
 
 # Emitter, 64 bytes (kernels/oclgi_types.h has the fields of each kind,
 # kernels/light.h samples them, oclgi/scene/lights.py writes them): p, e1,
@@ -115,7 +128,7 @@ ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
     "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment,
-    "Material": Material, "Texture": Texture, "Emitter": Emitter,
+    "Material": Material, "Texture": Texture, "Background": Background, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }
 

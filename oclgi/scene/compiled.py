@@ -21,7 +21,7 @@ from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Tri
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from . import materials, textures
+from . import background, materials, textures
 from .lights import emitter_rows, escaping_area_lights
 from .scene import OclgiWarning, Scene
 
@@ -152,6 +152,8 @@ class CompiledScene:
         coloured = scene.tri_colour is not None and any(m.vertex_colours for m in scene.materials)
         colourmap = (textures.colour_maps(v, scene.tri_colour) if coloured else np.zeros((3 * len(v), 4), np.float32))
         self.tri_colourmap = _buffer(ctx, colourmap)
+        bg, bg_texels = background.record(scene)
+        self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
         self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
         self.texels_host, self.uvmap_host, self.colourmap_host = texels, uvmap, colourmap
         self.emitters = _buffer(ctx, em)
