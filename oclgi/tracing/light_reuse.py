@@ -318,14 +318,17 @@ class LightReuse:
         t1 = time.perf_counter()
         scale = self.compiled.fixed_scale(self.paths_per_position)
         irr = np.empty((estimator.n, 4), np.float32)
-        cl.enqueue_copy(self.queue, irr, estimator.resolve(scale))
+        device = estimator.resolve(scale)
+        cl.enqueue_copy(self.queue, irr, device)
         t2 = time.perf_counter()
         p = getattr(self, "run_params", self.params)
         stats = Stats(photons=self.paths_per_position, segments=self.segments, points=estimator.n, method=p.method,
                       radius=float(p.radius or 0.0))
         stats.seconds = {"frame": t1 - t0, "resolve": t2 - t1}
-        return Estimate(irr[:, :3], estimator.accumulators(), scale, stats, estimator.points, estimator.work(),
-                        estimator)
+        out = Estimate(irr[:, :3], estimator.accumulators(), scale, stats, estimator.points, estimator.work(),
+                       estimator)
+        out.device_irradiance = device  # float4 per point, for Engine.shade (until the next frame)
+        return out
 
     def frames_irradiance(self, points, method=None, radius=None, **options) -> list[Estimate]:
         """Every frame's Estimate at ``points`` (one estimator, reset per frame)."""

@@ -1,0 +1,217 @@
+"""Moving lights by path reuse (oclgi/tracing/light_reuse.py, kernels/light_reuse.cl).
+
+Unbiasedness: each frame's mean over many seeds against an independent
+per-frame computation (a fresh Engine with the light at that position,
+Engine.irradiance), a two-sample z-test per point and frame with a
+Bonferroni correction: the family of F x P tests has a false-alarm rate of
+at most ALPHA, so each test is run at ALPHA / (F x P). Variances are
+reported, not asserted tightly. Bit-exactness: the same seed gives the same
+frames (the int64 sums) whatever the batch split or the work-group size.
+"""
+
+from statistics import NormalDist
+
+import numpy as np
+import pytest
+
+import oclgi
+from oclgi.errors import OclgiError
+from oclgi.tracing.light_reuse import LightReuse, light_path
+
+from cli_run import in_process
+from conftest import SCENES
+
+BOX = str(SCENES / "cornell-box" / "CornellBox-Original.obj")
+ALPHA = 1e-3  # family-wise false-alarm rate of each unbiasedness test
+POSITIONS = np.array([[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4], [0.3, 1.1, 0.5]])
+AXES = np.array([[0.0, -1.0, 0.0], [-0.3, -1.0, 0.0], [0.2, -1.0, 0.3], [0.0, -1.0, -0.4]])
+
+
+def box(position, spot=None, name="lamp", photons=20_000, max_depth=6):
+    """The Cornell box lit by one point light (or a spot with axis ``spot``), its area light off."""
+    light = {"name": name, "position": [float(c) for c in position], "intensity": [1.0, 0.8, 0.6]}
+    tables = ({"spot_light": [{**light, "direction": [float(c) for c in spot], "cone_angle": 50.0,
+                               "cone_delta": 15.0}]} if spot is not None else {"point_light": [light]})
+    return oclgi.load_dict({"mesh": [{"path": BOX, "materials": {"light": {"emission": [0, 0, 0]}}}], **tables,
+                            "photons": {"count": photons, "seed": 1, "max_depth": max_depth}})
+
+
+def points(n_floor=10, n_wall=6):
+    """Query points on the floor and the back wall, clear of the edges by more than the radius."""
+    r = np.random.default_rng(7)
+    floor = [[x, 0.0, z, 0, 1, 0] for x, z in r.uniform([-0.85, -0.85], [0.85, 0.75], (n_floor, 2))]
+    wall = [[x, y, -1.04, 0, 0, 1] for x, y in r.uniform([-0.8, 0.2], [0.8, 1.8], (n_wall, 2))]
+    return np.array(floor + wall)
+
+
+RADIUS = 0.12
+N = 1500  # paths per position
+SEEDS = 20
+
+
+def _frames(engine, seed, axes=None, method="detp_disc_index", **kw):
+    reuse = LightReuse(engine, "lamp", POSITIONS, axes, photons=N, seed=seed, max_depth=6, **kw)
+    return [e.irradiance.sum(axis=1) for e in reuse.frames_irradiance(points(), method=method, radius=RADIUS)]
+
+
+@pytest.mark.parametrize("kind", ["point", "spot"])
+def test_each_frame_is_unbiased(kind):
+    spot = kind == "spot"
+    axes = AXES if spot else None
+    engine = oclgi.Engine(box(POSITIONS[0], AXES[0] if spot else None))
+    reuse = np.array([_frames(engine, 1000 + s, axes) for s in range(SEEDS)])  # (seeds, F, P)
+    ref = []
+    for j in range(len(POSITIONS)):
+        eng = oclgi.Engine(box(POSITIONS[j], AXES[j] if spot else None))
+        ref.append([eng.irradiance(points(), photons=len(POSITIONS) * N, radius=RADIUS, seed=1 + s,
+                                   max_depth=6).irradiance.sum(axis=1) for s in range(SEEDS)])
+    ref = np.array(ref).transpose(1, 0, 2)  # (seeds, F, P): equal path counts per frame
+    m1, m2 = reuse.mean(0), ref.mean(0)
+    v1, v2 = reuse.var(0, ddof=1), ref.var(0, ddof=1)
+    se = np.sqrt(v1 / SEEDS + v2 / SEEDS)
+    lit = se > 0  # points that no position lights are 0 in both
+    z = np.abs(m1 - m2)[lit] / se[lit]
+    tests = z.size
+    z_crit = NormalDist().inv_cdf(1 - ALPHA / (2 * tests))
+    ratio = (v1[lit] / np.maximum(v2[lit], 1e-30))
+    print(f"\n{kind}: {tests} tests, max |z| {z.max():.2f} (Bonferroni critical {z_crit:.2f}); "
+          f"variance reuse / recompute per frame (median over points, equal paths): "
+          f"{[float(np.median((v1 / np.maximum(v2, 1e-30))[j][lit[j]])) for j in range(len(POSITIONS))]}")
+    assert lit.sum() >= 0.8 * lit.size
+    assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
+    assert np.isfinite(ratio).all()
+
+
+def _sums(engine, seed=5, batch_paths=None, method="detp_disc_index", axes=None):
+    reuse = LightReuse(engine, "lamp", POSITIONS, axes, photons=900, seed=seed, max_depth=6, batch_paths=batch_paths)
+    est = reuse.estimator(points(), method=method, radius=RADIUS)
+    return [reuse.estimate(j, est).accumulators for j in range(reuse.frames)]
+
+
+@pytest.mark.parametrize("method", ["detp_disc_index", "detp", "photon_map", "impact"])
+def test_frames_are_bit_exact_whatever_the_split_or_local_size(method):
+    sc = box(POSITIONS[0], AXES[0])
+    a = _sums(oclgi.Engine(sc), method=method, axes=AXES)
+    b = _sums(oclgi.Engine(sc, local_size=16), batch_paths=517, method=method, axes=AXES)
+    for x, y in zip(a, b):
+        assert x.dtype == np.int64 and np.array_equal(x, y)
+    assert any(np.any(x != y) for x, y in zip(a[:1], a[1:])), "the frames should differ"
+    c = _sums(oclgi.Engine(sc), seed=6, method=method, axes=AXES)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_one_position_is_the_ordinary_run():
+    """F = 1: every weight is p / p = 1 and a point light's profile is 1, so
+    the tails are the ordinary run's bit for bit, and the first hits carry
+    the ordinary photon's power: Impact Count's sums are the same."""
+    sc = box(POSITIONS[1])
+    eng = oclgi.Engine(sc)
+    pts = points()
+    reuse = LightReuse(eng, "lamp", POSITIONS[1:2], photons=3000, seed=9, max_depth=6)
+    est = reuse.frames_irradiance(pts, method="impact")[0]
+    ref = eng.irradiance(pts, method="impact", photons=3000, seed=9, max_depth=6)
+    assert np.array_equal(est.accumulators, ref.accumulators)
+
+
+def test_powers_stay_under_phi_max():
+    eng = oclgi.Engine(box(POSITIONS[0], AXES[0]))
+    reuse = LightReuse(eng, "lamp", POSITIONS, AXES, photons=800, seed=3, max_depth=6)
+    for j in range(reuse.frames):
+        for batch in reuse.batches(j):
+            seg = batch.read_segments(eng.queue)
+            assert seg["power"].max() <= 1.0 + 1e-6
+            assert np.isfinite(seg["power"]).all()
+
+
+def test_light_path_specs(tmp_path):
+    p, d = light_path("0,1,0;1,1,0", frames=3)
+    assert np.allclose(p, [[0, 1, 0], [0.5, 1, 0], [1, 1, 0]]) and d is None
+    np.save(tmp_path / "k.npy", np.array([[0, 1, 0, 0, -2, 0], [1, 1, 0, 0, -1, 0]]))
+    p, d = light_path(str(tmp_path / "k.npy"), frames=2)
+    assert np.allclose(d, [[0, -1, 0], [0, -1, 0]])
+    for bad, match in [("0,1", "rows of 3"), ("a,b,c", "expected x,y,z"), ("0,1,0;1,1", "as many numbers"),
+                       ("0,1,0,0,0,0", "direction is zero"), ("nan,1,0", "finite"),
+                       (str(tmp_path / "none.npy"), "no such file")]:
+        with pytest.raises(OclgiError, match=match):
+            light_path(bad, frames=2)
+
+
+def test_api_errors():
+    eng = oclgi.Engine(box(POSITIONS[0]))
+    with pytest.raises(OclgiError, match="no point or spot light of that name"):
+        LightReuse(eng, "nope", POSITIONS, photons=10)
+    with pytest.raises(OclgiError, match="index below 1"):
+        LightReuse(eng, 3, POSITIONS, photons=10)
+    with pytest.raises(OclgiError, match="a spot light's"):
+        LightReuse(eng, "lamp", POSITIONS, AXES, photons=10)
+    with pytest.raises(OclgiError, match="rows of 3"):
+        LightReuse(eng, 0, POSITIONS[:, :2], photons=10)
+    r = LightReuse(eng, 0, POSITIONS[:2], photons=10)
+    with pytest.raises(OclgiError, match="frame must be an index below 2"):
+        next(r.batches(2))
+    area = oclgi.Engine(oclgi.load_dict({"mesh": [{"path": BOX}],
+                                         "point_light": [{"name": "lamp", "position": [0, 1, 0],
+                                                          "intensity": [1, 1, 1]}]}))
+    with pytest.raises(OclgiError, match="only emitter"):
+        LightReuse(area, "lamp", POSITIONS, photons=10)
+    with pytest.raises(OclgiError, match="name: expected a non-empty string"):
+        oclgi.load_dict({"mesh": [{"path": BOX}], "point_light": [{"name": 3, "position": [0, 1, 0],
+                                                                   "intensity": [1, 1, 1]}]})
+
+
+SCENE_TOML = f"""
+[[mesh]]
+path = "{BOX}"
+materials = {{ light = {{ emission = [0, 0, 0] }} }}
+
+[[point_light]]
+name = "lamp"
+position = [0.0, 1.5, 0.0]
+intensity = [1, 1, 1]
+
+[camera]
+position = [0.0, 1.0, 3.94]
+look_at = [0.0, 1.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov = 39.3
+width = 24
+height = 24
+
+[photons]
+count = 4000
+max_depth = 5
+
+[estimator]
+radius = 0.1
+"""
+
+
+def test_cli_animates_a_light(monkeypatch, capsys, tmp_path):
+    scene = tmp_path / "lamp.toml"
+    scene.write_text(SCENE_TOML)
+    out = tmp_path / "out"
+    r = in_process(monkeypatch, capsys, tmp_path, "animate", str(scene), "--light", "lamp", "--light-path=-0.5,1.5,0;0.5,1.5,0", "--frames", "3",
+                "--photons", "1000", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["frame_0000.png", "frame_0001.png", "frame_0002.png",
+                                                    "timing.csv"]
+    rows = (out / "timing.csv").read_text().splitlines()
+    assert rows[0].startswith("frame,paths,trace_s") and len(rows) == 4
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--light", "nope", "--light-path", "0,1.5,0"], "no point or spot light of that name"),
+    (["--light", "lamp"], "--light and --light-path go together"),
+    (["--light", "lamp", "--light-path", "0,1.5"], "rows of 3"),
+    (["--light", "lamp", "--light-path", "0,1.5,0", "--path", "line:1,0,0"], "go with objects"),
+    (["--light", "lamp", "--light-path", "missing.npy"], "no such file"),
+    ([], "needs --path"),
+])
+def test_cli_errors_are_one_line(monkeypatch, capsys, tmp_path, args, match):
+    scene = tmp_path / "lamp.toml"
+    scene.write_text(SCENE_TOML)
+    r = in_process(monkeypatch, capsys, tmp_path, "animate", str(scene), *args, "--frames", "2", "-o", str(tmp_path / "out"))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0], r.stderr
+    assert not (tmp_path / "out").exists()
