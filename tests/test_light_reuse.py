@@ -80,6 +80,10 @@ def test_each_frame_is_unbiased(kind):
     assert lit.sum() >= 0.8 * lit.size
     assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
     assert np.isfinite(ratio).all()
+    # the test has the power to see a wrong frame: each against its neighbour's recomputation
+    shifted = np.roll(m2, 1, axis=0), np.roll(v2, 1, axis=0)
+    z_wrong = np.abs(m1 - shifted[0]) / np.sqrt(v1 / SEEDS + shifted[1] / SEEDS + 1e-30)
+    assert z_wrong.max() > 3 * z_crit
 
 
 def _sums(engine, seed=5, batch_paths=None, method="detp_disc_index", axes=None):
