@@ -294,11 +294,16 @@ class LightReuse:
     def estimator(self, points, method=None, radius=None, extension=None, count_emitted=None, **options):
         """A fresh estimator for this animation's frames (``Engine.estimator``
         with the run's parameters: n photons, for the resolve)."""
-        from ..engine import as_query_points
+        from .. import queries
 
+        if not isinstance(points, queries.QueryPoints):  # an (n, 6) array, as Engine.irradiance takes
+            a = queries.real_array(points, "points")
+            if a.ndim != 2 or a.shape[1] != 6:
+                raise OclgiError(f"points must be an (n, 6) array of x y z nx ny nz, got shape {a.shape}")
+            points = queries.from_arrays(a[:, :3], a[:, 3:])
         self.run_params = self.engine.run_params(method, self.paths_per_position, radius, self.seed,
                                                  self.max_depth, extension, count_emitted)
-        return self.engine.estimator(as_query_points(points), self.run_params, **options)
+        return self.engine.estimator(points, self.run_params, **options)
 
     def estimate(self, frame: int, estimator) -> Estimate:
         """Frame ``frame`` accumulated into ``estimator`` (its sums reset to
