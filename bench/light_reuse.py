@@ -74,15 +74,15 @@ def rel_rms(e, ref) -> float:
     return float(np.sqrt(np.mean((e - ref) ** 2)) / np.mean(ref))
 
 
-def study(engine, frames: int, paths: int, pts, seed: int = 11) -> dict:
+def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> dict:
     positions = circle(frames)
     n = paths // frames
     t0 = time.perf_counter()
     reuse = LightReuse(engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
     setup = time.perf_counter() - t0
-    est = reuse.estimator(pts, radius=RADIUS)
+    est = reuse.estimator(pts, method=method, radius=RADIUS)
     err_frames = sorted(set(np.linspace(0, frames - 1, ERROR_FRAMES).round().astype(int).tolist()))
-    connect, frame_s, errs_reuse, errs_rec, rec_s, rec_trace, refs = [], [], [], [], [], [], {}
+    connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace = [], [], [], [], [], [], []
     for j in range(frames):
         t1 = time.perf_counter()
         for _ in reuse.batches(j):
@@ -91,57 +91,73 @@ def study(engine, frames: int, paths: int, pts, seed: int = 11) -> dict:
         t1 = time.perf_counter()
         e = reuse.estimate(j, est)
         frame_s.append(time.perf_counter() - t1)
+        # the direct light alone: what a frame would still estimate if the
+        # tails' contributions were kept per point and only re-weighted
+        t1 = time.perf_counter()
+        for batch in reuse.batches(j, tails=False):
+            est.accumulate(batch)
+        engine.queue.finish()
+        direct_s.append(time.perf_counter() - t1)
         with reuse.light_at(j):
             t1 = time.perf_counter()
-            r = engine.irradiance(pts, photons=n * frames, radius=RADIUS, seed=seed + 1, max_depth=MAX_DEPTH)
+            r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS, seed=seed + 1,
+                                  max_depth=MAX_DEPTH)
             rec_s.append(time.perf_counter() - t1)
             rec_trace.append(r.stats.seconds["trace"])
             if j in err_frames:
-                ref = engine.irradiance(pts, photons=REF_FACTOR * n * frames, radius=RADIUS, seed=seed + 2,
-                                        max_depth=MAX_DEPTH).irradiance
+                ref = engine.irradiance(pts, method=method, photons=REF_FACTOR * n * frames, radius=RADIUS,
+                                        seed=seed + 2, max_depth=MAX_DEPTH).irradiance
                 errs_reuse.append(rel_rms(e.irradiance, ref))
                 errs_rec.append(rel_rms(r.irradiance, ref))
     # the references' own error (1/sqrt(REF_FACTOR) of a recomputation's) adds in quadrature: take it out
-    corr = lambda x: math.sqrt(max(x**2 - np.mean(errs_rec) ** 2 / REF_FACTOR, 1e-30))  # noqa: E731
+    corr = lambda x: math.sqrt(max(x**2 - np.mean(errs_rec) ** 2 / REF_FACTOR, 1e-30))
     err_reuse, err_rec = corr(float(np.mean(errs_reuse))), corr(float(np.mean(errs_rec)))
     seg_per_path = reuse.segments / reuse.n_paths
     reuse_frame = setup / frames + float(np.mean(frame_s))  # the store's cost spread over the frames
     reuse_trace = (reuse.seconds["trace"] + reuse.seconds["weights"]) / frames + float(np.mean(connect))
     rec_frame = float(np.mean(rec_s))
     eq_paths = (err_rec / err_reuse) ** 2  # recomputation's paths for reuse's error, relative to N
-    return {"F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
+    direct_frame = setup / frames + float(np.mean(direct_s))
+    return {"method": method, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
             "store_trace_s": reuse.seconds["trace"], "weights_s": reuse.seconds["weights"], "setup_s": setup,
             "connect_s": float(np.mean(connect)), "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
             "rec_trace_s": float(np.mean(rec_trace)), "err_reuse": err_reuse, "err_rec": err_rec,
             "tracing_speedup": float(np.mean(rec_trace)) / reuse_trace,
             "speedup_equal_paths": rec_frame / reuse_frame,
             "speedup_equal_error": rec_frame * eq_paths / reuse_frame,
-            "variance_gain": eq_paths}
+            "variance_gain": eq_paths, "direct_frame_s": direct_frame,
+            "bound_equal_error": rec_frame * eq_paths / direct_frame}
 
 
 def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = RESULTS / "light_reuse.md"
-    lines = [
-        "# Light reuse against per-frame recomputation (bench/light_reuse.py)", "",
-        f"Cornell box (area light off), a point light circling under the ceiling; {points} query points on the "
-        f"floor and walls, DETP disc index, radius {RADIUS}, max_depth {MAX_DEPTH}; N = {paths:,} paths per "
-        f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
-        f"{ERROR_FRAMES} frames (the reference's own error taken out). Times per frame; reuse's include the "
-        f"store's trace and weights over F. Study took {seconds:.0f}s.", "",
-        "| F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | recompute frame ms | "
-        "err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
-        "speedup, equal error (Sbert: up to F) | variance gain |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    header = ("| method | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
+              "recompute frame ms | err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
+              "speedup, equal error (Sbert: up to F) | variance gain | direct-only frame ms | "
+              "re-weighting bound, equal error |")
+    setting = (f"Cornell box (area light off), a point light circling under the ceiling; {points} query points on "
+               f"the floor and walls, radius {RADIUS} (DETP), max_depth {MAX_DEPTH}; N = {paths:,} paths per "
+               f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
+               f"{ERROR_FRAMES} frames (the reference's own error taken out). Times per frame; reuse's include "
+               f"the store's trace and weights over F. Study took {seconds:.0f}s.")
+    notes = ("Tracing speedup: recomputation's trace time per frame over reuse's store trace and weights per frame "
+             "plus its connection kernel. Variance gain: recomputation's error over reuse's, squared, at equal "
+             "paths (the path count recomputation needs for reuse's error, in units of N). Direct-only frame: the "
+             "store's cost per frame plus estimating segment 0 of every path alone; the re-weighting bound is the "
+             "equal-error speedup if the tails' contributions cost nothing per frame (an estimator keeping, per "
+             "point, the stored tail segments it counts would pay a sparse product over them on top): an upper "
+             "bound on what that design can gain.")
+    lines = ["# Light reuse against per-frame recomputation (bench/light_reuse.py)", "", setting, "", header,
+             "|---" * 16 + "|"]
     for r in rows:
-        lines.append(f"| {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | {r['weights_s']:.2f} | "
-                     f"{r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | {r['err_reuse']:.4f} | "
-                     f"{r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
+        lines.append(f"| {r['method']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
+                     f"{r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | "
+                     f"{r['err_reuse']:.4f} | {r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
                      f"{r['speedup_equal_paths']:.2f} | {r['speedup_equal_error']:.2f} ({r['F']}) | "
-                     f"{r['variance_gain']:.2f} |")
-    lines += ["", "Tracing speedup: recomputation's trace time per frame over reuse's store trace and weights "
-              "per frame plus its connection kernel. Variance gain: recomputation's error over reuse's, squared, "
-              "at equal paths (the path count recomputation needs for reuse's error, in units of N).", ""]
+                     f"{r['variance_gain']:.2f} | {r['direct_frame_s'] * 1e3:.0f} | "
+                     f"{r['bound_equal_error']:.2f} |")
+    lines += ["", notes, ""]
     out.write_text("\n".join(lines))
     return out
 
@@ -150,6 +166,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paths", type=int, default=64_000, help="paths per frame, N (default 64000)")
     ap.add_argument("--frames", default="4,16,64", help="frame counts F (default 4,16,64)")
+    ap.add_argument("--methods", default="detp_disc_index,impact", help="estimators (default detp_disc_index,impact)")
     ap.add_argument("--quick", action="store_true", help="N = 8000, F = 4,16")
     args = ap.parse_args()
     paths, frames = args.paths, [int(f) for f in args.frames.split(",")]
@@ -160,11 +177,14 @@ def main():
     pts = query_points()
     engine.irradiance(pts, photons=1000, radius=RADIUS)  # kernels compiled before any timing
     warm = LightReuse(engine, "lamp", circle(2), photons=100)
-    warm.estimate(0, warm.estimator(pts, radius=RADIUS))
+    for method in args.methods.split(","):
+        warm.estimate(0, warm.estimator(pts, method=method, radius=RADIUS))
+        engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
     rows = []
-    for f in frames:
-        rows.append(study(engine, f, paths, pts))
-        print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
+    for method in args.methods.split(","):
+        for f in frames:
+            rows.append(study(engine, f, paths, pts, method))
+            print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
     print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)}")
 
 

@@ -108,9 +108,11 @@ __kernel void reuse_weights(SCENE_ARGS, __global const float4 *tri_normals, __gl
  * times w = p_j / D; the tail's stored powers are scaled by the same
  * factor over the profile the path was traced with. w <= 1, so every
  * power stays <= 1 (oclgi/tracing/light_reuse.py: the F of the balance
- * heuristic goes into the resolve's photon count). */
+ * heuristic goes into the resolve's photon count). tails = 0 writes
+ * segment 0 alone (the direct light: what an estimator that re-weights
+ * the tails' stored contributions would still have to estimate). */
 __kernel void reuse_frame(__global const float4 *tri_normals, __global const Emitter *lights,
-                          __global const float *table, int frame, int paths_per_position,
+                          __global const float *table, int frame, int paths_per_position, int tails,
                           __global const Segment *store, __global const int *store_len,
                           __global const float *density_sum, __global const uint *visible, int words_per_path,
                           int first, int count, int max_depth, __global Segment *out, __global int *out_len)
@@ -141,14 +143,16 @@ __kernel void reuse_frame(__global const float4 *tri_normals, __global const Emi
     segment_load(src, &s0);
     float traced = reuse_profile(&lights[path / paths_per_position], s0.w);
     float scale = traced > 0.0f ? c / traced : 0.0f;
-    int len = store_len[i];
+    int len = tails ? store_len[i] : 1;
     for (int b = 1; b < max_depth; ++b) {
-        Segment seg = src[b];
-        if (b < len) {
-            seg.power[0] *= scale;
-            seg.power[1] *= scale;
-            seg.power[2] *= scale;
+        if (b >= len) {
+            segment_write_empty(&dst[b], path);
+            continue;
         }
+        Segment seg = src[b];
+        seg.power[0] *= scale;
+        seg.power[1] *= scale;
+        seg.power[2] *= scale;
         dst[b] = seg;
     }
     out_len[k] = len;

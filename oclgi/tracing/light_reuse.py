@@ -100,7 +100,8 @@ from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from ..params import MAX_LENGTH
 from .photon_trace import PathBatch, PhotonTracer
-from .run import SEGMENT_BYTES, Estimate, Stats, batch_paths as default_batch
+from .run import SEGMENT_BYTES, Estimate, Stats
+from .run import batch_paths as default_batch
 
 __all__ = ["LightReuse", "find_light", "light_path"]
 
@@ -277,16 +278,17 @@ class LightReuse:
         self.seconds["weights"] = time.perf_counter() - t0
 
     # -- frames -------------------------------------------------------------------
-    def batches(self, frame: int):
+    def batches(self, frame: int, tails: bool = True):
         """Frame ``frame``'s F n paths as PathBatches of at most ``batch_paths``
-        (one reused buffer: use each before asking for the next)."""
+        (one reused buffer: use each before asking for the next); ``tails``
+        False: segment 0 alone, the direct light (for studies)."""
         if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < self.frames:
             raise OclgiError(f"frame must be an index below {self.frames}, got {frame!r}")
         c = self.compiled
         for first in range(0, self.n_paths, self.batch):
             m = min(self.batch, self.n_paths - first)
             launch(self.queue, self._prog.reuse_frame, m, c.tri_normals, self.lights, c.emitter_cdf, int(frame),
-                   self.paths_per_position, self.store, self.store_len, self.density_sum, self.visible,
+                   self.paths_per_position, int(bool(tails)), self.store, self.store_len, self.density_sum, self.visible,
                    self.words, first, m, self.max_depth, self.frame_segments, self.frame_len,
                    local_size=self.engine.local_size)
             yield PathBatch(self.frame_segments, self.frame_len, first, m, self.max_depth)
