@@ -30,7 +30,6 @@ Writes ``bench/results/light_reuse.md``. Usage:
 from __future__ import annotations
 
 import argparse
-import math
 import time
 from pathlib import Path
 
@@ -46,6 +45,7 @@ RADIUS = 0.06
 MAX_DEPTH = 12
 REF_FACTOR = 24
 ERROR_FRAMES = 4
+ERROR_SEEDS = 3  # independent animations whose errors are averaged (only a few points' values are independent)
 
 
 def scene(photons: int):
@@ -69,9 +69,10 @@ def query_points(n: int = 600) -> np.ndarray:
     return np.array(floor + back + right)
 
 
-def rel_rms(e, ref) -> float:
+def rel_ms(e, ref) -> float:
+    """Mean squared error relative to the mean squared reference value (over the points, channels summed)."""
     e, ref = e.sum(axis=1), ref.sum(axis=1)
-    return float(np.sqrt(np.mean((e - ref) ** 2)) / np.mean(ref))
+    return float(np.mean((e - ref) ** 2) / np.mean(ref) ** 2)
 
 
 def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> dict:
@@ -82,7 +83,7 @@ def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> 
     setup = time.perf_counter() - t0
     est = reuse.estimator(pts, method=method, radius=RADIUS)
     err_frames = sorted(set(np.linspace(0, frames - 1, ERROR_FRAMES).round().astype(int).tolist()))
-    connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace = [], [], [], [], [], [], []
+    connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace, refs = [], [], [], [], [], [], [], {}
     for j in range(frames):
         t1 = time.perf_counter()
         for _ in reuse.batches(j):
@@ -105,13 +106,22 @@ def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> 
             rec_s.append(time.perf_counter() - t1)
             rec_trace.append(r.stats.seconds["trace"])
             if j in err_frames:
-                ref = engine.irradiance(pts, method=method, photons=REF_FACTOR * n * frames, radius=RADIUS,
-                                        seed=seed + 2, max_depth=MAX_DEPTH).irradiance
-                errs_reuse.append(rel_rms(e.irradiance, ref))
-                errs_rec.append(rel_rms(r.irradiance, ref))
-    # the references' own error (1/sqrt(REF_FACTOR) of a recomputation's) adds in quadrature: take it out
-    corr = lambda x: math.sqrt(max(x**2 - np.mean(errs_rec) ** 2 / REF_FACTOR, 1e-30))
-    err_reuse, err_rec = corr(float(np.mean(errs_reuse))), corr(float(np.mean(errs_rec)))
+                ref = refs[j] = engine.irradiance(pts, method=method, photons=REF_FACTOR * n * frames,
+                                                  radius=RADIUS, seed=seed + 2, max_depth=MAX_DEPTH).irradiance
+                errs_reuse.append(rel_ms(e.irradiance, ref))
+                errs_rec.append(rel_ms(r.irradiance, ref))
+    for k in range(1, ERROR_SEEDS):  # more animations, for the errors alone
+        other = LightReuse(engine, "lamp", positions, photons=n, seed=seed + 10 * k, max_depth=MAX_DEPTH)
+        for j in err_frames:
+            errs_reuse.append(rel_ms(other.estimate(j, est).irradiance, refs[j]))
+            with other.light_at(j):
+                r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS,
+                                      seed=seed + 10 * k + 1, max_depth=MAX_DEPTH)
+            errs_rec.append(rel_ms(r.irradiance, refs[j]))
+    # the references' own error (1/REF_FACTOR of a recomputation's squared error) adds: take it out
+    ref_ms = float(np.mean(errs_rec)) / REF_FACTOR
+    err_reuse = float(np.sqrt(max(np.mean(errs_reuse) - ref_ms, 1e-30)))
+    err_rec = float(np.sqrt(max(np.mean(errs_rec) - ref_ms, 1e-30)))
     seg_per_path = reuse.segments / reuse.n_paths
     reuse_frame = setup / frames + float(np.mean(frame_s))  # the store's cost spread over the frames
     reuse_trace = (reuse.seconds["trace"] + reuse.seconds["weights"]) / frames + float(np.mean(connect))
@@ -139,7 +149,8 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
     setting = (f"Cornell box (area light off), a point light circling under the ceiling; {points} query points on "
                f"the floor and walls, radius {RADIUS} (DETP), max_depth {MAX_DEPTH}; N = {paths:,} paths per "
                f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
-               f"{ERROR_FRAMES} frames (the reference's own error taken out). Times per frame; reuse's include "
+               f"{ERROR_FRAMES} frames of {ERROR_SEEDS} independent animations (the reference's own error taken "
+               f"out). Times per frame; reuse's include "
                f"the store's trace and weights over F. Study took {seconds:.0f}s.")
     notes = ("Tracing speedup: recomputation's trace time per frame over reuse's store trace and weights per frame "
              "plus its connection kernel. Variance gain: recomputation's error over reuse's, squared, at equal "

@@ -50,15 +50,13 @@ inline float reuse_density(__global const Emitter *em, __global const float *tab
     return light_pdf_dir(em, *d, table) * fabs(c) / r2;
 }
 
-/* Can light position em see x on triangle tri? The closest hit from the
- * light is tri itself, or a surface no nearer than x less eps (a
- * neighbouring triangle of the same face, at an edge). A miss (the ray
- * slipped through a crack) counts as not seen, for every frame alike. */
-inline int reuse_visible(SCENE_ARGS, __global const Emitter *em, float3 d, float r, int tri, float eps)
+/* Can light position em see x? Nothing is hit on the way there short of
+ * x less eps (the ray offset of oclgi/scene/compiled.py): x's own
+ * triangle, or a neighbour of the same face at an edge, lies beyond. An
+ * any-hit query: the first occluder found ends it. */
+inline int reuse_visible(SCENE_ARGS, __global const Emitter *em, float3 d, float r, float eps)
 {
-    Hit h;
-    scene_closest_hit(SCENE_PASS, vload3(0, em->p), d, INFINITY, &h);
-    return h.tri == tri || (h.tri >= 0 && h.t >= r - eps);
+    return !scene_any_hit(SCENE_PASS, vload3(0, em->p), d, r - eps);
 }
 
 /* The first hit of a stored path: 0 when segment 0 escaped. */
@@ -93,7 +91,7 @@ __kernel void reuse_weights(SCENE_ARGS, __global const float4 *tri_normals, __gl
             float3 d;
             float r;
             float p = reuse_density(&lights[l], table, x, n, side, &d, &r);
-            if (p > 0.0f && reuse_visible(SCENE_PASS, &lights[l], d, r, tri, eps)) {
+            if (p > 0.0f && reuse_visible(SCENE_PASS, &lights[l], d, r, eps)) {
                 sum += p;
                 bits[l >> 5] |= 1u << (l & 31);
             }

@@ -233,6 +233,9 @@ class LightReuse:
         if c.n_emitters != 1 or int(kinds[0]) not in (EMITTER_POINT, EMITTER_SPOT):
             raise OclgiError(f"{scene.name}: light reuse moves the scene's only emitter, a point or spot light; "
                              f"this scene has {c.n_emitters} emitters")
+        if not np.max(self.light.power) > 0:  # then the scene's one emitter is another light
+            raise OclgiError(f"{scene.name}: the light to move has no power; light reuse moves the scene's only "
+                             "emitter")
         bad = sorted({m.name for m in scene.materials if m.kind != "diffuse" or max(m.emission) > 0})
         if bad or (c.materials_host["kind"] != BSDF_DIFFUSE).any():
             raise OclgiError(f"{scene.name}: light reuse needs diffuse, non-emitting surfaces; not so: "
