@@ -23,8 +23,12 @@ path); Sbert et al. -- each frame gets the samples of the whole animation,
 so at equal tracing cost its variance falls by up to F (the positions'
 densities overlap fully), an equal-error speedup of up to F.
 
-Writes ``bench/results/light_reuse.md``. Usage:
-``.venv/bin/python bench/light_reuse.py [--paths N] [--frames 4,16,64] [--quick]``.
+Two light paths: a circle of radius 0.5 m (positions far apart: their
+densities overlap little) and of 0.1 m (a small move, much overlap).
+Writes ``bench/results/light_reuse.md``.
+
+Usage: ``.venv/bin/python bench/light_reuse.py [--paths N] [--frames 4,16,64]
+[--spans 0.5:detp_disc_index,impact;0.1:detp_disc_index] [--quick]``.
 """
 
 from __future__ import annotations
@@ -55,9 +59,10 @@ def scene(photons: int):
                             "photons": {"count": photons, "seed": 1, "max_depth": MAX_DEPTH}})
 
 
-def circle(frames: int) -> np.ndarray:
+def circle(frames: int, span: float = 0.5) -> np.ndarray:
+    """F positions round a circle of radius ``span`` under the ceiling (a little up and down)."""
     a = 2 * np.pi * np.arange(frames) / frames
-    return np.stack([0.5 * np.cos(a), 1.6 + 0.2 * np.sin(3 * a), 0.5 * np.sin(a) - 0.1], axis=1)
+    return np.stack([span * np.cos(a), 1.6 + 0.4 * span * np.sin(3 * a), span * np.sin(a) - 0.1], axis=1)
 
 
 def query_points(n: int = 600) -> np.ndarray:
@@ -75,8 +80,8 @@ def rel_ms(e, ref) -> float:
     return float(np.mean((e - ref) ** 2) / np.mean(ref) ** 2)
 
 
-def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> dict:
-    positions = circle(frames)
+def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: int = 11) -> dict:
+    positions = circle(frames, span)
     n = paths // frames
     t0 = time.perf_counter()
     reuse = LightReuse(engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
@@ -128,7 +133,7 @@ def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> 
     rec_frame = float(np.mean(rec_s))
     eq_paths = (err_rec / err_reuse) ** 2  # recomputation's paths for reuse's error, relative to N
     direct_frame = setup / frames + float(np.mean(direct_s))
-    return {"method": method, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
+    return {"method": method, "span": span, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
             "store_trace_s": reuse.seconds["trace"], "weights_s": reuse.seconds["weights"], "setup_s": setup,
             "connect_s": float(np.mean(connect)), "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
             "rec_trace_s": float(np.mean(rec_trace)), "err_reuse": err_reuse, "err_rec": err_rec,
@@ -142,11 +147,11 @@ def study(engine, frames: int, paths: int, pts, method: str, seed: int = 11) -> 
 def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = RESULTS / "light_reuse.md"
-    header = ("| method | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
+    header = ("| method | span m | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
               "recompute frame ms | err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
               "speedup, equal error (Sbert: up to F) | variance gain | direct-only frame ms | "
               "re-weighting bound, equal error |")
-    setting = (f"Cornell box (area light off), a point light circling under the ceiling; {points} query points on "
+    setting = (f"Cornell box (area light off), a point light circling under the ceiling (radius: span); {points} query points on "
                f"the floor and walls, radius {RADIUS} (DETP), max_depth {MAX_DEPTH}; N = {paths:,} paths per "
                f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
                f"{ERROR_FRAMES} frames of {ERROR_SEEDS} independent animations (the reference's own error taken "
@@ -160,9 +165,9 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
              "point, the stored tail segments it counts would pay a sparse product over them on top): an upper "
              "bound on what that design can gain.")
     lines = ["# Light reuse against per-frame recomputation (bench/light_reuse.py)", "", setting, "", header,
-             "|---" * 16 + "|"]
+             "|---" * 17 + "|"]
     for r in rows:
-        lines.append(f"| {r['method']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
+        lines.append(f"| {r['method']} | {r['span']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
                      f"{r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | "
                      f"{r['err_reuse']:.4f} | {r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
                      f"{r['speedup_equal_paths']:.2f} | {r['speedup_equal_error']:.2f} ({r['F']}) | "
@@ -177,25 +182,29 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paths", type=int, default=64_000, help="paths per frame, N (default 64000)")
     ap.add_argument("--frames", default="4,16,64", help="frame counts F (default 4,16,64)")
-    ap.add_argument("--methods", default="detp_disc_index,impact", help="estimators (default detp_disc_index,impact)")
+    ap.add_argument("--spans", default="0.5:detp_disc_index,impact;0.1:detp_disc_index",
+                    help="the light path's radii (m), each with its methods (default "
+                         "0.5:detp_disc_index,impact;0.1:detp_disc_index)")
     ap.add_argument("--quick", action="store_true", help="N = 8000, F = 4,16")
     args = ap.parse_args()
     paths, frames = args.paths, [int(f) for f in args.frames.split(",")]
     if args.quick:
         paths, frames = 8000, [4, 16]
+    spans = [(float(a), b.split(",")) for a, b in (part.split(":") for part in args.spans.split(";"))]
     t0 = time.perf_counter()
     engine = oclgi.Engine(scene(paths))
     pts = query_points()
     engine.irradiance(pts, photons=1000, radius=RADIUS)  # kernels compiled before any timing
     warm = LightReuse(engine, "lamp", circle(2), photons=100)
-    for method in args.methods.split(","):
+    for method in sorted({m for _, ms in spans for m in ms}):
         warm.estimate(0, warm.estimator(pts, method=method, radius=RADIUS))
         engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
     rows = []
-    for method in args.methods.split(","):
-        for f in frames:
-            rows.append(study(engine, f, paths, pts, method))
-            print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
+    for span, methods in spans:
+        for method in methods:
+            for f in frames:
+                rows.append(study(engine, f, paths, pts, method, span))
+                print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
     print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)}")
 
 

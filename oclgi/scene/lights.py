@@ -40,7 +40,9 @@ table           parameters (defaults)
                 power pi R^2 x the map's integral of radiance.
 ==============  ============================================================
 
-Unknown keys are errors, as everywhere in a scene file. The sun and sky
+Point and spot lights take an optional ``name`` (a string: what ``oclgi
+animate --light`` moves them by). Unknown keys are errors, as everywhere in
+a scene file. The sun and sky
 cover the scene's geometry as loaded (its bounding sphere): a movable
 object moved outside that sphere is not lit by them.
 
