@@ -10,7 +10,7 @@
  * reuse_weights  one work-item per stored path: the area density p_l(x) of
  *                every position l producing this first hit, arriving on
  *                the side the tail leaves from; their sum D, and one
- *                visibility bit per position (the shadow rays, F per path,
+ *                visibility bit per position (the shadow rays, F - 1 per path,
  *                traced once for the whole animation).
  * reuse_frame    one work-item per stored path: the path as frame j sees
  *                it, segment 0 from light position j to x, the tail's
@@ -74,7 +74,8 @@ inline int reuse_first_hit(__global const Segment *slot, __global const float4 *
 
 /* visible: words_per_path uints per path, bit l of word l / 32 for position l. */
 __kernel void reuse_weights(SCENE_ARGS, __global const float4 *tri_normals, __global const Emitter *lights,
-                            __global const float *table, int n_positions, __global const Segment *store,
+                            __global const float *table, int n_positions, int paths_per_position,
+                            __global const Segment *store,
                             int n_paths, int max_depth, float eps, int words_per_path,
                             __global float *density_sum, __global uint *visible)
 {
@@ -87,11 +88,14 @@ __kernel void reuse_weights(SCENE_ARGS, __global const float4 *tri_normals, __gl
     int tri;
     float sum = 0.0f;
     if (reuse_first_hit(&store[(size_t)i * max_depth], tri_normals, &x, &n, &side, &tri)) {
+        /* the path's own position saw x: it hit it (no shadow ray, so no
+         * grazing miss of one either) */
+        int own = store[(size_t)i * max_depth].path / paths_per_position;
         for (int l = 0; l < n_positions; ++l) { /* in order: the float sum is the same everywhere */
             float3 d;
             float r;
             float p = reuse_density(&lights[l], table, x, n, side, &d, &r);
-            if (p > 0.0f && reuse_visible(SCENE_PASS, &lights[l], d, r, eps)) {
+            if (p > 0.0f && (l == own || reuse_visible(SCENE_PASS, &lights[l], d, r, eps))) {
                 sum += p;
                 bits[l >> 5] |= 1u << (l & 31);
             }

@@ -158,7 +158,8 @@ def test_weights_and_powers_match_a_float64_reference():
         ct = d @ rec["e1"][l]
         pdf = np.where(ct >= a, 1.0 / (2 * np.pi * (1 - a)), 0.0)
         t, tri = ray_triangle_brute(np.broadcast_to(rec["p"][l], d.shape), d, tri_v)
-        seen = ~(t < r - eng.compiled.eps)  # nothing in the way short of x
+        own = s0["path"] // reuse.paths_per_position == l  # the path's own position hit x
+        seen = own | ~(t < r - eng.compiled.eps)  # else: nothing in the way short of x
         p[:, l] = np.where(hit & (c * side > 0) & seen, pdf * np.abs(c) / r**2, 0.0)
     got_bits = ((bits.reshape(n_paths, reuse.words)[:, 0][:, None] >> np.arange(reuse.frames)) & 1).astype(bool)
     agree = (got_bits == (p > 0)).all(axis=1)

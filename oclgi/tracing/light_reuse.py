@@ -65,8 +65,11 @@ has a factor 2 to spare.)
 What is not reused: a path whose segment 0 escapes has no first hit, and
 a path whose first hit position j cannot see, or sees from the other side,
 contributes nothing to frame j (f_j = 0 there). Visibility of all F
-positions from every first hit is traced once (F shadow rays per path,
-one bit each); a frame traces no ray at all.
+positions from every first hit is traced once (F - 1 shadow rays per
+path, one bit each: its own position hit it); a frame traces no ray.
+A DETP disc reaching past a surface's edge can catch escaping segments of
+an ordinary run that reuse leaves out: query points within the radius of
+an open edge (the Cornell box's front) differ by that light.
 
 Parameters (:class:`LightReuse`)
 --------------------------------
@@ -275,7 +278,7 @@ class LightReuse:
         self.density_sum = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.n_paths * 4)
         self.visible = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.n_paths * self.words * 4)
         launch(self.queue, self._prog.reuse_weights, self.n_paths, *c.scene_args, c.tri_normals, self.lights,
-               c.emitter_cdf, self.frames, self.store, self.n_paths, self.max_depth, c.eps, self.words,
+               c.emitter_cdf, self.frames, self.paths_per_position, self.store, self.n_paths, self.max_depth, c.eps, self.words,
                self.density_sum, self.visible, local_size=self.engine.local_size)
         self.queue.finish()
         self.seconds["weights"] = time.perf_counter() - t0
