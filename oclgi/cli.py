@@ -4,6 +4,7 @@
                        [--checkpoint FILE.npz | --resume FILE.npz [--more N]] [--progressive N]
     oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv [--checkpoint FILE.npz | --resume ...]
     oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
+    oclgi animate SCENE --light NAME --light-path FILE.npy|x,y,z;x,y,z;... [--frames N] -o DIR
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
                       [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
@@ -203,8 +204,14 @@ def build_parser() -> argparse.ArgumentParser:
     a = sub.add_parser("animate", help="move an object along a path; incremental update and one image per frame")
     _estimate_args(a)
     a.add_argument("--object", help="the movable object to move (default: the scene's only one)")
-    a.add_argument("--path", required=True, help="line:DX,DY,DZ | orbit:R[,TURNS] | keyframes .csv/.npy "
+    a.add_argument("--path", help="line:DX,DY,DZ | orbit:R[,TURNS] | keyframes .csv/.npy "
                    "(rows x,y,z[,angle about Y] or 16 numbers of a 4x4 matrix)")
+    a.add_argument("--light", help="move this point or spot light (its name, or its index among the scene's point "
+                   "and spot lights) instead of an object: every position's paths traced once and reused by every "
+                   "frame (path reuse; --photons counts the paths per position)")
+    a.add_argument("--light-path", metavar="FILE.npy|x,y,z;...",
+                   help="the light's keyframes, rows x,y,z (or x,y,z,dx,dy,dz: a spot's position and axis), "
+                        "interpolated over the frames")
     a.add_argument("--frames", type=_param(budget.frames, "--frames"), default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
@@ -416,6 +423,10 @@ def cmd_irradiance(args):
 
 
 def cmd_animate(args):
+    if args.light is not None or args.light_path is not None:
+        return _animate_light(args)
+    if args.path is None:
+        raise OclgiError("animate needs --path (an object's) or --light with --light-path")
     from .incremental.animate import animate, output_names, poses
     from .incremental.session import Session
     from .io import check_not_input, check_output
@@ -463,6 +474,44 @@ def cmd_animate(args):
 
         frames = [np.rint(read_image(p) * 255).astype(np.uint8) for p in frame_paths(out, len(rows))]
         print(f"wrote {write_video(args.video, frames, args.fps)}")
+
+
+def _animate_light(args):
+    from .incremental.animate import animate_light, output_names
+    from .io import check_not_input, check_output
+    from .tracing.light_reuse import LightReuse, light_path
+
+    if args.path is not None or args.object is not None or args.dynamic is not None or args.video is not None:
+        raise OclgiError("--light moves a light: --path, --object, --dynamic and --video go with objects")
+    if args.light is None or args.light_path is None:
+        raise OclgiError("--light and --light-path go together")
+    out = args.output
+    if out.exists() and not out.is_dir():
+        raise OclgiError(f"{out}: exists and is not a folder")
+    check_output(out / "timing.csv")
+    inputs = {args.scene: "the scene file"}
+    if Path(args.light_path).is_file():
+        inputs[Path(args.light_path)] = "the light's keyframes file (--light-path)"
+    check_not_input([out / n for n in output_names(args.frames, args.exr)], inputs)
+    positions, directions = light_path(args.light_path, args.frames)  # a bad path fails before any work
+    engine = _engine(args)
+    light = int(args.light) if args.light.isdigit() else args.light
+    options = dict(args.option)
+    est_args = {k: options.pop(k) for k in ("extension", "count_emitted") if k in options}
+    reuse = LightReuse(engine, light, positions, directions, photons=args.photons, seed=args.seed,
+                       max_depth=args.max_depth)
+    show = None if args.quiet or not sys.stderr.isatty() else (
+        lambda f, r: print(f"\rframe {f + 1}/{args.frames}: {r['total_s'] * 1e3:.0f} ms", end="", file=sys.stderr))
+    rows = animate_light(reuse, out, args.exposure, args.exr, show, method=args.method, radius=args.radius,
+                         **est_args, **options)
+    if show:
+        print(file=sys.stderr)
+    if not args.quiet:
+        frame = [r["total_s"] for r in rows]
+        print(f"{len(rows)} frames of light {args.light!r}: {reuse.n_paths:,} paths traced once in "
+              f"{reuse.seconds['trace']:.2f}s (weights {reuse.seconds['weights']:.2f}s), frame median "
+              f"{np.median(frame) * 1e3:.1f} ms", file=sys.stderr)
+    print(f"wrote {len(rows)} frames and timing.csv to {out}")
 
 
 def cmd_study(args):

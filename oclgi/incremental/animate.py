@@ -155,3 +155,46 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
         keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
         write_array_text(stage / "timing.csv", keys, [[r.get(k, 0.0) for k in keys] for r in rows], sync=False)
     return rows
+
+
+def animate_light(reuse, out_dir: Path, exposure: float = 1.0, write_exr: bool = False, progress=None,
+                  **estimate_args) -> list[dict]:
+    """One PNG (and EXR) per light position of ``reuse`` (an
+    :class:`oclgi.tracing.light_reuse.LightReuse`: the paths of every
+    position traced once, each frame re-weighted) and ``timing.csv``, as
+    :func:`animate` writes for a moved object; returns the log rows (frame
+    0's carries the store's trace and weights too). ``estimate_args``: the
+    estimator's (method, radius, options)."""
+    import time
+
+    from ..io import staged_folder, write_array_text, write_images
+
+    engine = reuse.engine
+    t0 = time.perf_counter()
+    points = engine.camera_points()
+    estimator = reuse.estimator(points, **estimate_args)
+    setup = time.perf_counter() - t0
+    rows = []
+    with staged_folder(out_dir) as stage:
+        for f in range(reuse.frames):
+            t1 = time.perf_counter()
+            est = reuse.estimate(f, estimator)
+            t2 = time.perf_counter()
+            radiance, pixels = engine.shade(points, est.device_irradiance, exposure)
+            t3 = time.perf_counter()
+            stem = stage / _frame_stem(f)
+            images = {stem.with_suffix(".png"): pixels}
+            if write_exr:
+                images[stem.with_suffix(".exr")] = radiance
+            write_images(images, sync=False)
+            rows.append({"frame": f, "paths": reuse.n_paths,
+                         "trace_s": reuse.seconds["trace"] if f == 0 else 0.0,
+                         "weights_s": reuse.seconds["weights"] if f == 0 else 0.0,
+                         "setup_s": setup if f == 0 else 0.0,
+                         "reuse_s": est.stats.seconds["frame"], "resolve_s": est.stats.seconds["resolve"],
+                         "shade_s": t3 - t2, "total_s": t3 - t1})
+            if progress:
+                progress(f, rows[-1])
+        keys = list(rows[0])
+        write_array_text(stage / "timing.csv", keys, [[r[k] for k in keys] for r in rows], sync=False)
+    return rows

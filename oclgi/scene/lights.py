@@ -40,7 +40,9 @@ table           parameters (defaults)
                 power pi R^2 x the map's integral of radiance.
 ==============  ============================================================
 
-Unknown keys are errors, as everywhere in a scene file. The sun and sky
+Point and spot lights take an optional ``name`` (a string: what ``oclgi
+animate --light`` moves them by). Unknown keys are errors, as everywhere in
+a scene file. The sun and sky
 cover the scene's geometry as loaded (its bounding sphere): a movable
 object moved outside that sphere is not lit by them.
 
@@ -72,8 +74,8 @@ from . import values
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
 TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
 _KEYS = {
-    "point_light": {"position", "intensity", "candela", "colour"},
-    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta"},
+    "point_light": {"position", "intensity", "candela", "colour", "name"},
+    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta", "name"},
     "sun": {"direction", "irradiance", "lux", "colour"},
     "sky": {"radiance", "hemisphere", "up", "map", "scale"},
 }
@@ -134,11 +136,13 @@ class PointLight:
     ==========  =========================================
     position    3 numbers, world space
     intensity   RGB radiant intensity, W/sr per channel
+    name        optional, what a light animation calls it
     ==========  =========================================
     """
 
     position: tuple[float, float, float]
     intensity: tuple[float, float, float]  # W/sr per channel
+    name: str | None = None
 
     table = "point_light"
 
@@ -169,6 +173,7 @@ class SpotLight:
     cone_angle   half-angle of the cone, degrees, in (0, 180]
     cone_delta   width of the falloff band inside the cone, degrees, in
                  [0, cone_angle]
+    name         optional, what a light animation calls it
     ===========  ==============================================================
     """
 
@@ -177,6 +182,7 @@ class SpotLight:
     intensity: tuple[float, float, float]
     cone_angle: float = SPOT_CONE_ANGLE
     cone_delta: float = SPOT_CONE_DELTA
+    name: str | None = None
 
     table = "spot_light"
 
@@ -557,11 +563,20 @@ def _direction(t: dict, key: str, where: str):
     return tuple(float(x) for x in _unit(v, f"{where}.{key}"))
 
 
+def _name(t: dict, where: str) -> str | None:
+    """A light's optional name (light animations move a light by it)."""
+    name = t.get("name")
+    if name is not None and (not isinstance(name, str) or not name.strip()):
+        raise OclgiError(f"{where}.name: expected a non-empty string, got {name!r}")
+    return name
+
+
 def _read_point(t: dict, where: str) -> PointLight:
     from ..photometry import intensity_from_candela
 
     return PointLight(values.vec3(t.get("position"), where + ".position", MAX_COORDINATE),
-                      _photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"))
+                      _photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
+                      name=_name(t, where))
 
 
 def _read_spot(t: dict, where: str) -> SpotLight:
@@ -573,6 +588,7 @@ def _read_spot(t: dict, where: str) -> SpotLight:
         intensity=_photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
         cone_angle=values.number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
         cone_delta=values.number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
+        name=_name(t, where),
     )
     if "cone_delta" not in t:  # the default band, within a narrow cone
         light.cone_delta = min(light.cone_delta, light.cone_angle)

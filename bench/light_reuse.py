@@ -1,0 +1,212 @@
+"""Moving a light by path reuse against recomputing every frame (issue #17).
+
+The Cornell box, its area light off, lit by a point light that goes round
+a circle under the ceiling in F frames, F in {4, 16, 64}. Each frame is
+estimated at the same query points (floor and walls) by DETP (disc index):
+
+- reuse: ``LightReuse`` with n = N / F paths per position, so every frame
+  sums N reused paths (the store, N paths, is traced once for the whole
+  animation, plus F shadow rays per stored path for the weights);
+- recompute: an ordinary run of N paths per frame with the light there.
+
+Measured per frame: time (reuse: the store's trace and weights spread over
+the F frames, plus the frame's connection and estimation; recompute: trace
+and estimation) and the relative RMS error against a reference (an
+ordinary run of ``REF_FACTOR`` N paths) on ``ERROR_FRAMES`` frames spread
+over the animation. At equal path counts the two are compared as
+measured; at equal error, recomputation's time is scaled to the path count
+that gives reuse's error (error ~ 1/sqrt(paths), time ~ paths).
+
+Models: the thesis -- a reused path costs one connection instead of a whole
+path, so the tracing speedup is the mean path length L (segments per
+path); Sbert et al. -- each frame gets the samples of the whole animation,
+so at equal tracing cost its variance falls by up to F (the positions'
+densities overlap fully), an equal-error speedup of up to F.
+
+Two light paths: a circle of radius 0.5 m (positions far apart: their
+densities overlap little) and of 0.1 m (a small move, much overlap).
+Writes ``bench/results/light_reuse.md``.
+
+Usage: ``.venv/bin/python bench/light_reuse.py [--paths N] [--frames 4,16,64]
+[--spans 0.5:detp_disc_index,impact;0.1:detp_disc_index] [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+import oclgi
+from oclgi.tracing.light_reuse import LightReuse
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "bench" / "results"
+BOX = str(ROOT / "scenes" / "cornell-box" / "CornellBox-Original.obj")
+RADIUS = 0.06
+MAX_DEPTH = 12
+REF_FACTOR = 24
+ERROR_FRAMES = 4
+ERROR_SEEDS = 3  # independent animations whose errors are averaged (only a few points' values are independent)
+
+
+def scene(photons: int):
+    return oclgi.load_dict({"mesh": [{"path": BOX, "materials": {"light": {"emission": [0, 0, 0]}}}],
+                            "point_light": [{"name": "lamp", "position": [0.0, 1.6, 0.0],
+                                             "intensity": [1.0, 1.0, 1.0]}],
+                            "photons": {"count": photons, "seed": 1, "max_depth": MAX_DEPTH}})
+
+
+def circle(frames: int, span: float = 0.5) -> np.ndarray:
+    """F positions round a circle of radius ``span`` under the ceiling (a little up and down)."""
+    a = 2 * np.pi * np.arange(frames) / frames
+    return np.stack([span * np.cos(a), 1.6 + 0.4 * span * np.sin(3 * a), span * np.sin(a) - 0.1], axis=1)
+
+
+def query_points(n: int = 600) -> np.ndarray:
+    r = np.random.default_rng(3)
+    k = n // 4
+    floor = [[x, 0.0, z, 0, 1, 0] for x, z in r.uniform([-0.9, -0.9], [0.9, 0.8], (2 * k, 2))]
+    back = [[x, y, -1.04, 0, 0, 1] for x, y in r.uniform([-0.9, 0.1], [0.9, 1.85], (k, 2))]
+    right = [[1.0, y, z, -1, 0, 0] for y, z in r.uniform([0.1, -0.9], [1.85, 0.8], (k, 2))]
+    return np.array(floor + back + right)
+
+
+def rel_ms(e, ref) -> float:
+    """Mean squared error relative to the mean squared reference value (over the points, channels summed)."""
+    e, ref = e.sum(axis=1), ref.sum(axis=1)
+    return float(np.mean((e - ref) ** 2) / np.mean(ref) ** 2)
+
+
+def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: int = 11) -> dict:
+    positions = circle(frames, span)
+    n = paths // frames
+    t0 = time.perf_counter()
+    reuse = LightReuse(engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
+    setup = time.perf_counter() - t0
+    est = reuse.estimator(pts, method=method, radius=RADIUS)
+    err_frames = sorted(set(np.linspace(0, frames - 1, ERROR_FRAMES).round().astype(int).tolist()))
+    connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace, refs = [], [], [], [], [], [], [], {}
+    for j in range(frames):
+        t1 = time.perf_counter()
+        for _ in reuse.batches(j):
+            engine.queue.finish()
+        connect.append(time.perf_counter() - t1)
+        t1 = time.perf_counter()
+        e = reuse.estimate(j, est)
+        frame_s.append(time.perf_counter() - t1)
+        # the direct light alone: what a frame would still estimate if the
+        # tails' contributions were kept per point and only re-weighted
+        t1 = time.perf_counter()
+        for batch in reuse.batches(j, tails=False):
+            est.accumulate(batch)
+        engine.queue.finish()
+        direct_s.append(time.perf_counter() - t1)
+        with reuse.light_at(j):
+            t1 = time.perf_counter()
+            r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS, seed=seed + 1,
+                                  max_depth=MAX_DEPTH)
+            rec_s.append(time.perf_counter() - t1)
+            rec_trace.append(r.stats.seconds["trace"])
+            if j in err_frames:
+                ref = refs[j] = engine.irradiance(pts, method=method, photons=REF_FACTOR * n * frames,
+                                                  radius=RADIUS, seed=seed + 2, max_depth=MAX_DEPTH).irradiance
+                errs_reuse.append(rel_ms(e.irradiance, ref))
+                errs_rec.append(rel_ms(r.irradiance, ref))
+    for k in range(1, ERROR_SEEDS):  # more animations, for the errors alone
+        other = LightReuse(engine, "lamp", positions, photons=n, seed=seed + 10 * k, max_depth=MAX_DEPTH)
+        for j in err_frames:
+            errs_reuse.append(rel_ms(other.estimate(j, est).irradiance, refs[j]))
+            with other.light_at(j):
+                r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS,
+                                      seed=seed + 10 * k + 1, max_depth=MAX_DEPTH)
+            errs_rec.append(rel_ms(r.irradiance, refs[j]))
+    # the references' own error (1/REF_FACTOR of a recomputation's squared error) adds: take it out
+    ref_ms = float(np.mean(errs_rec)) / REF_FACTOR
+    err_reuse = float(np.sqrt(max(np.mean(errs_reuse) - ref_ms, 1e-30)))
+    err_rec = float(np.sqrt(max(np.mean(errs_rec) - ref_ms, 1e-30)))
+    seg_per_path = reuse.segments / reuse.n_paths
+    reuse_frame = setup / frames + float(np.mean(frame_s))  # the store's cost spread over the frames
+    reuse_trace = (reuse.seconds["trace"] + reuse.seconds["weights"]) / frames + float(np.mean(connect))
+    rec_frame = float(np.mean(rec_s))
+    eq_paths = (err_rec / err_reuse) ** 2  # recomputation's paths for reuse's error, relative to N
+    direct_frame = setup / frames + float(np.mean(direct_s))
+    return {"method": method, "span": span, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
+            "store_trace_s": reuse.seconds["trace"], "weights_s": reuse.seconds["weights"], "setup_s": setup,
+            "connect_s": float(np.mean(connect)), "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
+            "rec_trace_s": float(np.mean(rec_trace)), "err_reuse": err_reuse, "err_rec": err_rec,
+            "tracing_speedup": float(np.mean(rec_trace)) / reuse_trace,
+            "speedup_equal_paths": rec_frame / reuse_frame,
+            "speedup_equal_error": rec_frame * eq_paths / reuse_frame,
+            "variance_gain": eq_paths, "direct_frame_s": direct_frame,
+            "bound_equal_error": rec_frame * eq_paths / direct_frame}
+
+
+def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = RESULTS / "light_reuse.md"
+    header = ("| method | span m | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
+              "recompute frame ms | err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
+              "speedup, equal error (Sbert: up to F) | variance gain | direct-only frame ms | "
+              "re-weighting bound, equal error |")
+    setting = (f"Cornell box (area light off), a point light circling under the ceiling (radius: span); {points} query points on "
+               f"the floor and walls, radius {RADIUS} (DETP), max_depth {MAX_DEPTH}; N = {paths:,} paths per "
+               f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
+               f"{ERROR_FRAMES} frames of {ERROR_SEEDS} independent animations (the reference's own error taken "
+               f"out). Times per frame; reuse's include "
+               f"the store's trace and weights over F. Study took {seconds:.0f}s.")
+    notes = ("Tracing speedup: recomputation's trace time per frame over reuse's store trace and weights per frame "
+             "plus its connection kernel. Variance gain: recomputation's error over reuse's, squared, at equal "
+             "paths (the path count recomputation needs for reuse's error, in units of N). Direct-only frame: the "
+             "store's cost per frame plus estimating segment 0 of every path alone; the re-weighting bound is the "
+             "equal-error speedup if the tails' contributions cost nothing per frame (an estimator keeping, per "
+             "point, the stored tail segments it counts would pay a sparse product over them on top): an upper "
+             "bound on what that design can gain.")
+    lines = ["# Light reuse against per-frame recomputation (bench/light_reuse.py)", "", setting, "", header,
+             "|---" * 17 + "|"]
+    for r in rows:
+        lines.append(f"| {r['method']} | {r['span']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
+                     f"{r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | "
+                     f"{r['err_reuse']:.4f} | {r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
+                     f"{r['speedup_equal_paths']:.2f} | {r['speedup_equal_error']:.2f} ({r['F']}) | "
+                     f"{r['variance_gain']:.2f} | {r['direct_frame_s'] * 1e3:.0f} | "
+                     f"{r['bound_equal_error']:.2f} |")
+    lines += ["", notes, ""]
+    out.write_text("\n".join(lines))
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--paths", type=int, default=64_000, help="paths per frame, N (default 64000)")
+    ap.add_argument("--frames", default="4,16,64", help="frame counts F (default 4,16,64)")
+    ap.add_argument("--spans", default="0.5:detp_disc_index,impact;0.1:detp_disc_index",
+                    help="the light path's radii (m), each with its methods (default "
+                         "0.5:detp_disc_index,impact;0.1:detp_disc_index)")
+    ap.add_argument("--quick", action="store_true", help="N = 8000, F = 4,16")
+    args = ap.parse_args()
+    paths, frames = args.paths, [int(f) for f in args.frames.split(",")]
+    if args.quick:
+        paths, frames = 8000, [4, 16]
+    spans = [(float(a), b.split(",")) for a, b in (part.split(":") for part in args.spans.split(";"))]
+    t0 = time.perf_counter()
+    engine = oclgi.Engine(scene(paths))
+    pts = query_points()
+    engine.irradiance(pts, photons=1000, radius=RADIUS)  # kernels compiled before any timing
+    warm = LightReuse(engine, "lamp", circle(2), photons=100)
+    for method in sorted({m for _, ms in spans for m in ms}):
+        warm.estimate(0, warm.estimator(pts, method=method, radius=RADIUS))
+        engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
+    rows = []
+    for span, methods in spans:
+        for method in methods:
+            for f in frames:
+                rows.append(study(engine, f, paths, pts, method, span))
+                print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
+    print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)}")
+
+
+if __name__ == "__main__":
+    main()
