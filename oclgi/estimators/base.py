@@ -117,14 +117,36 @@ class DetpEstimator(Estimator):
 
     Parameters: ``radius`` d; ``extension`` e (segments may end up to e past
     the disc's plane and still count; for concave surfaces); ``count_emitted``
-    (segments leaving the lights count, i.e. direct light included). Every
-    variant selects segments with ``detp_crosses``/``DETP_TEST`` (kernels/
-    detp.h), so all give the same sums, bit for bit.
+    (segments leaving the lights count, i.e. direct light included);
+    ``radius_mode`` "fixed" (d for every point) or "adaptive" (a radius per
+    point, fixed when the estimator is built, with ``adaptive_k``,
+    ``pilot_photons`` and ``radius_min``: oclgi/estimators/adaptive_radius.py;
+    variants with ``per_point_radius`` only). Every variant selects segments
+    with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
+    same sums, bit for bit.
     """
 
-    def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0, **kw):
+    # Variants whose kernels read each disc's own radius (plain DETP: a
+    # per-point buffer; disc indexing: the disc blocks' r2).
+    per_point_radius = False
+
+    def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
+                 radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
+                 radius_min: float = 0.25, **kw):
+        from . import adaptive_radius
+
+        adaptive_radius.check(radius_mode, adaptive_k, pilot_photons, radius_min)
+        if radius_mode == "adaptive" and not self.per_point_radius:
+            raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
+        self.radius_mode = radius_mode
+        self.adaptive = None
+        if radius_mode == "adaptive":
+            self.adaptive = adaptive_radius.AdaptiveRadii(queue, compiled, self.radius, extension,
+                                                          self.count_emitted, adaptive_k, pilot_photons,
+                                                          radius_min, self.local_size)
+        self.set_radii(np.arange(self.n))
         # The user's extension plus a scene-relative tolerance, so segments
         # ending on the disc's own surface survive float rounding.
         self.ext = float(extension) + 10.0 * compiled.eps
@@ -134,6 +156,25 @@ class DetpEstimator(Estimator):
         self.irr = self.zeros(self.n * 16)
         # every DETP program carries the resolve kernel (kernels/detp_resolve.h)
         self.k_resolve = self.program(self.name).detp_resolve
+        self.k_resolve_radii = self.program(self.name).detp_resolve_radii
+
+    def set_radii(self, index: np.ndarray) -> None:
+        """The radii of points ``index`` (all of them when built): d, or the
+        adaptive radius of each point (a function of the point alone, so a
+        replaced point gets the radius it would have had from the start).
+        Kept on the host as float32 d^2 (what the kernels compare with; d^2
+        rounded once, as a float argument is) and 1 / d^2 (the resolve's)."""
+        if self.adaptive is None:
+            self.radii = np.full(self.n, self.radius)
+        else:
+            if not hasattr(self, "radii"):
+                self.radii = np.zeros(self.n)
+            if len(index):
+                self.radii[index] = self.adaptive.radii(self.points.subset(index) if len(index) < self.n
+                                                        else self.points)
+        self.radius2 = (self.radii**2).astype(np.float32)
+        self.radius2_buf = self.upload(self.radius2)
+        self.inv_radius2_buf = self.upload((1.0 / self.radii**2).astype(np.float32))
 
     def replace_points(self, index: np.ndarray, new) -> None:
         self.points.positions[index] = new.positions
@@ -141,6 +182,8 @@ class DetpEstimator(Estimator):
         self.points.barys[index] = new.barys
         cl.enqueue_copy(self.queue, self.positions, self.points.positions)
         cl.enqueue_copy(self.queue, self.normals, self.points.normals)
+        if self.adaptive is not None:
+            self.set_radii(np.asarray(index))
         self.points_changed()
 
     # Fewer segments than this per disc, on average, and most discs catch
@@ -154,7 +197,8 @@ class DetpEstimator(Estimator):
         area = float(np.sum(self.compiled.areas, dtype=np.float64))
         if paths_done <= 0 or not area > 0:
             return
-        expected = segments / paths_done * paths_total * math.pi * self.radius**2 / area
+        mean_r2 = self.radius**2 if self.adaptive is None else float(np.mean(self.radii**2))
+        expected = segments / paths_done * paths_total * math.pi * mean_r2 / area
         if expected < self.FEW_SEGMENTS:
             import warnings
 
@@ -170,6 +214,10 @@ class DetpEstimator(Estimator):
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
+        if self.adaptive is not None:  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
+            launch(self.queue, self.k_resolve_radii, self.n, self.acc, self.n, 1.0 / (scale * math.pi),
+                   self.inv_radius2_buf, self.irr)
+            return self.irr
         inv = 1.0 / (scale * math.pi * self.radius**2)
         launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
         return self.irr

@@ -23,6 +23,7 @@ FIRST_PAIR_TESTS = 1 << 24
 
 class Detp(DetpEstimator):
     name = "detp"
+    per_point_radius = True  # detp_plain reads each point's d^2
 
     def __init__(self, queue, compiled, points, radius: float, **kw):
         super().__init__(queue, compiled, points, radius, **kw)
@@ -45,7 +46,7 @@ class Detp(DetpEstimator):
             launch(
                 self.queue, self.k_plain, (self.n + LANES - 1) // LANES,
                 self.positions, self.normals, self.n, segments, count,
-                batch.max_depth, self.count_emitted, self.radius**2,
+                batch.max_depth, self.count_emitted, self.radius2_buf,
                 self.ext, self.acc, self.work_buf,
                 local_size=self.local_size,
             )
