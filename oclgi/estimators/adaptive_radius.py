@@ -52,6 +52,9 @@ option             default   meaning
 ``pilot_photons``  32768     paths of the pilot, 1,024..4,194,304
 ``radius_min``     0.25      smallest density radius, and the geometric
                              floor, as a fraction of d, in (0, 1]
+``radii``          None      with "adaptive": each point's radius, given
+                             instead of computed (a session's first frame's,
+                             to recompute with the radii it keeps)
 =================  ========  =================================================
 """
 
@@ -86,6 +89,22 @@ def check(radius_mode, adaptive_k, pilot_photons, radius_min) -> None:
         f = math.nan
     if isinstance(radius_min, bool) or not 0.0 < f <= 1.0:
         raise OclgiError(f"radius_min must be a number in (0, 1], got {radius_min!r}")
+
+
+def given_radii(radii, radius_mode: str, n: int):
+    """``radii`` as (n,) float64, checked; None when not given."""
+    if radii is None:
+        return None
+    if radius_mode != "adaptive":
+        raise OclgiError("radii are given with radius_mode 'adaptive' only")
+    try:
+        r = np.array(radii, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise OclgiError(f"radii must be {n} positive numbers, got {type(radii).__name__}") from None
+    if len(r) != n or not (np.isfinite(r) & (r > 0)).all():
+        raise OclgiError(f"radii must be {n} positive finite numbers (one per point), got {len(r)}"
+                         + ("" if len(r) != n else " with some not positive or not finite"))
+    return r
 
 
 class AdaptiveRadii:

@@ -121,7 +121,9 @@ class DetpEstimator(Estimator):
     ``radius_mode`` "fixed" (d for every point) or "adaptive" (a radius per
     point, fixed when the estimator is built, with ``adaptive_k``,
     ``pilot_photons`` and ``radius_min``: oclgi/estimators/adaptive_radius.py;
-    variants with ``per_point_radius`` only). Every variant selects segments
+    variants with ``per_point_radius`` only); ``radii``: with "adaptive",
+    the radius of each point given instead of computed (a session's first
+    frame's, ``Session.estimator.radii``). Every variant selects segments
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
     same sums, bit for bit.
     """
@@ -132,17 +134,20 @@ class DetpEstimator(Estimator):
 
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
-                 radius_min: float = 0.25, **kw):
+                 radius_min: float = 0.25, radii=None, **kw):
         from . import adaptive_radius
 
         adaptive_radius.check(radius_mode, adaptive_k, pilot_photons, radius_min)
         if radius_mode == "adaptive" and not self.per_point_radius:
             raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
+        given = adaptive_radius.given_radii(radii, radius_mode, len(points))
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
         self.radius_mode = radius_mode
         self.adaptive = None
-        if radius_mode == "adaptive":
+        if given is not None:
+            self.radii = given  # e.g. a session's first frame's: kept as they are
+        elif radius_mode == "adaptive":
             self.adaptive = adaptive_radius.AdaptiveRadii(queue, compiled, self.radius, extension,
                                                           self.count_emitted, adaptive_k, pilot_photons,
                                                           radius_min, self.local_size)
@@ -164,9 +169,9 @@ class DetpEstimator(Estimator):
         replaced point gets the radius it would have had from the start).
         Kept on the host as float32 d^2 (what the kernels compare with; d^2
         rounded once, as a float argument is) and 1 / d^2 (the resolve's)."""
-        if self.adaptive is None:
+        if self.radius_mode == "fixed":
             self.radii = np.full(self.n, self.radius)
-        else:
+        elif self.adaptive is not None:
             if not hasattr(self, "radii"):
                 self.radii = np.zeros(self.n)
             if len(index):
@@ -197,7 +202,7 @@ class DetpEstimator(Estimator):
         area = float(np.sum(self.compiled.areas, dtype=np.float64))
         if paths_done <= 0 or not area > 0:
             return
-        mean_r2 = self.radius**2 if self.adaptive is None else float(np.mean(self.radii**2))
+        mean_r2 = self.radius**2 if self.radius_mode == "fixed" else float(np.mean(self.radii**2))
         expected = segments / paths_done * paths_total * math.pi * mean_r2 / area
         if expected < self.FEW_SEGMENTS:
             import warnings
@@ -214,7 +219,7 @@ class DetpEstimator(Estimator):
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
-        if self.adaptive is not None:  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
+        if self.radius_mode != "fixed":  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
             launch(self.queue, self.k_resolve_radii, self.n, self.acc, self.n, 1.0 / (scale * math.pi),
                    self.inv_radius2_buf, self.irr)
             return self.irr
