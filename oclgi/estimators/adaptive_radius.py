@@ -56,6 +56,8 @@ option             default   meaning
                              instead of computed (a session's first frame's,
                              to recompute with the radii it keeps)
 =================  ========  =================================================
+
+The options are checked by oclgi/estimators/radius_options.py.
 """
 
 from __future__ import annotations
@@ -64,47 +66,12 @@ import math
 
 import numpy as np
 
-from ..errors import OclgiError
-
-RADIUS_MODES = ("fixed", "adaptive")
-PILOT_SEED = 0x5EED_AD47  # the pilot's paths: not any run's, whatever its seed
+from .ray_map_knn import SegmentKnnIndex
+from .surface_patches import SurfacePatches
+# The pilot's paths, traced by the engine (Engine.estimator): their own seed,
+# not any run's, so the radii do not change with the run's seed.
+PILOT_SEED = 0x5EED_AD47
 PILOT_MAX_DEPTH = 16
-
-
-def check(radius_mode, adaptive_k, pilot_photons, radius_min) -> None:
-    """One error line for a bad option, before any work."""
-    from ..params import integral
-
-    if radius_mode not in RADIUS_MODES:
-        raise OclgiError(f"radius_mode must be one of {', '.join(map(repr, RADIUS_MODES))}, got {radius_mode!r}")
-    k = integral(adaptive_k)
-    if isinstance(adaptive_k, bool) or k is None or not 2 <= k <= 256:
-        raise OclgiError(f"adaptive_k must be an integer in 2..256, got {adaptive_k!r}")
-    n = integral(pilot_photons)
-    if isinstance(pilot_photons, bool) or n is None or not 1024 <= n <= 1 << 22:
-        raise OclgiError(f"pilot_photons must be an integer in 1024..4194304, got {pilot_photons!r}")
-    try:
-        f = float(radius_min)
-    except (TypeError, ValueError):
-        f = math.nan
-    if isinstance(radius_min, bool) or not 0.0 < f <= 1.0:
-        raise OclgiError(f"radius_min must be a number in (0, 1], got {radius_min!r}")
-
-
-def given_radii(radii, radius_mode: str, n: int):
-    """``radii`` as (n,) float64, checked; None when not given."""
-    if radii is None:
-        return None
-    if radius_mode != "adaptive":
-        raise OclgiError("radii are given with radius_mode 'adaptive' only")
-    try:
-        r = np.array(radii, np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise OclgiError(f"radii must be {n} positive numbers, got {type(radii).__name__}") from None
-    if len(r) != n or not (np.isfinite(r) & (r > 0)).all():
-        raise OclgiError(f"radii must be {n} positive finite numbers (one per point), got {len(r)}"
-                         + ("" if len(r) != n else " with some not positive or not finite"))
-    return r
 
 
 class AdaptiveRadii:
@@ -116,32 +83,26 @@ class AdaptiveRadii:
     ==============  =============================================================
     queue           the OpenCL queue
     compiled        the compiled scene (its scene's geometry, area and eps)
+    pilot           the pilot's paths (a PathBatch of ``pilot_photons`` paths
+                    from PILOT_SEED, traced by Engine.estimator)
     radius          d, the run's radius
     extension       e, the user's extension (as DETP's)
     count_emitted   whether segments leaving the lights count (as DETP's)
     adaptive_k      k of the pilot's search
-    pilot_photons   paths of the pilot
     radius_min      smallest radius, as a fraction of d
     local_size      the work-group size (no result depends on it)
     ==============  =============================================================
     """
 
-    def __init__(self, queue, compiled, radius: float, extension: float, count_emitted: bool,
-                 adaptive_k: int = 16, pilot_photons: int = 32768, radius_min: float = 0.25,
-                 local_size: int | None = None):
-        from ..tracing.photon_trace import PhotonTracer
-        from .ray_map_knn import SegmentKnnIndex
-        from .surface_patches import SurfacePatches
-
+    def __init__(self, queue, compiled, pilot, radius: float, extension: float, count_emitted: bool,
+                 adaptive_k: int = 16, radius_min: float = 0.25, local_size: int | None = None):
         self.queue, self.radius, self.k = queue, float(radius), int(adaptive_k)
         self.radius_min, self.local_size = float(radius_min), local_size
         scene = compiled.scene
-        tracer = PhotonTracer(queue, compiled, PILOT_SEED, PILOT_MAX_DEPTH, int(pilot_photons), local_size)
-        batch = tracer.trace(0, int(pilot_photons))
-        segs = batch.read_segments(queue)
+        segs = pilot.read_segments(queue)
         keep = (segs["dir"] != 0).any(axis=1)  # empty slots and holes have no direction
         if not count_emitted:
-            keep[::batch.max_depth] = False
+            keep[::pilot.max_depth] = False
         s = segs[keep]
         self.index = None
         self.r_u = math.inf

@@ -16,6 +16,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from . import radius_options
 
 
 class Estimator:
@@ -121,7 +122,7 @@ class DetpEstimator(Estimator):
     ``radius_mode`` "fixed" (d for every point) or "adaptive" (a radius per
     point, fixed when the estimator is built, with ``adaptive_k``,
     ``pilot_photons`` and ``radius_min``: oclgi/estimators/adaptive_radius.py;
-    variants with ``per_point_radius`` only); ``radii``: with "adaptive",
+    variants with a ``radii_maker`` only); ``radii``: with "adaptive",
     the radius of each point given instead of computed (a session's first
     frame's, ``Session.estimator.radii``). Every variant selects segments
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
@@ -129,18 +130,17 @@ class DetpEstimator(Estimator):
     """
 
     # Variants whose kernels read each disc's own radius (plain DETP: a
-    # per-point buffer; disc indexing: the disc blocks' r2).
-    per_point_radius = False
+    # per-point buffer; disc indexing: the disc blocks' r2) name the class
+    # that makes adaptive radii (adaptive_radius.AdaptiveRadii).
+    radii_maker = None
 
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
-                 radius_min: float = 0.25, radii=None, **kw):
-        from . import adaptive_radius
-
-        adaptive_radius.check(radius_mode, adaptive_k, pilot_photons, radius_min)
-        if radius_mode == "adaptive" and not self.per_point_radius:
+                 radius_min: float = 0.25, radii=None, pilot=None, **kw):
+        radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
+        if radius_mode == "adaptive" and self.radii_maker is None:
             raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
-        given = adaptive_radius.given_radii(radii, radius_mode, len(points))
+        given = radius_options.given_radii(radii, radius_mode, len(points))
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
         self.radius_mode = radius_mode
@@ -148,9 +148,10 @@ class DetpEstimator(Estimator):
         if given is not None:
             self.radii = given  # e.g. a session's first frame's: kept as they are
         elif radius_mode == "adaptive":
-            self.adaptive = adaptive_radius.AdaptiveRadii(queue, compiled, self.radius, extension,
-                                                          self.count_emitted, adaptive_k, pilot_photons,
-                                                          radius_min, self.local_size)
+            if pilot is None:
+                raise OclgiError("adaptive radii need the pilot's paths (Engine.estimator traces them)")
+            self.adaptive = self.radii_maker(queue, compiled, pilot, self.radius, extension, self.count_emitted,
+                                             adaptive_k, radius_min, self.local_size)
         self.set_radii(np.arange(self.n))
         # The user's extension plus a scene-relative tolerance, so segments
         # ending on the disc's own surface survive float rounding.

@@ -14,6 +14,7 @@ import math
 from ..cl.layout import Segment
 from ..cl.constants import LANES  # points per work-item in detp_plain (kernels/detp.cl)
 from ..cl.programs import launch, timed_slices
+from .adaptive_radius import AdaptiveRadii
 from .base import DetpEstimator
 
 
@@ -23,7 +24,7 @@ FIRST_PAIR_TESTS = 1 << 24
 
 class Detp(DetpEstimator):
     name = "detp"
-    per_point_radius = True  # detp_plain reads each point's d^2
+    radii_maker = AdaptiveRadii  # detp_plain reads each point's d^2
 
     def __init__(self, queue, compiled, points, radius: float, **kw):
         super().__init__(queue, compiled, points, radius, **kw)

@@ -71,11 +71,12 @@ from ..accel.bvh_build import build_bvh
 from ..cl.layout import DiscBlock
 from ..cl.programs import launch
 from ..errors import OclgiError
+from .adaptive_radius import AdaptiveRadii
 from .base import DetpEstimator
 
 class DetpDiscIndex(DetpEstimator):
     name = "detp_disc_index"
-    per_point_radius = True  # each disc block carries its discs' d^2
+    radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
     def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, **kw):
         super().__init__(queue, compiled, points, radius, **kw)
