@@ -242,6 +242,15 @@ def main():
             lines.append(row)
             summary.append((name, label, photons, seconds, np.median(rel), np.percentile(rel, 90), rel.max(),
                             int(off.sum())))
+        radii = engine.estimator(pts, engine.run_params("detp_disc_index", 1000, None),
+                                 radius_mode="adaptive").radii / scene.radius
+        lines += ["", "Adaptive radii over d, median (10% / 90%) per part: " + ", ".join(
+            f"{p} {np.median(radii[parts == p]):.2f} ({np.percentile(radii[parts == p], 10):.2f} / "
+            f"{np.percentile(radii[parts == p], 90):.2f})" for p in counts) + "."]
+        mine = [r for r in summary if r[0] == name]
+        lines += ["", "Goals (issue 16: median <= 2%, no point off by 2x, in <= 10 s on 2 cores): " + "; ".join(
+            f"{label}: median {'met' if med <= 0.02 else 'missed'} ({med:.2%}), "
+            f"{'none' if n_off == 0 else n_off} off by 2x" for _, label, _, _, med, _, _, n_off in mine) + "."]
         lines.append("")
     if args.references_only:
         return

@@ -375,9 +375,9 @@ class Engine:
         seed nor its batches. The options are checked first."""
         from .estimators import adaptive_radius, radius_options
 
-        radius_options.check(options.get("radius_mode", "fixed"), options.get("adaptive_k", 16),
-                             options.get("pilot_photons", 32768), options.get("radius_min", 0.25))
-        n = int(options.get("pilot_photons", 32768))
+        given = {k: options.get(k, v) for k, v in radius_options.DEFAULTS.items()}
+        radius_options.check(**given)
+        n = int(given["pilot_photons"])
         tracer = PhotonTracer(self.queue, self.compiled, adaptive_radius.PILOT_SEED, adaptive_radius.PILOT_MAX_DEPTH,
                               n, self.local_size)
         return tracer.trace(0, n)

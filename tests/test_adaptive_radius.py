@@ -247,3 +247,14 @@ def test_study_runs_the_adaptive_variant(plane):
     result = run_study(plane, configs, points=pts, seeds=2, reference=lambda p, n: exact(p[:, 0], p[:, 2]))
     labels = {row.label for row in result.rows}
     assert len(labels) == 2 and any("radius_mode=adaptive" in label for label in labels)
+
+
+def test_option_defaults_agree():
+    """The engine traces the pilot with radius_options.DEFAULTS: they are the signature's."""
+    import inspect
+
+    from oclgi.estimators.base import DetpEstimator
+    from oclgi.estimators.radius_options import DEFAULTS
+
+    sig = inspect.signature(DetpEstimator.__init__).parameters
+    assert {k: sig[k].default for k in DEFAULTS} == DEFAULTS

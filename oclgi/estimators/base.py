@@ -180,7 +180,8 @@ class DetpEstimator(Estimator):
                                                         else self.points)
         self.radius2 = (self.radii**2).astype(np.float32)
         self.radius2_buf = self.upload(self.radius2)
-        self.inv_radius2_buf = self.upload((1.0 / self.radii**2).astype(np.float32))
+        if self.radius_mode != "fixed":  # the fixed resolve takes one scalar
+            self.inv_radius2_buf = self.upload((1.0 / self.radii**2).astype(np.float32))
 
     def replace_points(self, index: np.ndarray, new) -> None:
         self.points.positions[index] = new.positions

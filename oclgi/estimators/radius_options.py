@@ -12,6 +12,9 @@ import numpy as np
 from ..errors import OclgiError
 
 RADIUS_MODES = ("fixed", "adaptive")
+# The defaults, as DetpEstimator's signature gives them (the engine reads
+# them to trace the pilot before the estimator is built).
+DEFAULTS = {"radius_mode": "fixed", "adaptive_k": 16, "pilot_photons": 32768, "radius_min": 0.25}
 
 
 def check(radius_mode, adaptive_k, pilot_photons, radius_min) -> None:
