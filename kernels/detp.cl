@@ -5,12 +5,15 @@
  *               (n_slots = paths * max_depth, read by segment.h) is
  *               tested against the 8 discs at once with DETP_TEST (detp.h),
  *               and the fixed-point power of a crossing segment is added to
- *               that point's sums. A
+ *               that point's sums. Each point has its own squared radius
+ *               (radius2[i]: the one radius of the run, or per-point
+ *               adaptive radii, oclgi/estimators/adaptive_radius.py). A
  *               work-item owns its points, so no atomics; batches run in
  *               order. (PoCL does not vectorise loops across work-items, so
  *               the lanes are explicit.)
  *               Counts u = segment-disc tests (work.h).
- * detp_resolve  (detp_resolve.h) one work-item per point: E = acc / (scale * pi d^2).
+ * detp_resolve  (detp_resolve.h) one work-item per point: E = acc / (scale * pi d^2);
+ *               detp_resolve_radii the same with each point's own d.
  *
  * count_emitted = 0 skips segments leaving the light (bounce 0, segment.h),
  * i.e. the estimate is of indirect light only.
@@ -23,7 +26,7 @@
 
 __kernel void detp_plain(__global const float4 *positions, __global const float4 *normals,
                          int n_points, __global const Segment *segments, int n_paths,
-                         int max_depth, int count_emitted, float radius2, float ext,
+                         int max_depth, int count_emitted, __global const float *radius2, float ext,
                          __global long *acc, __global ulong *work)
 {
     int base = get_global_id(0) * OCLGI_LANES;
@@ -31,14 +34,17 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
     WORK_DECL;
     int lanes = min(OCLGI_LANES, n_points - base); /* real points in this work-item */
     float px[OCLGI_LANES], py[OCLGI_LANES], pz[OCLGI_LANES], qx[OCLGI_LANES], qy[OCLGI_LANES], qz[OCLGI_LANES];
+    float rr[OCLGI_LANES];
     for (int k = 0; k < OCLGI_LANES; ++k) {
         int i = min(base + k, n_points - 1);
         float4 p = positions[i], n = normals[i];
         if (base + k >= n_points) n = (float4)(0.0f); /* padding lane: never crosses */
         px[k] = p.x; py[k] = p.y; pz[k] = p.z; qx[k] = n.x; qy[k] = n.y; qz[k] = n.z;
+        rr[k] = radius2[i];
     }
     float8 x = vload8(0, px), y = vload8(0, py), z = vload8(0, pz);
     float8 nx = vload8(0, qx), ny = vload8(0, qy), nz = vload8(0, qz);
+    float8 r2 = vload8(0, rr);
     /* Per-lane sums in long4 halves: a long8 (512 bits) through a builtin
      * (convert_long8, vstore8) changes the calling convention without
      * AVX-512, a compiler warning on AVX2; 256-bit vectors do not, and the
@@ -55,7 +61,7 @@ __kernel void detp_plain(__global const float4 *positions, __global const float4
             float tmax = s.t_end + ext;
             WORK_U(lanes);
             int8 hit;
-            DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, radius2);
+            DETP_TEST(float8, hit, x, y, z, nx, ny, nz, s.o.x, s.o.y, s.o.z, s.w.x, s.w.y, s.w.z, tmax, r2);
             if (any(hit)) {
                 long3 q = segment_fixed_power(path + b);
                 long4 m0 = convert_long4(hit.lo) & 1, m1 = convert_long4(hit.hi) & 1;

@@ -15,7 +15,7 @@
  *
  * Disc blocks (host: oclgi/estimators/detp_disc_index.py): the discs of a
  * leaf are stored as ceil(count / 8) DiscBlocks (oclgi_types.h: x, y, z,
- * nx, ny, nz, point id, a float8 or int8 each); padding lanes have a zero
+ * nx, ny, nz, squared radius, point id, a float8 or int8 each); padding lanes have a zero
  * normal, which never passes DETP_TEST (w.n = 0). A leaf node's `first` is
  * its first block and `count` its number of real discs.
  *
@@ -30,7 +30,7 @@
 
 __kernel void detp_disc_index(__global const BvhNode *nodes, __global const DiscBlock *discs,
                               __global const Segment *segments, int n_paths, int max_depth,
-                              int count_emitted, float radius2, float ext,
+                              int count_emitted, float ext,
                               __global long *acc, __global ulong *work)
 {
     int p = get_global_id(0);
@@ -45,7 +45,7 @@ __kernel void detp_disc_index(__global const BvhNode *nodes, __global const Disc
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
-        disc_index_segment(nodes, discs, path + b, &s, radius2, ext, acc, &visited, &tests);
+        disc_index_segment(nodes, discs, path + b, &s, ext, acc, &visited, &tests);
     }
     WORK_U(tests);
     WORK_NODE(visited);

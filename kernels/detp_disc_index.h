@@ -11,9 +11,9 @@
 #include "box_bvh.h"
 
 /* One segment (s, read from `slot`) against the tree: every leaf it meets,
- * 8 discs at a time. */
+ * 8 discs at a time, each disc with its own squared radius (DiscBlock r2). */
 inline void disc_index_segment(__global const BvhNode *nodes, __global const DiscBlock *discs,
-                               __global const Segment *slot, const SegmentView *s, float radius2, float ext,
+                               __global const Segment *slot, const SegmentView *s, float ext,
                                __global long *acc, uint *visited, ulong *tests)
 {
     float3 o = s->o, w = s->w;
@@ -32,7 +32,7 @@ inline void disc_index_segment(__global const BvhNode *nodes, __global const Dis
             __global const DiscBlock *b = discs + blk;
             int8 hit;
             DETP_TEST(float8, hit, b->x, b->y, b->z, b->nx, b->ny, b->nz, o.x, o.y, o.z, w.x, w.y, w.z,
-                      tmax, radius2);
+                      tmax, b->r2);
             if (!any(hit)) continue;
             if (!have_q) { /* quantised once per segment, as detp_plain does */
                 q = segment_fixed_power(slot);

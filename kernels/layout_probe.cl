@@ -30,7 +30,7 @@ __kernel void layout_probe(__global int *out)
     SIZE(Emitter); OFF(Emitter, p); OFF(Emitter, kind); OFF(Emitter, e1); OFF(Emitter, tri);
     OFF(Emitter, e2); OFF(Emitter, a); OFF(Emitter, power); OFF(Emitter, b);
     SIZE(DiscBlock); OFF(DiscBlock, x); OFF(DiscBlock, y); OFF(DiscBlock, z); OFF(DiscBlock, nx);
-    OFF(DiscBlock, ny); OFF(DiscBlock, nz); OFF(DiscBlock, id);
+    OFF(DiscBlock, ny); OFF(DiscBlock, nz); OFF(DiscBlock, r2); OFF(DiscBlock, id);
     SIZE(PieceBlock); OFF(PieceBlock, ox); OFF(PieceBlock, oy); OFF(PieceBlock, oz); OFF(PieceBlock, wx);
     OFF(PieceBlock, wy); OFF(PieceBlock, wz); OFF(PieceBlock, t_end); OFF(PieceBlock, slot);
     OFF(PieceBlock, claim_lo); OFF(PieceBlock, claim_hi);

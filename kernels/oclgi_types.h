@@ -158,7 +158,8 @@ typedef struct {
     float8 nx;
     float8 ny;
     float8 nz;
-    int8 id; /* query point */
+    float8 r2; /* squared radius of each disc (per point: adaptive radii) */
+    int8 id;   /* query point */
 } DiscBlock;
 
 /* 8 segment pieces of a ray-map leaf (detp_ray_map.cl); padding lanes have

@@ -108,7 +108,7 @@ __kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,
                                     int n_list, int max_depth, __global int *first,
                                     __global const BvhNode *disc_nodes, __global const DiscBlock *discs,
-                                    int count_emitted, float radius2, float ext,
+                                    int count_emitted, float ext,
                                     __global long *acc, __global ulong *work)
 {
     int i = get_global_id(0);
@@ -136,7 +136,7 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
             continue;
         }
         if (segment_counted(b, count_emitted))
-            disc_index_segment(disc_nodes, discs, path + b, &s, radius2, ext, acc, &visited, &tests);
+            disc_index_segment(disc_nodes, discs, path + b, &s, ext, acc, &visited, &tests);
     }
     first[i] = found;
     WORK_U(tests);

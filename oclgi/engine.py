@@ -361,9 +361,26 @@ class Engine:
         check_options(params.method, options)
         self._check_points(points)
         self._check_precision(params)
+        if getattr(cls, "radii_maker", None) is not None and options.get("radius_mode") == "adaptive" \
+                and options.get("radii") is None:
+            options = dict(options, pilot=self.pilot_paths(options))
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size,
                    count_work=flag(count_work, "count_work"), **options)
+
+    def pilot_paths(self, options: dict):
+        """The paths adaptive DETP radii are taken from
+        (oclgi/estimators/adaptive_radius.py): ``pilot_photons`` of them
+        from the pilot's own seed, so the radii depend on neither the run's
+        seed nor its batches. The options are checked first."""
+        from .estimators import adaptive_radius, radius_options
+
+        given = {k: options.get(k, v) for k, v in radius_options.DEFAULTS.items()}
+        radius_options.check(**given)
+        n = int(given["pilot_photons"])
+        tracer = PhotonTracer(self.queue, self.compiled, adaptive_radius.PILOT_SEED, adaptive_radius.PILOT_MAX_DEPTH,
+                              n, self.local_size)
+        return tracer.trace(0, n)
 
     def trace(self, photons: int | None = None, seed: int | None = None, max_depth: int | None = None):
         """Trace photon paths and return their segments on the host.

@@ -55,7 +55,7 @@ RUN_KEYS = ("method", "photons", "radius", "seed", "max_depth", "extension", "co
 # arguments, and the command line has no flag of their own for them.
 OPTION_PARAMS = ("extension", "count_emitted")
 # What the engine hands every estimator itself: never an option.
-ENGINE_ARGS = frozenset({"self", "queue", "compiled", "points", "local_size", "count_work"})
+ENGINE_ARGS = frozenset({"self", "queue", "compiled", "points", "local_size", "count_work", "pilot"})
 
 
 class ParamError(OclgiError):

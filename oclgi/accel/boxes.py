@@ -37,10 +37,14 @@ def active_discs(points):
     return np.nonzero((points.normals[:, :3] != 0).any(axis=1))[0]
 
 
-def disc_boxes(positions: np.ndarray, normals: np.ndarray, radius: float, pad: float):
-    """Padded float32 boxes of the discs: half-extent d sqrt(1 - n_a^2) + pad."""
+def disc_boxes(positions: np.ndarray, normals: np.ndarray, radius, pad: float):
+    """Padded float32 boxes of the discs: half-extent d sqrt(1 - n_a^2) + pad
+    (``radius`` d one number, or one per disc)."""
     n = normals.astype(np.float64)
     n /= np.linalg.norm(n, axis=1)[:, None]
+    radius = np.asarray(radius, np.float64)
+    if radius.ndim:
+        radius = radius[:, None]
     half = radius * np.sqrt(np.clip(1.0 - n * n, 0.0, 1.0)) + pad
     x = positions.astype(np.float64)
     return outward_f32(x - half, x + half)

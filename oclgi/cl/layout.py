@@ -101,10 +101,10 @@ Emitter = np.dtype(
 # DETP variants, LANES primitives each, one per lane of every field.
 L = LANES
 
-# 8 discs of a disc-index leaf, 224 bytes (estimators/detp_disc_index.py);
-# padding lanes have a zero normal.
+# 8 discs of a disc-index leaf, 256 bytes (estimators/detp_disc_index.py):
+# each disc's centre, normal and squared radius; padding lanes have a zero normal.
 DiscBlock = np.dtype([("x", f4, L), ("y", f4, L), ("z", f4, L), ("nx", f4, L), ("ny", f4, L), ("nz", f4, L),
-                      ("id", i4, L)])
+                      ("r2", f4, L), ("id", i4, L)])
 
 # 8 segment pieces of a ray-map leaf, 320 bytes (estimators/detp_ray_map.py):
 # the whole segment's o, w and t_end, its slot in the batch, and the piece's

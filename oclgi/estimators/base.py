@@ -16,6 +16,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from . import radius_options
 
 
 class Estimator:
@@ -117,14 +118,41 @@ class DetpEstimator(Estimator):
 
     Parameters: ``radius`` d; ``extension`` e (segments may end up to e past
     the disc's plane and still count; for concave surfaces); ``count_emitted``
-    (segments leaving the lights count, i.e. direct light included). Every
-    variant selects segments with ``detp_crosses``/``DETP_TEST`` (kernels/
-    detp.h), so all give the same sums, bit for bit.
+    (segments leaving the lights count, i.e. direct light included);
+    ``radius_mode`` "fixed" (d for every point) or "adaptive" (a radius per
+    point, fixed when the estimator is built, with ``adaptive_k``,
+    ``pilot_photons`` and ``radius_min``: oclgi/estimators/adaptive_radius.py;
+    variants with a ``radii_maker`` only); ``radii``: with "adaptive",
+    the radius of each point given instead of computed (a session's first
+    frame's, ``Session.estimator.radii``). Every variant selects segments
+    with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
+    same sums, bit for bit.
     """
 
-    def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0, **kw):
+    # Variants whose kernels read each disc's own radius (plain DETP: a
+    # per-point buffer; disc indexing: the disc blocks' r2) name the class
+    # that makes adaptive radii (adaptive_radius.AdaptiveRadii).
+    radii_maker = None
+
+    def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
+                 radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
+                 radius_min: float = 0.25, radii=None, pilot=None, **kw):
+        radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
+        if radius_mode == "adaptive" and self.radii_maker is None:
+            raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
+        given = radius_options.given_radii(radii, radius_mode, len(points))
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
+        self.radius_mode = radius_mode
+        self.adaptive = None
+        if given is not None:
+            self.radii = given  # e.g. a session's first frame's: kept as they are
+        elif radius_mode == "adaptive":
+            if pilot is None:
+                raise OclgiError("adaptive radii need the pilot's paths (Engine.estimator traces them)")
+            self.adaptive = self.radii_maker(queue, compiled, pilot, self.radius, extension, self.count_emitted,
+                                             adaptive_k, radius_min, self.local_size)
+        self.set_radii(np.arange(self.n))
         # The user's extension plus a scene-relative tolerance, so segments
         # ending on the disc's own surface survive float rounding.
         self.ext = float(extension) + 10.0 * compiled.eps
@@ -134,6 +162,26 @@ class DetpEstimator(Estimator):
         self.irr = self.zeros(self.n * 16)
         # every DETP program carries the resolve kernel (kernels/detp_resolve.h)
         self.k_resolve = self.program(self.name).detp_resolve
+        self.k_resolve_radii = self.program(self.name).detp_resolve_radii
+
+    def set_radii(self, index: np.ndarray) -> None:
+        """The radii of points ``index`` (all of them when built): d, or the
+        adaptive radius of each point (a function of the point alone, so a
+        replaced point gets the radius it would have had from the start).
+        Kept on the host as float32 d^2 (what the kernels compare with; d^2
+        rounded once, as a float argument is) and 1 / d^2 (the resolve's)."""
+        if self.radius_mode == "fixed":
+            self.radii = np.full(self.n, self.radius)
+        elif self.adaptive is not None:
+            if not hasattr(self, "radii"):
+                self.radii = np.zeros(self.n)
+            if len(index):
+                self.radii[index] = self.adaptive.radii(self.points.subset(index) if len(index) < self.n
+                                                        else self.points)
+        self.radius2 = (self.radii**2).astype(np.float32)
+        self.radius2_buf = self.upload(self.radius2)
+        if self.radius_mode != "fixed":  # the fixed resolve takes one scalar
+            self.inv_radius2_buf = self.upload((1.0 / self.radii**2).astype(np.float32))
 
     def replace_points(self, index: np.ndarray, new) -> None:
         self.points.positions[index] = new.positions
@@ -141,6 +189,8 @@ class DetpEstimator(Estimator):
         self.points.barys[index] = new.barys
         cl.enqueue_copy(self.queue, self.positions, self.points.positions)
         cl.enqueue_copy(self.queue, self.normals, self.points.normals)
+        if self.adaptive is not None:
+            self.set_radii(np.asarray(index))
         self.points_changed()
 
     # Fewer segments than this per disc, on average, and most discs catch
@@ -154,7 +204,8 @@ class DetpEstimator(Estimator):
         area = float(np.sum(self.compiled.areas, dtype=np.float64))
         if paths_done <= 0 or not area > 0:
             return
-        expected = segments / paths_done * paths_total * math.pi * self.radius**2 / area
+        mean_r2 = self.radius**2 if self.radius_mode == "fixed" else float(np.mean(self.radii**2))
+        expected = segments / paths_done * paths_total * math.pi * mean_r2 / area
         if expected < self.FEW_SEGMENTS:
             import warnings
 
@@ -170,6 +221,10 @@ class DetpEstimator(Estimator):
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
+        if self.radius_mode != "fixed":  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
+            launch(self.queue, self.k_resolve_radii, self.n, self.acc, self.n, 1.0 / (scale * math.pi),
+                   self.inv_radius2_buf, self.irr)
+            return self.irr
         inv = 1.0 / (scale * math.pi * self.radius**2)
         launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
         return self.irr

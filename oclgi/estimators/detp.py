@@ -14,6 +14,7 @@ import math
 from ..cl.layout import Segment
 from ..cl.constants import LANES  # points per work-item in detp_plain (kernels/detp.cl)
 from ..cl.programs import launch, timed_slices
+from .adaptive_radius import AdaptiveRadii
 from .base import DetpEstimator
 
 
@@ -23,6 +24,7 @@ FIRST_PAIR_TESTS = 1 << 24
 
 class Detp(DetpEstimator):
     name = "detp"
+    radii_maker = AdaptiveRadii  # detp_plain reads each point's d^2
 
     def __init__(self, queue, compiled, points, radius: float, **kw):
         super().__init__(queue, compiled, points, radius, **kw)
@@ -45,7 +47,7 @@ class Detp(DetpEstimator):
             launch(
                 self.queue, self.k_plain, (self.n + LANES - 1) // LANES,
                 self.positions, self.normals, self.n, segments, count,
-                batch.max_depth, self.count_emitted, self.radius**2,
+                batch.max_depth, self.count_emitted, self.radius2_buf,
                 self.ext, self.acc, self.work_buf,
                 local_size=self.local_size,
             )

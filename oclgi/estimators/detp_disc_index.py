@@ -11,7 +11,9 @@ segment-disc test) instead of ``u n_R n_P``.
 
 Algorithm:
 
-1. Discs: centre x, unit normal n, radius d. Its box has half-extent
+1. Discs: centre x, unit normal n, radius d (the run's, or the point's own
+   with ``radius_mode="adaptive"``, oclgi/estimators/adaptive_radius.py,
+   carried in the blocks as d^2). Its box has half-extent
    ``d sqrt(1 - n_a^2)`` on axis a, plus a pad (below). Points with a zero
    normal (camera rays that missed) can never be crossed and are left out.
 2. ``build_bvh`` (oclgi/accel/bvh_build.py, host numpy, Morton order) over
@@ -69,10 +71,12 @@ from ..accel.bvh_build import build_bvh
 from ..cl.layout import DiscBlock
 from ..cl.programs import launch
 from ..errors import OclgiError
+from .adaptive_radius import AdaptiveRadii
 from .base import DetpEstimator
 
 class DetpDiscIndex(DetpEstimator):
     name = "detp_disc_index"
+    radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
     def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, **kw):
         super().__init__(queue, compiled, points, radius, **kw)
@@ -92,7 +96,7 @@ class DetpDiscIndex(DetpEstimator):
         if self.n_active:
             pos, nrm = points.positions[ids, :3], points.normals[ids, :3]
             pad = PAD * coordinate_scale(self.compiled, pos)
-            lo, hi = disc_boxes(pos, nrm, self.radius, pad)
+            lo, hi = disc_boxes(pos, nrm, self.radii[ids], pad)
             bvh = build_bvh(lo, hi, self.leaf_size)
             check_depth(bvh.depth, "discs")
             nodes, blk, lane, n_blocks = leaf_blocks(bvh.nodes, self.n_active)
@@ -101,6 +105,7 @@ class DetpDiscIndex(DetpEstimator):
             for c, (x, n) in enumerate((("x", "nx"), ("y", "ny"), ("z", "nz"))):
                 blocks[x][blk, lane] = pos[o, c]
                 blocks[n][blk, lane] = nrm[o, c]
+            blocks["r2"][blk, lane] = self.radius2[ids[o]]
             blocks["id"][blk, lane] = ids[o]
             self.nodes = self.upload(nodes)
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
@@ -119,7 +124,7 @@ class DetpDiscIndex(DetpEstimator):
         launch(
             self.queue, self.k_walk, batch.n_paths,
             self.nodes, self.blocks, batch.segments, batch.n_paths, batch.max_depth,
-            self.count_emitted, self.radius**2, self.ext,
+            self.count_emitted, self.ext,
             self.acc, self.work_buf,
             local_size=self.local_size,
         )

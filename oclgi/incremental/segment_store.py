@@ -189,12 +189,12 @@ class SegmentStore:
         if n:
             args = (*engine.compiled.scene_args, obj, self.batch.segments, listed, n, self.max_depth, self.first)
             if not fused:
-                launch(q, self.k_first, n, *args, None, None, 0, 0, 0,
+                launch(q, self.k_first, n, *args, None, None, 0, 0,
                        None, None, local_size=engine.local_size)
             else:
                 k = programs(engine.ctx).get("update", **discs.defines).update_first_affected
                 launch(q, k, n, *args, discs.nodes, discs.blocks, discs.count_emitted,
-                       discs.radius ** 2, discs.ext, discs.acc,
+                       discs.ext, discs.acc,
                        discs.work_buf, local_size=engine.local_size)
             cl.enqueue_copy(q, self.first_host[:n], self.first)
         hit = np.nonzero(self.first_host[:n] >= 0)[0]

@@ -85,6 +85,11 @@ class Session:
             raise OclgiError(f"method {p.method!r} has no exact incremental update; sessions take "
                              f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
         self.view = None
+        if points is None and options.get("radius_mode", "fixed") != "fixed":
+            # Adaptive radii are fixed when the estimator is built (the first
+            # frame); a camera session's dynamic points are new every frame.
+            raise OclgiError("radius_mode 'adaptive' needs a session over given points (points=...), "
+                             "not a camera session")
         if points is None:
             from .dynamic_view import DynamicView
 
