@@ -23,31 +23,6 @@
  */
 #include "point_index.h"
 
-inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int include_kth,
-                      __global long *acc, __global float *r2, int write_ids,
-                      __global int *ids, __global float *d2s)
-{
-    long3 s = (long3)(0);
-    float r = INFINITY;
-    if (h->n == PM_K) {
-        r = h->d2[0];
-        /* heap slot 0 is the K-th nearest: the K-1 estimator leaves it out */
-        for (int j = include_kth ? 0 : 1; j < PM_K; ++j)
-            s += segment_quantise(power[h->id[j]].xyz);
-    }
-    acc[3 * i + 0] = s.x;
-    acc[3 * i + 1] = s.y;
-    acc[3 * i + 2] = s.z;
-    r2[i] = r;
-    if (write_ids) {
-        pm_sort(h);
-        for (int j = 0; j < PM_K; ++j) {
-            ids[(size_t)i * PM_K + j] = j < h->n ? h->id[j] : -1;
-            d2s[(size_t)i * PM_K + j] = j < h->n ? h->d2[j] : INFINITY;
-        }
-    }
-}
-
 inline int pm_has_normal(float3 n)
 {
     return n.x != 0.0f || n.y != 0.0f || n.z != 0.0f;

@@ -107,6 +107,17 @@ inline void pm_offer(PmHeap *h, float d, int id)
     h->d2[c] = d; h->id[c] = id;
 }
 
+/* Offer the lanes of a block that pass ``ok`` to the heap, lane order. */
+inline void pm_offer_lanes(PmHeap *h, float8 d2, int8 ok, __global const int *ids)
+{
+    float d[OCLGI_LANES];
+    int m[OCLGI_LANES];
+    vstore8(d2, 0, d);
+    vstore8(ok, 0, m);
+    for (int l = 0; l < OCLGI_LANES; ++l)
+        if (m[l]) pm_offer(h, d[l], ids[l]);
+}
+
 /* Impacts are stored as structure-of-arrays (px, py, pz, wx, wy, wz, id,
  * each padded with OCLGI_LANES entries past the end) so that a run of them
  * is tested OCLGI_LANES at a time in vector lanes: PoCL does not vectorise
@@ -135,12 +146,7 @@ inline void pm_scan(PmHeap *h, const PmImpacts *im, int start, int count, float3
             ok &= wn < (float8)(-OCLGI_FRONT_COS_EPS);
         }
         if (!any(ok)) continue;
-        float d[OCLGI_LANES];
-        int m[OCLGI_LANES];
-        vstore8(d2, 0, d);
-        vstore8(ok, 0, m);
-        for (int l = 0; l < OCLGI_LANES; ++l)
-            if (m[l]) pm_offer(h, d[l], im->id[j + l]);
+        pm_offer_lanes(h, d2, ok, im->id + j);
     }
 }
 
@@ -161,6 +167,36 @@ inline void pm_sort(PmHeap *h)
             c = m;
         }
         h->d2[c] = d; h->id[c] = id;
+    }
+}
+
+/* The end of a k-nearest search: acc = the fixed-point sum of the K-1 (or,
+ * with include_kth, the K) nearest powers, r2 = the K-th distance squared
+ * (INFINITY when fewer than K were found); with write_ids the neighbours in
+ * ascending (d2, id) order too. Photon Maps (point_index.cl) and Ray Maps'
+ * k-nearest rays (ray_map_knn.cl) share it. */
+inline void pm_finish(PmHeap *h, __global const float4 *power, int i, int include_kth,
+                      __global long *acc, __global float *r2, int write_ids,
+                      __global int *ids, __global float *d2s)
+{
+    long3 s = (long3)(0);
+    float r = INFINITY;
+    if (h->n == PM_K) {
+        r = h->d2[0];
+        /* heap slot 0 is the K-th nearest: the K-1 estimator leaves it out */
+        for (int j = include_kth ? 0 : 1; j < PM_K; ++j)
+            s += segment_quantise(power[h->id[j]].xyz);
+    }
+    acc[3 * i + 0] = s.x;
+    acc[3 * i + 1] = s.y;
+    acc[3 * i + 2] = s.z;
+    r2[i] = r;
+    if (write_ids) {
+        pm_sort(h);
+        for (int j = 0; j < PM_K; ++j) {
+            ids[(size_t)i * PM_K + j] = j < h->n ? h->id[j] : -1;
+            d2s[(size_t)i * PM_K + j] = j < h->n ? h->d2[j] : INFINITY;
+        }
     }
 }
 

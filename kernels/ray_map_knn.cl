@@ -37,7 +37,7 @@
  *
  * Two passes (see rmk_knn): the first within the host's guess r0.
  *
- * The result (rmk_finish): acc = the fixed-point sum of the K-1 nearest
+ * The result (pm_finish, point_index.h): acc = the fixed-point sum of the K-1 nearest
  * segments' powers (the K nearest with include_kth), each quantised once by
  * segment_quantise (segment.h); r2 = the K-th nearest's d2 (INFINITY when
  * fewer than K were found); with write_ids, the K neighbours' ids and d2 in
@@ -91,37 +91,7 @@ inline void rmk_scan(PmHeap *h, const RmkPieces *pc, int start, int count, float
         float8 d2 = dx * dx + dy * dy + dz * dz;
         ok &= d2 <= (float8)(rmk_bound(h, r0sq));
         if (!any(ok)) continue;
-        float d[OCLGI_LANES];
-        int m[OCLGI_LANES];
-        vstore8(d2, 0, d);
-        vstore8(ok, 0, m);
-        for (int l = 0; l < OCLGI_LANES; ++l)
-            if (m[l]) pm_offer(h, d[l], pc->id[j + l]);
-    }
-}
-
-inline void rmk_finish(PmHeap *h, __global const float4 *power, int i, int include_kth,
-                       __global long *acc, __global float *r2, int write_ids,
-                       __global int *ids, __global float *d2s)
-{
-    long3 s = (long3)(0);
-    float r = INFINITY;
-    if (h->n == PM_K) {
-        r = h->d2[0];
-        /* heap slot 0 is the K-th nearest: the K-1 estimator leaves it out */
-        for (int j = include_kth ? 0 : 1; j < PM_K; ++j)
-            s += segment_quantise(power[h->id[j]].xyz);
-    }
-    acc[3 * i + 0] = s.x;
-    acc[3 * i + 1] = s.y;
-    acc[3 * i + 2] = s.z;
-    r2[i] = r;
-    if (write_ids) {
-        pm_sort(h);
-        for (int j = 0; j < PM_K; ++j) {
-            ids[(size_t)i * PM_K + j] = j < h->n ? h->id[j] : -1;
-            d2s[(size_t)i * PM_K + j] = j < h->n ? h->d2[j] : INFINITY;
-        }
+        pm_offer_lanes(h, d2, ok, pc->id + j);
     }
 }
 
@@ -205,6 +175,6 @@ __kernel void rmk_knn(__global const BvhNode *nodes, __global const float *soa, 
         }
         if (h.n == PM_K || guess == INFINITY) break;
     }
-    rmk_finish(&h, power, i, include_kth, acc, r2, write_ids, ids, d2s);
+    pm_finish(&h, power, i, include_kth, acc, r2, write_ids, ids, d2s);
     WORK_FLUSH(work);
 }

@@ -82,7 +82,19 @@ class Estimator:
         raise NotImplementedError
 
     def accumulators(self) -> np.ndarray:
-        raise NotImplementedError
+        """The int64 sums, one RGB row per point (Impact Count: per triangle)."""
+        out = np.empty((self.n, 3), np.int64)
+        cl.enqueue_copy(self.queue, out, self.acc)
+        return out
+
+    def move_points(self, index: np.ndarray, new) -> None:
+        """The points ``index`` replaced by ``new`` on the host and the device
+        (what each estimator's replace_points starts with)."""
+        self.points.positions[index] = new.positions
+        self.points.normals[index] = new.normals
+        self.points.barys[index] = new.barys
+        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
+        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
 
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
         """After a run's first batch (``paths_done`` of ``paths_total``
@@ -184,11 +196,7 @@ class DetpEstimator(Estimator):
             self.inv_radius2_buf = self.upload((1.0 / self.radii**2).astype(np.float32))
 
     def replace_points(self, index: np.ndarray, new) -> None:
-        self.points.positions[index] = new.positions
-        self.points.normals[index] = new.normals
-        self.points.barys[index] = new.barys
-        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
-        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
+        self.move_points(index, new)
         if self.adaptive is not None:
             self.set_radii(np.asarray(index))
         self.points_changed()
@@ -229,7 +237,3 @@ class DetpEstimator(Estimator):
         launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
         return self.irr
 
-    def accumulators(self) -> np.ndarray:
-        out = np.empty((self.n, 3), np.int64)
-        cl.enqueue_copy(self.queue, out, self.acc)
-        return out

@@ -274,16 +274,7 @@ class PhotonMap(Estimator):
     def replace_points(self, index: np.ndarray, new) -> None:
         """Points ``index`` moved (points on a moved object); the caller searches them again.
         The Morton order of the full search is kept: it only serves locality."""
-        self.points.positions[index] = new.positions
-        self.points.normals[index] = new.normals
-        self.points.barys[index] = new.barys
-        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
-        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
-
-    def accumulators(self) -> np.ndarray:
-        out = np.empty((self.n, 3), np.int64)
-        cl.enqueue_copy(self.queue, out, self.acc)
-        return out
+        self.move_points(index, new)
 
     def radii(self) -> np.ndarray:
         """r_k per point (inf where fewer than k impacts were found), after resolve."""

@@ -480,18 +480,9 @@ class RayMapKnn(Estimator):
 
     def replace_points(self, index: np.ndarray, new) -> None:
         """Points ``index`` moved; the map's box holds the old points only, so it is built again."""
-        self.points.positions[index] = new.positions
-        self.points.normals[index] = new.normals
-        self.points.barys[index] = new.barys
-        cl.enqueue_copy(self.queue, self.positions, self.points.positions)
-        cl.enqueue_copy(self.queue, self.normals, self.points.normals)
+        self.move_points(index, new)
         self.order = self.upload(query_order(self.points.positions))
         self.knn = None
-
-    def accumulators(self) -> np.ndarray:
-        out = np.empty((self.n, 3), np.int64)
-        cl.enqueue_copy(self.queue, out, self.acc)
-        return out
 
     def radii(self) -> np.ndarray:
         """r_k per point (inf where fewer than k segments were found), after resolve."""
