@@ -1,11 +1,12 @@
 /* texture.h: albedo textures (oclgi/scene/textures.py packs them).
  *
- * texture_uv   a point's texture coordinates on triangle tri, from the
- *              point itself: the triangle's affine map (textures.uv_maps)
- *              applied in its object's space, so a photon's hit needs no
- *              barycentrics and a re-traced path textures bit for bit as
- *              its first trace did (both compute from the stored floats).
- * albedo_tint  a material's albedo's texture and vertex colours at a point.
+ * albedo_tint  a material's albedo's texture and vertex colours at a point:
+ *              the point's texture coordinates (and colours) from the point
+ *              itself, through its triangle's affine maps (textures.uv_maps,
+ *              colour_maps) applied in its object's space, so a photon's hit
+ *              needs no barycentrics and a re-traced path textures bit for
+ *              bit as its first trace did (both compute from the stored
+ *              floats).
  * texture_rgb  bilinear lookup, repeating outside [0, 1), v up the image
  *              (row 0, the top, at v = 1); texel centres at (i + 0.5) / w.
  */
@@ -18,13 +19,6 @@
                      __global const int *tri_object, __global const Texture *textures,         \
                      __global const float4 *texels
 #define TEXTURE_PASS tri_uvmap, tri_colourmap, tri_object, textures, texels
-
-inline float2 texture_uv(TEXTURE_ARGS, __global const Instance *instances, int tri, float3 p)
-{
-    float3 q = xform_point(instances[tri_object[tri]].object_from_world, p);
-    float8 m = tri_uvmap[tri];
-    return (float2)(dot(m.s012, q) + m.s3, dot(m.s456, q) + m.s7);
-}
 
 inline float4 texel_at(__global const Texture *t, __global const float4 *texels, int x, int y)
 {

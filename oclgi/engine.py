@@ -449,18 +449,20 @@ class Engine:
         """The image of a render run's estimate (resolved: ``Run.finish``);
         ``layers``: also the irradiance, albedo, normal and depth layers."""
         spp, cam = run.spp, run.camera
-        radiance, pixels, albedo = self.shade_albedo(run.estimator.points, est.estimator.irr, exposure, spp)
-        extra = render_layers(run.estimator.points, est.irradiance, albedo, cam, spp) if layers and cam else {}
+        want = bool(layers and cam)
+        radiance, pixels, albedo = self.shade_albedo(run.estimator.points, est.estimator.irr, exposure, spp, want)
+        extra = render_layers(run.estimator.points, est.irradiance, albedo, cam, spp) if want else {}
         return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure), extra)
 
     def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1):
         """(radiance, pixels): see ``shade_albedo``."""
-        return self.shade_albedo(points, irradiance, exposure, spp)[:2]
+        return self.shade_albedo(points, irradiance, exposure, spp, albedo=False)[:2]
 
     def shade_albedo(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0,
-                     spp: int = 1):
+                     spp: int = 1, albedo: bool = True):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
-        pixels, from the irradiance (a device float4 buffer, one per point).
+        pixels, from the irradiance (a device float4 buffer, one per point);
+        with ``albedo``, each point's albedo too (the render's layer), else None.
         ``spp`` > 1: the points are ``camera_points``' stacked samples, and a
         pixel is the mean of its samples' radiance (its alpha, their coverage)."""
         exposure = params.exposure(exposure, "exposure")
@@ -506,6 +508,8 @@ class Engine:
         pixels = np.empty((h, w, 4), np.uint8)
         cl.enqueue_copy(self.queue, radiance, rad)
         cl.enqueue_copy(self.queue, pixels, pix)
-        albedo = np.empty((len(points), 4), np.float32)  # per sample: the albedo layer averages them
-        cl.enqueue_copy(self.queue, albedo, alb)
-        return radiance[:, :, :3].copy(), pixels, albedo[:, :3]
+        if not albedo:  # a session's frame, a render without layers: no copy back
+            return radiance[:, :, :3].copy(), pixels, None
+        out = np.empty((len(points), 4), np.float32)  # per sample: the albedo layer averages them
+        cl.enqueue_copy(self.queue, out, alb)
+        return radiance[:, :, :3].copy(), pixels, out[:, :3]

@@ -127,9 +127,9 @@ class _Readers:
     def __init__(self, base_dir):
         self.base_dir = base_dir
 
-    vec3 = staticmethod(lambda v, where: _vec3(v, where))
-    radiant = staticmethod(lambda v, where: _radiant(v, where))
-    number = staticmethod(lambda v, where: _number(v, where))
+    vec3 = staticmethod(_vec3)
+    radiant = staticmethod(_radiant)
+    number = staticmethod(_number)
 
     def texture(self, value, where):
         from . import textures
@@ -153,8 +153,10 @@ def _texture_reader(loaded, label):
     def read(value):
         if not isinstance(value, str):
             return textures.from_image(value, f"{label}: embedded texture")
-        data = loaded.read_file(value) if getattr(loaded, "read_file", None) else None
-        return None if data is None else textures.read_bytes(data, value)
+        found = loaded.read_file(value) if getattr(loaded, "read_file", None) else None
+        if isinstance(found, Path):  # on disk: read where it is, not copied through a temporary file
+            return textures.read(found)
+        return None if found is None else textures.read_bytes(found, value)
     return read
 
 
@@ -247,7 +249,6 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
                 o = overrides[name]
                 _check_keys(o, TABLE_KEYS, f"{where}.materials.{name}")
                 mat = from_table(f"{where}.materials.{name}", o, mat, read)
-        mat.validate()
         local.append(len(materials))
         materials.append(mat)
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):

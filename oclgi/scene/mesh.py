@@ -41,7 +41,7 @@ class LoadedMesh:
     materials: dict[str, FileMaterial]
     face_uv: object = lambda: None  # () -> (F, 3, 2) texture coordinates (NaN where a face has none) or None
     face_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (NaN where none), or None
-    read_file: object = None  # name -> bytes or None: the files a material names (textures), beside the mesh
+    read_file: object = None  # name -> Path, bytes (a zip member) or None: the files a material names (textures)
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
     camera: object = None  # a glTF's camera (gltf_lights.read_camera), or None
 
@@ -82,16 +82,12 @@ def _from_obj(obj, read_file=None) -> LoadedMesh:
 
 
 def _beside(path: Path):
-    """Reads the files a mesh's materials name, relative to its folder."""
-    def read(name: str):
+    """Finds the files a mesh's materials name, relative to its folder (the
+    path, read where it is; a zip member's reader returns its bytes)."""
+    def find(name: str):
         f = path.parent / name.replace("\\", "/")
-        if not is_file(f, "texture"):
-            return None
-        try:
-            return f.read_bytes()
-        except OSError as exc:
-            raise OclgiError(f"cannot read texture {f}: {exc.strerror or exc}") from None
-    return read
+        return f if is_file(f, "texture") else None
+    return find
 
 
 def _load_zip(path: Path) -> LoadedMesh:
