@@ -422,13 +422,11 @@ def cmd_irradiance(args):
     print(f"wrote {path}")
 
 
-def cmd_animate(args):
-    if args.light is not None or args.light_path is not None:
-        return _animate_light(args)
-    if args.path is None:
-        raise OclgiError("animate needs --path (an object's) or --light with --light-path")
-    from .incremental.animate import animate, output_names, poses
-    from .incremental.session import Session
+def _animation_folder(args, keyframes: str, what: str) -> tuple[Path, dict]:
+    """The frames' folder, checked before any work: a folder (or none yet),
+    writable, and none of its frames or timing log one of the inputs; and
+    the inputs (path -> what it is)."""
+    from .incremental.animate import output_names
     from .io import check_not_input, check_output
 
     out = args.output
@@ -436,9 +434,22 @@ def cmd_animate(args):
         raise OclgiError(f"{out}: exists and is not a folder")
     check_output(out / "timing.csv")
     inputs = {args.scene: "the scene file"}
-    if Path(args.path).is_file():
-        inputs[Path(args.path)] = "the keyframes file (--path)"
+    if Path(keyframes).is_file():
+        inputs[Path(keyframes)] = what
     check_not_input([out / n for n in output_names(args.frames, args.exr)], inputs)
+    return out, inputs
+
+
+def cmd_animate(args):
+    if args.light is not None or args.light_path is not None:
+        return _animate_light(args)
+    if args.path is None:
+        raise OclgiError("animate needs --path (an object's) or --light with --light-path")
+    from .incremental.animate import animate, poses
+    from .incremental.session import Session
+    from .io import check_not_input, check_output
+
+    out, inputs = _animation_folder(args, args.path, "the keyframes file (--path)")
     if args.video is not None:
         from . import video
 
@@ -477,22 +488,14 @@ def cmd_animate(args):
 
 
 def _animate_light(args):
-    from .incremental.animate import animate_light, output_names
-    from .io import check_not_input, check_output
+    from .incremental.animate import animate_light
     from .tracing.light_reuse import LightReuse, light_path
 
     if args.path is not None or args.object is not None or args.dynamic is not None or args.video is not None:
         raise OclgiError("--light moves a light: --path, --object, --dynamic and --video go with objects")
     if args.light is None or args.light_path is None:
         raise OclgiError("--light and --light-path go together")
-    out = args.output
-    if out.exists() and not out.is_dir():
-        raise OclgiError(f"{out}: exists and is not a folder")
-    check_output(out / "timing.csv")
-    inputs = {args.scene: "the scene file"}
-    if Path(args.light_path).is_file():
-        inputs[Path(args.light_path)] = "the light's keyframes file (--light-path)"
-    check_not_input([out / n for n in output_names(args.frames, args.exr)], inputs)
+    out, _ = _animation_folder(args, args.light_path, "the light's keyframes file (--light-path)")
     positions, directions = light_path(args.light_path, args.frames)  # a bad path fails before any work
     engine = _engine(args)
     light = int(args.light) if args.light.isdigit() else args.light
