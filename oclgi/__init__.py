@@ -27,7 +27,8 @@ _LAZY = {
     "PointLight": ".scene.scene", "Scene": ".scene.scene",
     "SpotLight": ".scene.lights", "SunLight": ".scene.lights", "SkyLight": ".scene.lights",
     "PhotonMapSession": ".incremental.photon_map_session",
-    "Session": ".incremental.session", "UpdateStats": ".incremental.session",
+    "Session": ".incremental.session", "UpdateStats": ".incremental.protocol",
+    "open_session": ".incremental.protocol", "IncrementalSession": ".incremental.protocol",
 }
 
 
@@ -72,5 +73,6 @@ def save_render(result: "Render", path) -> tuple[_Path, _Path]:
 __all__ = [
     "Engine", "Estimate", "Render", "Stats", "OclgiError", "OclgiWarning", "QueryPoints",
     "query_points", "read_points", "load_dict", "load_file", "Camera", "Material", "PointLight", "SpotLight",
-    "SunLight", "SkyLight", "Scene", "Session", "PhotonMapSession", "UpdateStats", "scene_path", "save_render", "__version__",
+    "SunLight", "SkyLight", "Scene", "Session", "PhotonMapSession", "UpdateStats",
+    "open_session", "IncrementalSession", "scene_path", "save_render", "__version__",
 ]

@@ -14,6 +14,7 @@ True
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -219,14 +220,40 @@ class Engine:
         self._programs = programs(self.ctx)
 
     # -- objects -----------------------------------------------------------------
+    shared_by_sessions = True  # a session's close() frees its own buffers, never these (oclgi/cl/release.py)
+    owner = None  # the session whose own view of the engine this is (Engine.posed)
+
     def move(self, name: str, matrix) -> None:
         """Place movable object ``name`` by a 4x4 (or 3x4) world-from-object
         matrix, relative to where the scene file put it (identity = back home).
-        Later traces and renders see the object there; nothing is rebuilt but
-        its instance record."""
+        Later traces and renders of this engine see the object there; nothing
+        is rebuilt but its instance record. Sessions have poses of their own
+        (``Session.move``): moving the engine does not move them."""
+        if self.owner is not None:
+            raise OclgiError(f"this engine is the view of a {type(self.owner).__name__} at its own pose: move "
+                             "objects with the session's move(), which keeps its sums up to date")
+        self.place(name, matrix)
+
+    def place(self, name: str, matrix) -> None:
+        """``move`` without the owner's check: the session's own step."""
         if not isinstance(name, str):
             raise OclgiError(f"move: the object's name must be a string, got {name!r}")
         self.compiled.set_transform(self.queue, self.scene.object_id(name), matrix)
+
+    def posed(self, owner=None) -> "Engine":
+        """A view of this engine at a pose of its own, starting from this
+        engine's current pose: the device, the programs and the compiled
+        scene's trees and tables are shared; moves of the one do not reach
+        the other (oclgi/scene/pose.py). ``owner``: the session the view
+        belongs to (its ``move`` then refuses: the session moves it)."""
+        view = copy.copy(self)
+        view.compiled = self.compiled.at(self.compiled.pose.copy(self.queue))
+        view.owner = owner
+        return view
+
+    def pose_matrix(self, name: str) -> np.ndarray:
+        """Object ``name``'s current world-from-object transform (4x4)."""
+        return self.compiled.pose.matrix(self.scene.object_id(name))
 
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
@@ -335,7 +362,7 @@ class Engine:
         the scene came from a file or from Python."""
         scale = self.compiled.fixed_scale(run.photons)  # refuses a scale beyond float32 itself
         derived = {"1 / the fixed-point scale": 1.0 / scale}
-        if run.method.startswith("detp"):
+        if ESTIMATORS[run.method].family == "detp":
             derived["1 / (scale pi d^2), DETP's resolve"] = 1.0 / (scale * math.pi * run.radius**2)
         for what, value in derived.items():
             if not params.F32_TINY <= value <= params.F32_MAX:

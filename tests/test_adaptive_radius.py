@@ -138,7 +138,7 @@ def test_session_exact_with_first_frame_radii(moving, method):
     for m in _moves(rng, 6):
         session.move("bunny", m)
     assert np.array_equal(session.estimator.radii, radii), "the radii stay those of the first frame"
-    fresh = oclgi.Session(moving, pts, method=method, radius=0.05, radii=radii, **ADAPTIVE)
+    fresh = oclgi.Session(session.engine, pts, method=method, radius=0.05, radii=radii, **ADAPTIVE)
     assert np.array_equal(session.accumulators(), fresh.accumulators())
     assert np.array_equal(session.irradiance(), fresh.irradiance())
     moving.move("bunny", np.eye(4))

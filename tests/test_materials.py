@@ -133,6 +133,7 @@ def test_session_with_a_specular_object_moving_equals_recomputation(scenes_dir, 
         m[:3, 3] = np.clip(m[:3, 3], -0.5, 0.5)
         recomputed += session.move("bunny", m).points
     assert recomputed > 0
+    engine = session.engine  # the session's pose, for the recomputations
     fresh = oclgi.Session(engine, method="detp_disc_index", radius=0.05, photons=10_000)
     assert session.points.positions.tobytes() == fresh.points.positions.tobytes()
     assert session.points.weights.tobytes() == fresh.points.weights.tobytes()
@@ -153,6 +154,7 @@ def test_retrace_through_glass_equals_a_fresh_trace(scenes_dir, rng):
     for _ in range(4):
         session.move("bunny", _rigid(rng, shift=0.4))
     seg, plen = session.segments()
+    engine = session.engine  # at the session's pose
     fresh_seg, fresh_len = engine.trace(10_000, seed=5, max_depth=10)
     assert np.array_equal(plen, fresh_len)
     stored = seg.copy()

@@ -75,7 +75,7 @@ def test_incremental_equals_recomputation(engine, rng, method):
         stats = session.move("bunny", m)
         touched += stats.paths
     assert touched > 0
-    fresh = oclgi.Session(engine, pts, method=method, radius=0.05)
+    fresh = oclgi.Session(session.engine, pts, method=method, radius=0.05)  # at the session's pose
     assert np.array_equal(session.accumulators(), fresh.accumulators())
     assert session.segments()[0].tobytes() == fresh.segments()[0].tobytes()
     assert not np.array_equal(session.accumulators(), first)
@@ -122,11 +122,12 @@ def test_camera_session_equals_recomputation(scenes_dir, rng, method):
     for m in _moves(rng, 20):
         recomputed += session.move("bunny", m).points
     assert recomputed > 0
-    fresh = oclgi.Session(engine, method=method, radius=0.05, photons=10_000)
+    fresh = oclgi.Session(session.engine, method=method, radius=0.05, photons=10_000)
     assert session.points.positions.tobytes() == fresh.points.positions.tobytes()
     assert np.array_equal(session.accumulators(), fresh.accumulators())
     if method.startswith("detp"):  # every DETP variant equals plain DETP over the whole view
-        plain = engine.irradiance(engine.camera_points(), method="detp", radius=0.05, photons=10_000)
+        at = session.engine
+        plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
         assert np.array_equal(session.accumulators(), plain.accumulators)
     assert np.array_equal(session.render()[0], fresh.render()[0])
     session.move("bunny", np.eye(4))
@@ -152,7 +153,8 @@ def test_dynamic_points_by_every_variant(scenes_dir, rng, dynamic):
         m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # stay in view: dynamic points every frame
         dynamic_points += session.move("bunny", m).points
     assert dynamic_points > 50
-    plain = engine.irradiance(engine.camera_points(), method="detp", radius=0.05, photons=10_000)
+    at = session.engine
+    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
     assert np.array_equal(session.accumulators(), plain.accumulators)
     np.testing.assert_array_equal(session.irradiance(), plain.irradiance)
 

@@ -113,6 +113,7 @@ def test_session_with_a_textured_object_moving_equals_recomputation(tmp_path, rn
         m = _rigid(rng, shift=0.3)
         m[:3, 3] = np.clip(m[:3, 3], -0.3, 0.3)
         session.move("panel", m)
+    engine = session.engine  # the session's pose, for the recomputations
     fresh = oclgi.Session(engine, method="detp_disc_index", radius=0.05, photons=10_000)
     assert np.array_equal(session.accumulators(), fresh.accumulators())
     seg, _ = session.segments()

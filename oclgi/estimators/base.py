@@ -22,6 +22,8 @@ from . import radius_options
 class Estimator:
     name = ""
     incremental = True  # sums can be updated exactly by adding and subtracting segments
+    family = ""  # "detp" for the DETP variants (same sums, different algorithms), else the method's own
+    fuses_with_find = False  # sums a store's segments in the update's find pass (kernels/update.cl)
 
     def __init__(self, queue, compiled, points, count_emitted: bool = True,
                  local_size: int | None = None, count_work: bool = False):
@@ -140,6 +142,8 @@ class DetpEstimator(Estimator):
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
     same sums, bit for bit.
     """
+
+    family = "detp"
 
     # Variants whose kernels read each disc's own radius (plain DETP: a
     # per-point buffer; disc indexing: the disc blocks' r2) name the class

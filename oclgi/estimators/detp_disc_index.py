@@ -76,6 +76,7 @@ from .base import DetpEstimator
 
 class DetpDiscIndex(DetpEstimator):
     name = "detp_disc_index"
+    fuses_with_find = True  # the find pass sums its discs (kernels/update.cl)
     radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
     def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, **kw):

@@ -34,6 +34,7 @@ def vertex_triangles(faces: np.ndarray, n_vertices: int):
 
 class ImpactCount(Estimator):
     name = "impact"
+    family = "impact"
     sums_per_point = False  # sums per triangle: a changed point only reads them
 
     def __init__(self, queue, compiled, points, radius=None, extension=None, **kw):

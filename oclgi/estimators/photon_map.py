@@ -129,6 +129,7 @@ class PhotonMap(Estimator):
     expose the map for tests and studies."""
 
     name = "photon_map"
+    family = "photon_map"
     # Exact add/subtract does not apply to k nearest neighbours (a removed
     # impact changes other points' neighbour sets); see DESIGN.md section 4.
     incremental = False

@@ -351,6 +351,7 @@ class RayMapKnn(Estimator):
     expose the map for tests and studies."""
 
     name = "ray_map_knn"
+    family = "ray_map_knn"
     # A removed segment changes other points' neighbour sets: no exact add/subtract.
     incremental = False
 

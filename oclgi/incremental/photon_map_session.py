@@ -69,9 +69,9 @@ from ..errors import OclgiError
 from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, outward_f32
 from ..estimators.photon_map import DEFAULT_K
 from ..queries import QueryPoints
-from ..scene.compiled import as_transform
+from ..scene.pose import as_transform
+from .protocol import SessionBase, UpdateStats
 from .segment_store import SegmentStore
-from .session import UpdateStats
 
 MODES = ("practical", "exact")
 BALL_LEAF = 8  # balls per leaf of the ball BVH
@@ -109,44 +109,101 @@ class BallIndex:
 
 
 
-class PhotonMapSession:
-    """Photon Map irradiance at fixed query points, kept up to date under moves.
+class PhotonMapSession(SessionBase):
+    """Photon Map irradiance at query points, kept up to date under moves.
 
-    ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz); ``photons``,
+    ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz), or None
+    for the visible points of ``camera`` (the scene's by default; after a
+    move the pixels that may see a movable object are traced again,
+    oclgi/incremental/dynamic_view.py, and searched again); ``photons``,
     ``seed``, ``max_depth``, ``count_emitted`` as for
     :meth:`oclgi.Engine.irradiance` (the scene's by default); ``k``,
     ``estimator``, ``index``, ``front_only``, ``leaf_size`` as for the
     ``photon_map`` estimator; ``mode``: "practical" (the thesis' update,
-    module docstring) or "exact" (equal to recomputation).
+    module docstring) or "exact" (equal to recomputation). The session has
+    a pose of its own, as ``oclgi.Session`` has (``self.engine``).
     """
 
-    def __init__(self, engine, points, photons=None, seed=None, max_depth=None, k=DEFAULT_K, estimator="k-1",
-                 count_emitted=None, mode="practical", index="bvh", front_only=True, leaf_size=16):
+    def __init__(self, engine, points=None, photons=None, seed=None, max_depth=None, k=DEFAULT_K,
+                 estimator="k-1", count_emitted=None, mode="practical", index="bvh", front_only=True, leaf_size=16,
+                 camera=None):
         if mode not in MODES:
             raise OclgiError(f"Photon Map session mode must be one of {', '.join(map(repr, MODES))}, got {mode!r}")
-        self.engine, self.queue, self.mode = engine, engine.queue, mode
-        self.params = engine.run_params("photon_map", photons, None, seed, max_depth, None, count_emitted)
+        self.engine = engine.posed(owner=self)
+        self.queue, self.mode = engine.queue, mode
+        self.params = self.engine.run_params("photon_map", photons, None, seed, max_depth, None, count_emitted)
         self.options = dict(k=k, estimator=estimator, index=index, front_only=front_only, leaf_size=leaf_size)
-        self.points = as_query_points(points).copy()
-        self.map = engine.estimator(self.points, self.params, **self.options)  # validates the options
+        self.view = None
+        if points is None:
+            from .dynamic_view import DynamicView
+
+            self.view = DynamicView(self.engine, camera)
+            self.points = self.view.points.copy()
+        else:
+            self.points = as_query_points(points).copy()
+        self.map = self.engine.estimator(self.points, self.params, **self.options)  # validates the options
         t0 = time.perf_counter()
         p = self.params
-        self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+        self.store = SegmentStore(self.engine, p.photons, p.seed, p.max_depth)
         self.scale = self.store.scale
+        prog = programs(engine.ctx).get("photon_map_update")
+        self.k_update, self.k_unmark = prog.pm_update_balls, prog.pm_unmark
+        self._search_all()
+        self.setup_seconds = time.perf_counter() - t0
+
+    # -- setup --------------------------------------------------------------
+    def _search_all(self):
+        """Every point searched in the store's impacts (a fresh session's
+        state at the session's pose), the balls and their marks anew."""
         self._gather()
         self.map.search()
         self.attached = self._attach()
         self.balls = self._balls()
-        prog = programs(engine.ctx).get("photon_map_update")
-        self.k_update, self.k_unmark = prog.pm_update_balls, prog.pm_unmark
         n = max(len(self.points), 1)
         self.marks = self.map.zeros(n * 4)
-        self.listed = cl.Buffer(engine.ctx, cl.mem_flags.READ_WRITE, n * 4)
+        self.listed = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_WRITE, n * 4)
         self.n_listed = self.map.zeros(4)
         self.queue.finish()
-        self.setup_seconds = time.perf_counter() - t0
 
-    # -- setup --------------------------------------------------------------
+    def set_estimator(self, method: str | None = None, **options) -> float:
+        """Other Photon Map options from now on (``k``, ``estimator``,
+        ``index``, ``front_only``, ``leaf_size``; the others keep theirs):
+        the stored paths' impacts are searched again, nothing is re-traced;
+        equal to a fresh session with these options at the session's pose.
+        ``method`` must be "photon_map" (a DETP or Impact Count session is
+        an ``oclgi.Session``). Returns the seconds it took."""
+        self._check_open()
+        if method not in (None, "photon_map"):
+            raise OclgiError(f"a Photon Map session estimates with photon_map; for {method!r} open an "
+                             "oclgi.Session (oclgi.open_session picks the kind)")
+        unknown = sorted(set(options) - set(self.options))
+        if unknown:
+            raise OclgiError(f"unknown Photon Map session option(s) {', '.join(unknown)}; "
+                             f"known: {', '.join(self.options)}")
+        t0 = time.perf_counter()
+        new = dict(self.options, **options)
+        new_map = self.engine.estimator(self.points.copy(), self.params, **new)  # validates them
+        self.options, self.map = new, new_map
+        self.points = new_map.points
+        self._search_all()
+        return time.perf_counter() - t0
+
+    def set_camera(self, camera) -> float:
+        """View through ``camera`` from now on (camera sessions only): its
+        points traced at the session's pose and searched in the stored
+        impacts; no photon is re-traced. Returns the seconds it took."""
+        self._check_open()
+        if self.view is None:
+            raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
+        from .dynamic_view import DynamicView
+
+        t0 = time.perf_counter()
+        self.view = DynamicView(self.engine, camera)
+        self.points = self.view.points.copy()
+        self.map = self.engine.estimator(self.points, self.params, **self.options)
+        self._search_all()
+        return time.perf_counter() - t0
+
     def _gather(self):
         """The map: every impact of the store, in canonical order (its index is built when searched)."""
         self.map.clear_impacts()
@@ -159,6 +216,8 @@ class PhotonMapSession:
         scene, compiled = self.engine.scene, self.engine.compiled
         tri = self.points.tri
         out = {}
+        if self.view is not None:
+            return out  # a camera's points are traced again instead (DynamicView)
         for obj, (a, b) in enumerate(scene.object_ranges()):
             ids = np.nonzero((tri >= a) & (tri < b))[0]
             if scene.objects[obj].movable and len(ids):
@@ -189,13 +248,23 @@ class PhotonMapSession:
     # -- reading ------------------------------------------------------------
     def irradiance(self) -> np.ndarray:
         """(n, 3) irradiance at the query points (their current positions), W/m^2."""
+        self._check_open()
         out = np.empty((len(self.points), 4), np.float32)
         cl.enqueue_copy(self.queue, out, self.map.irradiance_buffer(self.scale))
         return out[:, :3]
 
     def accumulators(self) -> np.ndarray:
         """The exact fixed-point sums behind the irradiance, (n, 3) int64."""
+        self._check_open()
         return self.map.accumulators()
+
+    def render(self, exposure: float = 1.0):
+        """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
+        self._check_open()
+        if self.view is None:
+            raise OclgiError("render() needs a camera session (points=None)")
+        buf = self.map.irradiance_buffer(self.scale)
+        return self.engine.shade(self.view.points, buf, exposure)  # the composite: positions and path weights
 
     def radii(self) -> np.ndarray:
         """r_k of each point: of its last k-nearest search (practical mode keeps it for static points)."""
@@ -214,6 +283,7 @@ class PhotonMapSession:
         """A Photon Map estimate from scratch at the current pose and points
         (an ``Estimate``; ``seed`` another seed, to measure the noise)."""
         p = self.params
+        self._check_open()
         return self.engine.irradiance(self.points.copy(), method="photon_map", photons=p.photons,
                                       seed=p.seed if seed is None else seed, max_depth=p.max_depth,
                                       count_emitted=p.count_emitted, **self.options)
@@ -221,11 +291,16 @@ class PhotonMapSession:
     # -- moving -------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
         """Place movable object ``name`` (4x4 world-from-object matrix) and update."""
+        self._check_open()
         engine, q = self.engine, self.queue
         obj = engine.scene.object_id(name)
         t0 = time.perf_counter()
-        engine.move(name, matrix)
+        engine.place(name, matrix)
         moved = self._place_points(obj, matrix)
+        if self.view is not None:
+            moved, _ = self.view.update()  # the pixels that may see a movable object, traced again
+            if len(moved):
+                self.map.replace_points(moved, self.view.subset(moved))
         affected = self.store.find(obj)
         t1 = time.perf_counter()
         seconds = {"find": t1 - t0}

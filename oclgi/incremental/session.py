@@ -27,24 +27,15 @@ has it), and ``render()`` shades the current view.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import replace
 
 import numpy as np
 import pyopencl as cl
 
 from ..engine import as_query_points
 from ..errors import OclgiError
+from .protocol import SessionBase, UpdateStats  # noqa: F401 (UpdateStats: the sessions' result)
 from .segment_store import SegmentStore
-
-
-@dataclass
-class UpdateStats:
-    paths: int  # paths re-traced
-    segments_removed: int  # old suffix segments taken away (n_Rec)
-    segments_added: int  # new suffix segments added
-    points: int = 0  # dynamic points recomputed (camera sessions)
-    seconds: dict = field(default_factory=dict)
-
 
 
 def _add_work(total: dict | None, more: dict | None) -> dict | None:
@@ -53,7 +44,7 @@ def _add_work(total: dict | None, more: dict | None) -> dict | None:
     return {k: total[k] + more[k] for k in total}
 
 
-class Session:
+class Session(SessionBase):
     """A scene, an estimator and query points, kept up to date under moves.
 
     ``points``: QueryPoints or an (n, 6) array (x y z nx ny nz); the other
@@ -61,6 +52,12 @@ class Session:
     variant that recomputes a camera session's dynamic points (default
     ``detp_disc_index``). Every segment of every path stays on the device:
     memory is photons x max_depth x 48 bytes.
+
+    The session has a pose of its own (``self.engine`` is its view of the
+    engine, oclgi/scene/pose.py), starting from the engine's current pose:
+    several sessions over one engine move independently, and moving the
+    engine does not move them. ``session.engine.irradiance(...)`` recomputes
+    at the session's pose.
 
     ``paths``: a PathRange of the run's path ids to store and update instead
     of all of them (a rank's part, oclgi/distributed.py): the sums are then
@@ -72,52 +69,78 @@ class Session:
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
                  extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, paths=None,
                  **options):
-        from ..estimators import ESTIMATORS
-
-        self.engine = engine
+        self.engine = engine.posed(owner=self)
         self.queue = engine.queue
+        self.params = self.engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
+        self._check_method(self.params.method, dynamic, options, points is None)
         self.camera = camera
         self.options = dict(options, count_work=count_work)
-        self.params = engine.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
-        p = self.params
-        cls = ESTIMATORS[p.method]
-        if not cls.incremental:
-            raise OclgiError(f"method {p.method!r} has no exact incremental update; sessions take "
-                             f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
+        self.dynamic_choice = dynamic
         self.view = None
-        if points is None and options.get("radius_mode", "fixed") != "fixed":
-            # Adaptive radii are fixed when the estimator is built (the first
-            # frame); a camera session's dynamic points are new every frame.
-            raise OclgiError("radius_mode 'adaptive' needs a session over given points (points=...), "
-                             "not a camera session")
-        if points is None:
-            from .dynamic_view import DynamicView
-
-            self.view = DynamicView(engine, camera)
-            self.points = self.view.points  # the composite view, kept current by the view
-            # DETP keeps sums per point: the estimator holds the static layer
-            # for good; Impact Count keeps sums per triangle and just shades
-            # whichever point each pixel sees.
-            est_points = self.view.static if cls.sums_per_point else self.view.points.copy()
-        else:
-            self.points = as_query_points(points).copy()
-            est_points = self.points
-        detp_variants = [m for m in ESTIMATORS if m.startswith("detp")]
-        self.dynamic = dynamic or ("detp_disc_index" if p.method.startswith("detp") else p.method)
-        if self.dynamic not in detp_variants and (cls.sums_per_point or dynamic is not None):
-            raise OclgiError(f"dynamic points are recomputed by a DETP variant ({', '.join(detp_variants)}), "
-                             f"got {self.dynamic!r}")
-        self.estimator = engine.estimator(est_points, p, **self.options)
+        self.fixed_points = None if points is None else as_query_points(points).copy()
+        self._new_view(camera)
         t0 = time.perf_counter()
+        p = self.params
         if paths is None:
-            self.store = SegmentStore(engine, p.photons, p.seed, p.max_depth)
+            self.store = SegmentStore(self.engine, p.photons, p.seed, p.max_depth)
         else:
             if not (0 <= paths.first and 0 < paths.count and paths.end <= p.photons):
                 raise OclgiError(f"paths {paths.first}..{paths.end} are not a non-empty part of the session's "
                                  f"{p.photons:,} photons")
-            self.store = SegmentStore(engine, paths.count, p.seed, p.max_depth, first=paths.first,
+            self.store = SegmentStore(self.engine, paths.count, p.seed, p.max_depth, first=paths.first,
                                       total=p.photons)
         self.scale = self.store.scale
+        self._accumulate_all()
+        self.setup_seconds = time.perf_counter() - t0
+
+    # -- setting up -----------------------------------------------------------
+    @staticmethod
+    def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
+        from ..estimators import ESTIMATORS
+
+        cls = ESTIMATORS[method]
+        if not cls.incremental:
+            raise OclgiError(f"method {method!r} has no exact incremental update; sessions take "
+                             f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
+        if camera and options.get("radius_mode", "fixed") != "fixed":
+            # Adaptive radii are fixed when the estimator is built (the first
+            # frame); a camera session's dynamic points are new every frame.
+            raise OclgiError("radius_mode 'adaptive' needs a session over given points (points=...), "
+                             "not a camera session")
+        detp_variants = [m for m, c in ESTIMATORS.items() if c.family == "detp"]
+        chosen = dynamic or ("detp_disc_index" if cls.family == "detp" else method)
+        if chosen not in detp_variants and (cls.sums_per_point or dynamic is not None):
+            raise OclgiError(f"dynamic points are recomputed by a DETP variant ({', '.join(detp_variants)}), "
+                             f"got {chosen!r}")
+
+    def _new_view(self, camera) -> None:
+        """The query points: the given ones, or the camera's two layers."""
+        if self.fixed_points is not None:
+            self.points = self.fixed_points
+            return
+        from .dynamic_view import DynamicView
+
+        self.view = DynamicView(self.engine, camera)
+        self.camera = self.view.cam
+        self.points = self.view.points  # the composite view, kept current by the view
+
+    def _accumulate_all(self) -> None:
+        """The estimators over the current points, summed over the whole
+        store (a fresh session's state at the session's pose, without a
+        trace)."""
+        from ..estimators import ESTIMATORS
+
+        p = self.params
+        cls = ESTIMATORS[p.method]
+        if self.view is None:
+            est_points = self.points
+        else:
+            # DETP keeps sums per point: the estimator holds the static layer
+            # for good; Impact Count keeps sums per triangle and just shades
+            # whichever point each pixel sees.
+            est_points = self.view.static if cls.sums_per_point else self.view.points.copy()
+        self.dynamic = self.dynamic_choice or ("detp_disc_index" if cls.family == "detp" else p.method)
+        self.estimator = self.engine.estimator(est_points, p, **self.options)
         self.estimator.accumulate(self.store.batch)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:
@@ -126,7 +149,42 @@ class Session:
                 self.dyn_est.accumulate(self.store.batch)
                 self.dynamic_work = self.dyn_est.work()
         self.queue.finish()
-        self.setup_seconds = time.perf_counter() - t0
+
+    # -- changing what is estimated (no re-trace) ------------------------------------
+    def set_estimator(self, method: str | None = None, radius: float | None = None,
+                      extension: float | None = None, count_emitted: bool | None = None, dynamic=None,
+                      **options) -> float:
+        """Estimate with another incremental method or other options from
+        now on: the stored paths are summed again, nothing is re-traced.
+        None keeps the session's current value; ``options`` replace the
+        method's options (``count_work`` stays). Equal bit for bit to a
+        fresh session with these settings at the session's pose. Returns
+        the seconds it took."""
+        self._check_open()
+        t0 = time.perf_counter()
+        p = self.params
+        new = self.engine.run_params(method or p.method, p.photons, p.radius if radius is None else radius,
+                                     p.seed, p.max_depth, p.extension if extension is None else extension,
+                                     p.count_emitted if count_emitted is None else count_emitted)
+        self._check_method(new.method, dynamic, options, self.view is not None)
+        self.params = new
+        self.options = dict(options, count_work=self.options["count_work"])
+        self.dynamic_choice = dynamic
+        self._accumulate_all()
+        return time.perf_counter() - t0
+
+    def set_camera(self, camera) -> float:
+        """View through ``camera`` (an oclgi.Camera) from now on: the camera
+        points are traced again at the session's pose and summed over the
+        stored paths; no photon is re-traced. Camera sessions only. Returns
+        the seconds it took."""
+        self._check_open()
+        if self.view is None:
+            raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
+        t0 = time.perf_counter()
+        self._new_view(camera)
+        self._accumulate_all()
+        return time.perf_counter() - t0
 
     # -- reading ------------------------------------------------------------
     def _irradiance4(self) -> np.ndarray:
@@ -141,6 +199,7 @@ class Session:
 
     def irradiance(self) -> np.ndarray:
         """(n, 3) irradiance at the query points (the pixels' current visible points), W/m^2."""
+        self._check_open()
         return self._irradiance4()[:, :3]
 
     def accumulators(self) -> np.ndarray:
@@ -160,6 +219,7 @@ class Session:
 
     def render(self, exposure: float = 1.0):
         """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
+        self._check_open()
         if self.points.kind != "camera":
             raise OclgiError("render() needs a camera session (points=None)")
         irr = self._irradiance4()
@@ -169,10 +229,11 @@ class Session:
     # -- moving -----------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
         """Place object ``name`` (4x4 world-from-object matrix) and update."""
+        self._check_open()
         engine, q = self.engine, self.queue
         obj = engine.scene.object_id(name)
         t0 = time.perf_counter()
-        engine.move(name, matrix)
+        engine.place(name, matrix)
         seconds = {}
         n_view = self._refresh_view() if self.view is not None else 0
         t1 = time.perf_counter()
@@ -182,7 +243,7 @@ class Session:
         # in the find pass; the suffix passes below then update them as they
         # update the static points (update.cl). Any other variant sums over
         # the new store at the end.
-        fused = self.fuse_find and self.dyn_est is not None and self.dynamic == "detp_disc_index"
+        fused = self.fuse_find and self.dyn_est is not None and self.dyn_est.fuses_with_find
         affected = self.store.find(obj, self.dyn_est if fused else None)
         t2 = time.perf_counter()
         seconds["find"] = t2 - t1
@@ -237,7 +298,5 @@ class Session:
             return
         p = self.params
         options = self.options if self.dynamic == p.method else {"count_work": self.options["count_work"]}
-        from dataclasses import replace
-
         self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
                                              **options)

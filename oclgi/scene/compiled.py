@@ -8,6 +8,7 @@ of a run carries about the same power and the fixed-point scale follows.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import time
 
@@ -17,12 +18,11 @@ import pyopencl as cl
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_wide import WIDE_STACK, collapse
 from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, FIXED_ONE
-from ..params import MAX_LENGTH
 from ..cl.layout import Emitter, Instance, Tri
-from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from . import background, materials, textures
 from .lights import emitter_rows, escaping_area_lights
+from .pose import Pose, place_record
 from .scene import OclgiWarning, Scene
 
 F32_MAX = float(np.finfo(np.float32).max)
@@ -40,21 +40,6 @@ def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
     if array.nbytes == 0:  # OpenCL refuses empty buffers
         array = np.zeros(1, dtype=array.dtype)
     return cl.Buffer(ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
-
-
-def as_transform(matrix) -> np.ndarray:
-    """A validated affine 4x4 float64 matrix from a 4x4 or 3x4 one."""
-    try:
-        m = np.asarray(matrix, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise OclgiError(f"a transform must be a 4x4 or 3x4 array of numbers, got {matrix!r}") from None
-    if m.shape == (3, 4):
-        m = np.vstack([m, [0, 0, 0, 1]])
-    if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
-        raise OclgiError(f"a transform must be a finite affine 4x4 or 3x4 matrix, got shape {m.shape}")
-    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
-        raise OclgiError("the transform is singular (it flattens the object)")
-    return m
 
 
 def _warn_escaping(scene: Scene) -> None:
@@ -82,6 +67,8 @@ class CompiledScene:
     is found (the wide and binary layouts of one tree: the same bits but
     for such ties); ``n_nodes`` counts the traversed layout's nodes,
     ``n_binary_nodes`` the binary tree's."""
+
+    shared_by_sessions = True  # sessions' close() leaves it alone (oclgi/cl/release.py)
 
     def __init__(self, ctx: cl.Context, scene: Scene, bvh_quality: str = BVH_QUALITY):
         self.ctx = ctx
@@ -142,9 +129,9 @@ class CompiledScene:
 
         self.nodes = _buffer(ctx, self._nodes)
         self.tris = _buffer(ctx, self._tris)
-        self.instances = _buffer(ctx, self.instances_host, cl.mem_flags.READ_WRITE)
         self.object_normals = _buffer(ctx, normals)
-        self.tri_normals = _buffer(ctx, normals, cl.mem_flags.READ_WRITE)  # world space
+        # the pose as loaded (the engine's; sessions take copies: Engine.posed)
+        self.pose = Pose(self, self._loaded_records, normals)
         self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
         self.materials = _buffer(ctx, mats)
         self.textures, self.texels = _buffer(ctx, tex_records), _buffer(ctx, texels)
@@ -193,7 +180,7 @@ class CompiledScene:
         builder, wide = scene_tree(self.bvh_quality)
         ranges = self.scene.object_ranges()
         nodes_all, tris = [], np.zeros(len(v), dtype=Tri)
-        self.instances_host = np.zeros(len(ranges), dtype=Instance)
+        records = np.zeros(len(ranges), dtype=Instance)
         self.object_boxes = []
         n_nodes, depth, n_binary, stack_need = 0, 0, 0, 0
         for k, (a, b) in enumerate(ranges):
@@ -215,10 +202,10 @@ class CompiledScene:
             vo = vk[bvh.order]
             tris["v0"][a:b], tris["v1"][a:b], tris["v2"][a:b] = vo[:, 0], vo[:, 1], vo[:, 2]
             tris["id"][a:b] = a + bvh.order
-            inst = self.instances_host[k]
+            inst = records[k]
             inst["root"], inst["first_tri"], inst["n_tris"] = root, a, b - a
             self.object_boxes.append((vk.min(axis=(0, 1)), vk.max(axis=(0, 1))))
-            self._place(k, np.eye(4))
+            place_record(inst, self.object_boxes[k], np.eye(4), self.scene.objects[k].name)
             nodes_all.append(nodes)
             n_nodes += len(nodes)
         if not wide and depth > BVH_STACK_SIZE:
@@ -234,36 +221,32 @@ class CompiledScene:
         self.n_nodes = len(self._nodes)
         self.n_binary_nodes = n_binary
         self._tris = tris
+        self._loaded_records = records
 
-    def _place(self, k: int, m: np.ndarray):
-        """Set object k's transform (4x4, world from object) in the host record."""
-        lo, hi = self.object_boxes[k]
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        world = corners @ m[:3, :3].T + m[:3, 3]
-        if not np.isfinite(world).all() or np.abs(world).max() > MAX_LENGTH:  # checked before any change
-            raise OclgiError(f"the transform places object {self.scene.objects[k].name!r} beyond "
-                             f"{MAX_LENGTH:.0e} of the origin, past what the device's float32 coordinates hold")
-        inv = np.linalg.inv(m)
-        inst = self.instances_host[k]
-        inst["world_from_object"] = m[:3]
-        inst["object_from_world"] = inv[:3]
-        # The world box only culls; pad it for float rounding of the transform.
-        pad = 1e-6 * (np.abs(world).max() + np.abs(hi - lo).max())
-        inst["lo"], inst["hi"] = world.min(axis=0) - pad, world.max(axis=0) + pad
+    # -- the pose: what a move changes (oclgi/scene/pose.py) --------------------
+    @property
+    def instances(self) -> cl.Buffer:
+        return self.pose.instances
+
+    @property
+    def instances_host(self) -> np.ndarray:
+        return self.pose.instances_host
+
+    @property
+    def tri_normals(self) -> cl.Buffer:
+        """World normals, float4 per triangle (the pose's)."""
+        return self.pose.tri_normals
+
+    def at(self, pose: Pose) -> "CompiledScene":
+        """This scene seen at ``pose``: every tree, triangle and table shared,
+        the instances and world normals the pose's."""
+        view = copy.copy(self)
+        view.pose = pose
+        return view
 
     def set_transform(self, queue, obj: int, matrix) -> None:
-        """Move object ``obj``: ``matrix`` (4x4 or 3x4, world from the object as
-        loaded) replaces its transform. Only its Instance record and the world
-        normals of its triangles change; no BVH is rebuilt."""
-        m = as_transform(matrix)
-        if not self.scene.objects[obj].movable:
-            raise OclgiError(f"object {self.scene.objects[obj].name!r} is static")
-        self._place(obj, m)
-        item = self.instances_host.dtype.itemsize
-        cl.enqueue_copy(queue, self.instances, self.instances_host[obj:obj + 1], dst_offset=obj * item)
-        inst = self.instances_host[obj]
-        k = programs(self.ctx).get("instances").instances_normals
-        launch(queue, k, int(inst["n_tris"]), self.object_normals, self.instances, obj, self.tri_normals)
+        """Move object ``obj`` in this scene's pose (Pose.place)."""
+        self.pose.place(queue, obj, matrix)
 
     def fixed_scale(self, n_paths: int) -> float:
         """Fixed-point units per watt of the sums of a run of n_paths: a

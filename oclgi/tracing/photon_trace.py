@@ -55,6 +55,7 @@ class PhotonTracer:
         self.kernel, self.k_retrace = prog.photon_trace, prog.photon_retrace
         self.segments = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * self.max_depth * Segment.itemsize)
         self.path_len = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, self.batch_paths * 4)
+        self.launches = 0  # trace and retrace launches so far (what a session's switches must not add to)
 
     def _trace_args(self) -> tuple:
         """TRACE_ARGS of kernels/photon_trace.cl."""
@@ -67,6 +68,7 @@ class PhotonTracer:
         """Paths path_offset .. path_offset + n_paths - 1 (global ids); a
         path's segments do not depend on the batch or the run's total."""
         assert 0 < n_paths <= self.batch_paths
+        self.launches += 1
         launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(),
                path_offset, n_paths, self.segments, self.path_len,
                local_size=self.local_size)
@@ -75,6 +77,7 @@ class PhotonTracer:
     def retrace(self, batch: PathBatch, paths: cl.Buffer, starts: cl.Buffer, n_list: int):
         """Re-trace the suffixes of listed paths of ``batch`` in place: path
         ``paths[k]`` (an index into the batch) from bounce ``starts[k]`` on."""
+        self.launches += 1
         launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(),
                batch.path_offset, paths, starts, n_list, batch.segments, batch.path_len,
                local_size=self.local_size)

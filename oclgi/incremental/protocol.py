@@ -1,0 +1,98 @@
+"""What every session offers (ARCHITECTURE move M5), whatever its estimator.
+
+A session is a scene at a pose of its own, an estimator and query points
+(fixed sensors or a camera's visible points), with every photon path kept
+on the device so that changes cost only what depends on them:
+
+- ``move(name, matrix)``: an object moves; the paths it touches are
+  re-traced (the update, DESIGN.md section 4);
+- ``irradiance()``, ``render(exposure)``: the current estimate;
+- ``set_camera(camera)``: another view; only the camera points are traced;
+- ``set_estimator(method, **options)``: another estimator or its options;
+  the stored paths are summed again, nothing is re-traced;
+- ``close()``: the session's device memory is freed now.
+
+``Session`` (DETP variants and Impact Count: exact sums, equal to a
+recomputation bit for bit) and ``PhotonMapSession`` (k-nearest estimates:
+the thesis' practical update, or an exact one) implement it;
+``open_session`` picks the one a method needs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from ..errors import OclgiError
+
+
+@dataclass
+class UpdateStats:
+    paths: int  # paths re-traced
+    segments_removed: int  # old suffix segments taken away (n_Rec)
+    segments_added: int  # new suffix segments added
+    points: int = 0  # points recomputed (camera sessions' dynamic points; Photon Maps' searched points)
+    seconds: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class IncrementalSession(Protocol):
+    """The methods every session has (module doc)."""
+
+    def move(self, name: str, matrix) -> UpdateStats: ...
+
+    def irradiance(self) -> np.ndarray: ...
+
+    def render(self, exposure: float = 1.0): ...
+
+    def set_camera(self, camera) -> float: ...
+
+    def set_estimator(self, method: str | None = None, **options) -> float: ...
+
+    def close(self) -> None: ...
+
+
+class SessionBase:
+    """Closing, shared by the sessions: ``close()`` frees every device buffer
+    the session owns (its store, estimators, view and pose; the engine's
+    are shared and stay), after which every method refuses; also a context
+    manager (``with oclgi.Session(...) as s:``)."""
+
+    closed = False
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        from ..cl.release import release
+
+        self.queue.finish()
+        pose = self.engine.compiled.pose
+        self.released_buffers = release(*vars(self).values()) | pose.release()
+        self.closed = True
+        for k in [k for k in vars(self) if k not in ("queue", "params", "closed", "released_buffers")]:
+            setattr(self, k, None)
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise OclgiError(f"this {type(self).__name__} is closed")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_session(engine, points=None, method: str | None = None, **kwargs):
+    """A session for ``method`` (the scene's or the default when None):
+    ``PhotonMapSession`` for ``photon_map``, else ``Session``; the other
+    arguments as theirs."""
+    from .photon_map_session import PhotonMapSession
+    from .session import Session
+
+    method = engine.run_params(method).method
+    if method == "photon_map":
+        return PhotonMapSession(engine, points, **kwargs)
+    return Session(engine, points, method=method, **kwargs)
