@@ -28,7 +28,7 @@ _LAZY = {
     "SpotLight": ".scene.lights", "SunLight": ".scene.lights", "SkyLight": ".scene.lights",
     "PhotonMapSession": ".incremental.photon_map_session",
     "Session": ".incremental.session", "UpdateStats": ".incremental.protocol",
-    "open_session": ".incremental.protocol", "IncrementalSession": ".incremental.protocol",
+    "open_session": ".incremental.open_session", "IncrementalSession": ".incremental.protocol",
 }
 
 

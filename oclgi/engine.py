@@ -251,6 +251,33 @@ class Engine:
         view.owner = owner
         return view
 
+    # -- parameters (oclgi/parameters.py) -------------------------------------------
+    def parameters(self):
+        """What can change after loading (materials, lights, camera, the
+        run's defaults), by name; set values, then ``update()``."""
+        from .parameters import Parameters
+
+        return Parameters(self)
+
+    def _parameter_values(self) -> dict:
+        from .parameters import values
+
+        return values(self.scene, self.run_params(), self.scene.camera)
+
+    def _apply_parameters(self, changes: dict):
+        """The engine's part of an update: its scene, its tables (materials,
+        lights), its run defaults. Sessions already open keep theirs."""
+        from .parameters import Updated, changed_scene, kinds
+
+        t0 = time.perf_counter()
+        scene, run = changed_scene(self.scene, changes)
+        if run:
+            scene.settings = RunParams.read(run, base=self.scene.settings)
+        what = kinds(changes)
+        compiled = self.compiled.with_scene(scene) if "tables" in what else self.compiled
+        self.scene, self.compiled = scene, compiled
+        return Updated(tables="tables" in what, seconds=time.perf_counter() - t0)
+
     def pose_matrix(self, name: str) -> np.ndarray:
         """Object ``name``'s current world-from-object transform (4x4)."""
         return self.compiled.pose.matrix(self.scene.object_id(name))

@@ -7,9 +7,11 @@ import pytest
 import oclgi.engine
 import oclgi.incremental.photon_map_session
 import oclgi.incremental.session
+import oclgi.parameters
 
 
-@pytest.mark.parametrize("module", [oclgi.engine, oclgi.incremental.session, oclgi.incremental.photon_map_session])
+@pytest.mark.parametrize("module", [oclgi.engine, oclgi.incremental.session, oclgi.incremental.photon_map_session,
+                                    oclgi.parameters])
 def test_docstring_examples(module):
     result = doctest.testmod(module, verbose=False)
     assert result.attempted >= 2

@@ -1,6 +1,9 @@
 """Incremental updates: sessions that keep every path segment and, after a
 move, re-trace only the paths it touches.
 
+    protocol.py            what every session offers (move, irradiance, render, set_camera,
+                           set_estimator, set_photons, parameters, close)
+    open_session.py        the kind of session a method needs
     segment_store.py       the stored paths and the update steps (find, subtract, re-trace, add)
     session.py             DETP and Impact Count sessions over sensors or a camera
     dynamic_view.py        a camera session's static and dynamic points

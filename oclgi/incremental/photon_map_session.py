@@ -188,6 +188,73 @@ class PhotonMapSession(SessionBase):
         self._search_all()
         return time.perf_counter() - t0
 
+    def set_photons(self, photons: int) -> float:
+        """Keep ``photons`` paths from now on (more traced, only the new
+        ones; fewer dropped) and search every point again in their impacts:
+        equal to a fresh session with that count at the session's pose.
+        Returns the seconds it took."""
+        self._check_open()
+        from ..cl.release import release
+
+        t0 = time.perf_counter()
+        p = self.params
+        new_params = self.engine.run_params("photon_map", photons, None, p.seed, p.max_depth, None, p.count_emitted)
+        store, _ = self.store.resized(new_params.photons)
+        old, self.store, self.params, self.scale = self.store, store, new_params, store.scale
+        release(old)
+        self.map = self.engine.estimator(self.points.copy(), self.params, **self.options)
+        self.points = self.map.points
+        self._search_all()
+        return time.perf_counter() - t0
+
+    def _apply_parameters(self, changes: dict):
+        """An update (oclgi/parameters.py): materials and lights, seed and
+        depth re-trace the store; photons trace or drop the difference; a
+        camera traces its points; then every point is searched again (a
+        k-nearest estimate depends on every impact)."""
+        from ..cl.release import release
+        from ..parameters import Updated, kinds
+
+        t0 = time.perf_counter()
+        what = kinds(changes)
+        for key in ("method", "radius", "extension"):
+            if key in changes and not (key == "method" and changes[key] == "photon_map"):
+                raise OclgiError(f"a Photon Map session has no {key} to change (its k and options: set_estimator; "
+                                 "another method: an oclgi.Session)")
+        scene, compiled, run = self._new_tables(changes)
+        p = self.params
+        new = self.engine.run_params("photon_map", run.get("photons", p.photons), None, run.get("seed", p.seed),
+                                     run.get("max_depth", p.max_depth), None,
+                                     run.get("count_emitted", p.count_emitted))
+        done = Updated(tables=compiled is not None)
+        self.engine.scene = scene
+        if compiled is not None:
+            self.engine.compiled = compiled
+        old = self.store
+        if compiled is not None or "trace" in what:
+            self.store = SegmentStore(self.engine, new.photons, new.seed, new.max_depth)
+            done.paths_traced = new.photons
+        elif "photons" in what:
+            self.store, _ = old.resized(new.photons)
+            done.paths_traced = max(new.photons - p.photons, 0)
+            done.paths_dropped = max(p.photons - new.photons, 0)
+        if self.store is not old:
+            release(old)
+            self.scale = self.store.scale
+        self.params = new
+        if self.view is not None and ("camera" in what or (compiled is not None and self.view.through)):
+            from .dynamic_view import DynamicView
+
+            self.view = DynamicView(self.engine, changes.get("camera", self.view.cam))
+            done.points_traced = len(self.view.points)
+            self.points = self.view.points.copy()
+        self.map = self.engine.estimator(self.points.copy(), self.params, **self.options)
+        self.points = self.map.points
+        self._search_all()
+        done.resummed = True
+        done.seconds = time.perf_counter() - t0
+        return done
+
     def set_camera(self, camera) -> float:
         """View through ``camera`` from now on (camera sessions only): its
         points traced at the session's pose and searched in the stored

@@ -15,7 +15,8 @@ on the device so that changes cost only what depends on them:
 ``Session`` (DETP variants and Impact Count: exact sums, equal to a
 recomputation bit for bit) and ``PhotonMapSession`` (k-nearest estimates:
 the thesis' practical update, or an exact one) implement it;
-``open_session`` picks the one a method needs.
+``open_session`` (oclgi/incremental/open_session.py) picks the one a method
+needs.
 """
 
 from __future__ import annotations
@@ -74,6 +75,31 @@ class SessionBase:
         for k in [k for k in vars(self) if k not in ("queue", "params", "closed", "released_buffers")]:
             setattr(self, k, None)
 
+    def parameters(self):
+        """What can change in this session (materials, lights, its camera,
+        its photons and estimator), by name; set values, then ``update()``:
+        only what depends on them is recomputed (oclgi/parameters.py)."""
+        from ..parameters import Parameters
+
+        self._check_open()
+        return Parameters(self)
+
+    def _parameter_values(self) -> dict:
+        from ..parameters import values
+
+        self._check_open()
+        view = getattr(self, "view", None)
+        return values(self.engine.scene, self.params, None if view is None else view.cam)
+
+    def _new_tables(self, changes: dict):
+        """The session's engine view with the changed materials and lights
+        (checked, nothing changed yet on a refusal): (scene, compiled, run changes)."""
+        from ..parameters import changed_scene, kinds
+
+        scene, run = changed_scene(self.engine.scene, changes)
+        compiled = self.engine.compiled.with_scene(scene) if "tables" in kinds(changes) else None
+        return scene, compiled, run
+
     def _check_open(self) -> None:
         if self.closed:
             raise OclgiError(f"this {type(self).__name__} is closed")
@@ -83,16 +109,3 @@ class SessionBase:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def open_session(engine, points=None, method: str | None = None, **kwargs):
-    """A session for ``method`` (the scene's or the default when None):
-    ``PhotonMapSession`` for ``photon_map``, else ``Session``; the other
-    arguments as theirs."""
-    from .photon_map_session import PhotonMapSession
-    from .session import Session
-
-    method = engine.run_params(method).method
-    if method == "photon_map":
-        return PhotonMapSession(engine, points, **kwargs)
-    return Session(engine, points, method=method, **kwargs)

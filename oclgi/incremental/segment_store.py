@@ -72,9 +72,12 @@ class SegmentStore:
     ``first``: the global id of the first stored path (a rank of a
     distributed session stores ids first .. first + photons - 1; path k of
     the store is global path first + k). ``total``: the run's photon count,
-    which fixes the scale of the sums (default ``photons``)."""
+    which fixes the scale of the sums (default ``photons``). ``copy``: a
+    store of the same engine, seed and depth whose first paths this one
+    takes instead of tracing them (``resized``)."""
 
-    def __init__(self, engine, photons: int, seed: int, max_depth: int, first: int = 0, total: int | None = None):
+    def __init__(self, engine, photons: int, seed: int, max_depth: int, first: int = 0, total: int | None = None,
+                 copy: "SegmentStore | None" = None):
         self.engine = engine
         self.queue = engine.queue
         self.photons, self.max_depth = int(photons), int(max_depth)
@@ -88,9 +91,14 @@ class SegmentStore:
                              f"({limit / 2**30:.2f} GiB); use fewer photons or a smaller max_depth")
         self.nbytes = nbytes
         self.scale = engine.compiled.fixed_scale(self.total)
+        self.seed = int(seed)
         self.tracer = PhotonTracer(self.queue, engine.compiled, seed, max_depth, self.photons, engine.local_size)
         # retrace() finds a path's random numbers by the batch's path_offset
-        self.batch = self.tracer.trace(self.first_path, self.photons)
+        self.added = None  # the paths traced here that ``copy`` did not hold (resized)
+        if copy is None:
+            self.batch = self.tracer.trace(self.first_path, self.photons)
+        else:
+            self.batch = self._take(copy)
         prog = programs(engine.ctx).get("update")
         self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
         self.k_cells, self.k_candidates = prog.update_path_cells, prog.update_candidates
@@ -118,6 +126,46 @@ class SegmentStore:
         inst = engine.compiled.instances_host
         self.boxes = {k: (inst["lo"][k].astype(np.float64), inst["hi"][k].astype(np.float64))
                       for k in range(len(inst))}
+
+    def _take(self, other: "SegmentStore") -> PathBatch:
+        """Paths 0 .. photons - 1: those ``other`` holds copied on the device,
+        the rest traced (the same segments a full trace gives, path by path:
+        randomness is a function of the path id)."""
+        kept = min(self.photons, other.photons)
+        t = self.tracer
+        slot = self.max_depth * Segment.itemsize
+        cl.enqueue_copy(self.queue, t.segments, other.batch.segments, byte_count=kept * slot)
+        cl.enqueue_copy(self.queue, t.path_len, other.batch.path_len, byte_count=kept * 4)
+        if self.photons > kept:
+            extra = PhotonTracer(self.queue, self.engine.compiled, self.seed, self.max_depth, self.photons - kept,
+                                 self.engine.local_size)
+            self.added = extra.trace(self.first_path + kept, self.photons - kept)
+            cl.enqueue_copy(self.queue, t.segments, self.added.segments, dst_offset=kept * slot,
+                            byte_count=(self.photons - kept) * slot)
+            cl.enqueue_copy(self.queue, t.path_len, self.added.path_len, dst_offset=kept * 4,
+                            byte_count=(self.photons - kept) * 4)
+        return PathBatch(t.segments, t.path_len, self.first_path, self.photons, self.max_depth)
+
+    def resized(self, photons: int) -> tuple["SegmentStore", PathBatch | None]:
+        """A store of paths 0 .. photons - 1 at the current pose, without
+        tracing the paths this one holds; and what changes in the sums: the
+        paths it adds (a batch to accumulate), or the paths it drops (their
+        segments with negated power, a batch of this store's to accumulate
+        before it goes), or None. Whole-run stores only."""
+        if self.first_path != 0 or self.total != self.photons:
+            raise OclgiError("a store of part of a run's paths (a rank's) cannot change its photon count")
+        new = SegmentStore(self.engine, photons, self.seed, self.max_depth, copy=self)
+        if photons > self.photons:
+            return new, new.added
+        if photons < self.photons:
+            dropped = np.arange(photons, self.photons, dtype=np.int32)
+            mf = cl.mem_flags
+            gone = Affected(dropped, np.zeros(len(dropped), np.int32),
+                            cl.Buffer(self.engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=dropped),
+                            cl.Buffer(self.engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                                      hostbuf=np.zeros(len(dropped), np.int32)))
+            return new, self.suffixes(gone, -1.0)
+        return new, None
 
     # -- reading ------------------------------------------------------------
     def segments(self) -> np.ndarray:

@@ -173,6 +173,74 @@ class Session(SessionBase):
         self._accumulate_all()
         return time.perf_counter() - t0
 
+    def set_photons(self, photons: int) -> float:
+        """Keep ``photons`` paths from now on: more are traced (only the new
+        ones) and added to the sums, fewer are taken out of them; equal bit
+        for bit to a fresh session with that count at the session's pose.
+        Returns the seconds it took."""
+        self._check_open()
+        from ..cl.release import release
+
+        t0 = time.perf_counter()
+        p = self.params
+        new_params = self.engine.run_params(p.method, photons, p.radius, p.seed, p.max_depth, p.extension,
+                                            p.count_emitted)
+        store, delta = self.store.resized(new_params.photons)
+        if delta is not None:
+            for est in (self.estimator, self.dyn_est):
+                if est is not None:
+                    est.accumulate(delta)
+        self.queue.finish()
+        old, self.store, self.params, self.scale = self.store, store, new_params, store.scale
+        release(old)
+        return time.perf_counter() - t0
+
+    def _apply_parameters(self, changes: dict):
+        """An update (oclgi/parameters.py): materials and lights, seed and
+        depth re-trace the store; photons trace or drop only the difference;
+        a camera traces its points; the estimator's parameters re-sum."""
+        from ..cl.release import release
+        from ..parameters import Updated, kinds
+
+        t0 = time.perf_counter()
+        what = kinds(changes)
+        scene, compiled, run = self._new_tables(changes)  # checked: nothing changed yet
+        p = self.params
+        new = self.engine.run_params(*(run.get(k, getattr(p, k)) for k in (
+            "method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")))
+        self._check_method(new.method, self.dynamic_choice, self.options, self.view is not None)
+        if (self.store.first_path != 0 or self.store.total != self.store.photons) and what - {"camera", "estimate"}:
+            raise OclgiError("a session over part of a run's paths (a rank's) changes only its camera and estimator")
+        done = Updated(tables=compiled is not None)
+        if what == {"photons"}:  # the difference only, into the sums as they are
+            done.paths_traced = max(new.photons - p.photons, 0)
+            done.paths_dropped = max(p.photons - new.photons, 0)
+            self.set_photons(new.photons)
+            done.seconds = time.perf_counter() - t0
+            return done
+        self.engine.scene = scene
+        if compiled is not None:
+            self.engine.compiled = compiled
+        old = self.store
+        if compiled is not None or "trace" in what:
+            self.store = SegmentStore(self.engine, new.photons, new.seed, new.max_depth)
+            done.paths_traced = new.photons
+        elif "photons" in what:
+            self.store, _ = old.resized(new.photons)
+            done.paths_traced = max(new.photons - p.photons, 0)
+            done.paths_dropped = max(p.photons - new.photons, 0)
+        if self.store is not old:
+            release(old)
+            self.scale = self.store.scale
+        self.params = new
+        if self.view is not None and ("camera" in what or (compiled is not None and self.view.through)):
+            self._new_view(changes.get("camera", self.view.cam))
+            done.points_traced = len(self.points)
+        self._accumulate_all()
+        done.resummed = True
+        done.seconds = time.perf_counter() - t0
+        return done
+
     def set_camera(self, camera) -> float:
         """View through ``camera`` (an oclgi.Camera) from now on: the camera
         points are traced again at the session's pose and summed over the

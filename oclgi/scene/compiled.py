@@ -89,11 +89,41 @@ class CompiledScene:
             if m.texture is not None and id(m.texture) not in tex_index:
                 tex_index[id(m.texture)] = len(tex_list)
                 tex_list.append(m.texture)
-        mats = materials.record(scene.materials, [tex_index.get(id(m.texture), -1) for m in scene.materials])
+        self._tex_index = tex_index
         tex_records, texels = textures.pack(tex_list)
         uvmap = (textures.uv_maps(v, scene.tri_uv) if scene.tri_uv is not None and tex_list
                  else np.zeros((len(v), 8), np.float32))
 
+        self._tables(scene)
+
+        self.nodes = _buffer(ctx, self._nodes)
+        self.tris = _buffer(ctx, self._tris)
+        self.object_normals = _buffer(ctx, normals)
+        # the pose as loaded (the engine's; sessions take copies: Engine.posed)
+        self.pose = Pose(self, self._loaded_records, normals)
+        self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
+        self.textures, self.texels = _buffer(ctx, tex_records), _buffer(ctx, texels)
+        self.tri_uvmap = _buffer(ctx, uvmap)
+        coloured = scene.tri_colour is not None and any(m.vertex_colours for m in scene.materials)
+        colourmap = (textures.colour_maps(v, scene.tri_colour) if coloured else np.zeros((3 * len(v), 4), np.float32))
+        self.tri_colourmap = _buffer(ctx, colourmap)
+        bg, bg_texels = background.record(scene)
+        self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
+        self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
+        self.texels_host, self.uvmap_host, self.colourmap_host = texels, uvmap, colourmap
+        self.tri_areas = _buffer(ctx, self.areas)
+        self.faces = _buffer(ctx, scene.faces.astype(np.int32))
+        # scene scale for ray offsets and the DETP tolerance
+        self.eps = 1e-5 * scene.diagonal
+
+    # -- what a parameter update changes (oclgi/parameters.py) -------------------
+    def _tables(self, scene: Scene) -> None:
+        """The materials' and emitters' device tables of ``scene`` (its
+        geometry this compiled scene's): all that a change of a material's
+        parameters or of a light asks to rebuild."""
+        ctx = self.ctx
+        mats = materials.record(scene.materials, [self._tex_index.get(id(m.texture), -1) for m in scene.materials])
+        self.materials, self.materials_host = _buffer(ctx, mats), mats
         rows = emitter_rows(scene)
         power = rows.power
         weight = power.mean(axis=1)
@@ -127,30 +157,18 @@ class CompiledScene:
         em["power"] = photon_power / self.photon_power_max
         _warn_escaping(scene)
 
-        self.nodes = _buffer(ctx, self._nodes)
-        self.tris = _buffer(ctx, self._tris)
-        self.object_normals = _buffer(ctx, normals)
-        # the pose as loaded (the engine's; sessions take copies: Engine.posed)
-        self.pose = Pose(self, self._loaded_records, normals)
-        self.tri_material = _buffer(ctx, scene.tri_material.astype(np.int32))
-        self.materials = _buffer(ctx, mats)
-        self.textures, self.texels = _buffer(ctx, tex_records), _buffer(ctx, texels)
-        self.tri_uvmap = _buffer(ctx, uvmap)
-        coloured = scene.tri_colour is not None and any(m.vertex_colours for m in scene.materials)
-        colourmap = (textures.colour_maps(v, scene.tri_colour) if coloured else np.zeros((3 * len(v), 4), np.float32))
-        self.tri_colourmap = _buffer(ctx, colourmap)
-        bg, bg_texels = background.record(scene)
-        self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
-        self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
-        self.texels_host, self.uvmap_host, self.colourmap_host = texels, uvmap, colourmap
         self.emitters = _buffer(ctx, em)
         self.emitter_cdf = _buffer(ctx, cdf_table)
-        self.tri_areas = _buffer(ctx, self.areas)
-        self.faces = _buffer(ctx, scene.faces.astype(np.int32))
-        self.materials_host = mats
         self.emitters_host, self.emitter_cdf_host = em, cdf_table
-        # scene scale for ray offsets and the DETP tolerance
-        self.eps = 1e-5 * scene.diagonal
+
+    def with_scene(self, scene: Scene) -> "CompiledScene":
+        """This compiled scene with the materials and lights of ``scene``
+        (the same geometry, objects and textures, other parameters): the
+        trees, triangles and pose shared, the tables new."""
+        view = copy.copy(self)
+        view.scene = scene
+        view._tables(scene)
+        return view
 
     def fingerprint(self) -> str:
         """A hash of everything a photon path depends on, as the device holds
