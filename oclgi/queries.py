@@ -190,7 +190,7 @@ class QueryPoints:
         return self.positions[:, :3]
 
 
-def _pack(p, n, tri=None, barys=None, kind="points") -> QueryPoints:
+def pack(p, n, tri=None, barys=None, kind="points") -> QueryPoints:
     m = len(p)
     pos = np.zeros((m, 4), np.float32)
     pos[:, :3] = p
@@ -244,7 +244,7 @@ def from_arrays(points, normals) -> QueryPoints:
     bad = ~np.isfinite(length) | ~(length > 1e-12)
     if bad.any():
         raise OclgiError(f"query point {int(np.argmax(bad))} has a zero, NaN or infinite normal ({int(bad.sum())} such points)")
-    return _pack(p, n / length[:, None])
+    return pack(p, n / length[:, None])
 
 
 def from_file(path) -> QueryPoints:
@@ -302,6 +302,6 @@ def vertex_points(scene) -> QueryPoints:
     barys = np.zeros((len(ids), 2), np.float32)
     barys[corner[ids] == 1, 0] = 1.0
     barys[corner[ids] == 2, 1] = 1.0
-    q = _pack(scene.vertices[ids], acc[ids] / length[ids, None], tri[ids], barys, kind="vertices")
+    q = pack(scene.vertices[ids], acc[ids] / length[ids, None], tri[ids], barys, kind="vertices")
     q.vertex_ids = ids
     return q

@@ -93,6 +93,11 @@ class Session(SessionBase):
         self._accumulate_all()
         self.setup_seconds = time.perf_counter() - t0
 
+    @property
+    def is_camera(self) -> bool:
+        """Whether the query points are a camera's view."""
+        return self.view is not None and self.view.cam is not None
+
     # -- setting up -----------------------------------------------------------
     @staticmethod
     def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
@@ -114,9 +119,14 @@ class Session(SessionBase):
                              f"got {chosen!r}")
 
     def _new_view(self, camera) -> None:
-        """The query points: the given ones, or the camera's two layers."""
+        """The query points: the given ones (with those on movable objects
+        attached to them), or the camera's two layers."""
         if self.fixed_points is not None:
-            self.points = self.fixed_points
+            from .attached_points import AttachedPoints
+
+            attached = AttachedPoints(self.engine, self.fixed_points)
+            self.view = attached if len(attached.dynamic) else None
+            self.points = attached.points if self.view is not None else self.fixed_points
             return
         from .dynamic_view import DynamicView
 
@@ -166,7 +176,7 @@ class Session(SessionBase):
         new = self.engine.run_params(method or p.method, p.photons, p.radius if radius is None else radius,
                                      p.seed, p.max_depth, p.extension if extension is None else extension,
                                      p.count_emitted if count_emitted is None else count_emitted)
-        self._check_method(new.method, dynamic, options, self.view is not None)
+        self._check_method(new.method, dynamic, options, self.is_camera)
         self.params = new
         self.options = dict(options, count_work=self.options["count_work"])
         self.dynamic_choice = dynamic
@@ -208,7 +218,7 @@ class Session(SessionBase):
         p = self.params
         new = self.engine.run_params(*(run.get(k, getattr(p, k)) for k in (
             "method", "photons", "radius", "seed", "max_depth", "extension", "count_emitted")))
-        self._check_method(new.method, self.dynamic_choice, self.options, self.view is not None)
+        self._check_method(new.method, self.dynamic_choice, self.options, self.is_camera)
         if (self.store.first_path != 0 or self.store.total != self.store.photons) and what - {"camera", "estimate"}:
             raise OclgiError("a session over part of a run's paths (a rank's) changes only its camera and estimator")
         done = Updated(tables=compiled is not None)
@@ -247,7 +257,7 @@ class Session(SessionBase):
         stored paths; no photon is re-traced. Camera sessions only. Returns
         the seconds it took."""
         self._check_open()
-        if self.view is None:
+        if not self.is_camera:
             raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
         t0 = time.perf_counter()
         self._new_view(camera)
