@@ -255,6 +255,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder for study.md, study.csv, error_vs_time.png, variance_vs_photons.png")
     s.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
+    b = sub.add_parser("bake", help="bake the solution into a glTF: vertex colours of the scene cut to a fine edge")
+    _estimate_args(b)
+    b.add_argument("-o", "--output", type=Path, required=True, help="output .glb (glTF 2.0, binary)")
+    b.add_argument("--quantity", choices=("irradiance", "radiance"), default="irradiance",
+                   help="irradiance (default: the light arriving, for a renderer to multiply by its own "
+                        "textures) or radiance (emission + albedo x irradiance / pi, the materials' albedos)")
+    b.add_argument("--edge", type=_positive_float,
+                   help="longest triangle edge of the baked mesh (default: the disc radius)")
+    b.add_argument("--exposure", type=_positive_float, default=1.0,
+                   help="multiplier of the colours shown (COLOR_0, _COLOR_SRGB); the float values are kept as "
+                        "they are in _IRRADIANCE or _RADIANCE")
+
     sub.add_parser("info", help="list OpenCL devices")
     w = sub.add_parser("warm", help="compile every kernel into PoCL's cache, so that later runs start at once "
                        "(the make targets' set-up runs it)")
@@ -422,6 +434,26 @@ def cmd_irradiance(args):
     print(f"wrote {path}")
 
 
+def cmd_bake(args):
+    from .bake import bake, write_glb
+    from .io import check_not_input, check_output
+
+    if args.output.suffix.lower() != ".glb":
+        raise OclgiError(f"{args.output}: the output must end in .glb")
+    check_output(args.output)
+    check_not_input([args.output], {args.scene: "the scene file"})
+    _world(args, "bake")
+    engine = _engine(args)
+    result = bake(engine, edge=args.edge, quantity=args.quantity, exposure=args.exposure, **_est_kwargs(args))
+    write_glb(result, args.output)
+    vertices = sum(len(g.vertices) for g in result.geometry.values())
+    faces = sum(len(g.faces) for g in result.geometry.values())
+    if not args.quiet:
+        print(result.metadata["stats"].summary(), file=sys.stderr)
+    print(f"wrote {args.output} ({len(result.geometry)} meshes, {vertices:,} vertices, {faces:,} triangles, "
+          f"{args.quantity})")
+
+
 def _animation_folder(args, keyframes: str, what: str) -> tuple[Path, dict]:
     """The frames' folder, checked before any work: a folder (or none yet),
     writable, and none of its frames or timing log one of the inputs; and
@@ -580,7 +612,7 @@ def _run(argv) -> int:
             if args.command == "animate":
                 _world(args, args.command)  # refused under MPI, before any work
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
-             "study": cmd_study, "info": cmd_info, "warm": cmd_warm}[args.command](args)
+             "study": cmd_study, "info": cmd_info, "warm": cmd_warm, "bake": cmd_bake}[args.command](args)
     except OclgiError as exc:
         if not _other_rank():
             print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)

@@ -432,7 +432,7 @@ def read_image(path) -> np.ndarray:
         inp.close()
 
 
-def _write_bytes(tmp: Path, data: bytes) -> None:
+def write_bytes(tmp: Path, data: bytes) -> None:
     """Write ``data`` to ``tmp`` and check that every byte reached the file.
 
     The data is made in memory first (it is small: one row per point or
@@ -463,7 +463,7 @@ def write_array(path, values: np.ndarray, points=None, columns=("E_r", "E_g", "E
                 cols = ["x", "y", "z", "nx", "ny", "nz"] + cols
                 data = np.hstack([points.positions[:, :3], points.normals[:, :3], data])
             np.savetxt(buf, data, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
-        _write_bytes(tmp, buf.getvalue())
+        write_bytes(tmp, buf.getvalue())
     return path
 
 
@@ -475,5 +475,5 @@ def write_array_text(path, columns: list[str], rows, sync: bool = True) -> Path:
         ",".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r) for r in rows]
     data = ("\n".join(lines) + "\n").encode()
     with atomic_path(path, sync) as tmp:
-        _write_bytes(tmp, data)
+        write_bytes(tmp, data)
     return path

@@ -34,7 +34,10 @@ class AttachedPoints:
     cam = None  # not a camera's view
     through = False
 
-    def __init__(self, engine, points: QueryPoints):
+    def __init__(self, engine, points: QueryPoints, as_loaded: bool = False):
+        """``as_loaded``: the points are where the objects were loaded (a
+        tessellation of the scene file's geometry); else where the engine
+        has the objects now (a session's points as given when it opens)."""
         self.engine = engine
         self.given = points
         self.points = points.copy()
@@ -44,7 +47,7 @@ class AttachedPoints:
         for obj, (a, b) in enumerate(scene.object_ranges()):
             ids = np.nonzero((tri >= a) & (tri < b))[0]
             if scene.objects[obj].movable and len(ids):
-                self.groups.append((obj, ids, engine.compiled.pose.matrix(obj)))
+                self.groups.append((obj, ids, np.eye(4) if as_loaded else engine.compiled.pose.matrix(obj)))
         self.dynamic = (np.concatenate([g[1] for g in self.groups]) if self.groups
                         else np.zeros(0, np.int64))
         self.dynamic.sort()
