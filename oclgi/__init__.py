@@ -28,7 +28,7 @@ _LAZY = {
     "SpotLight": ".scene.lights", "SunLight": ".scene.lights", "SkyLight": ".scene.lights",
     "PhotonMapSession": ".incremental.photon_map_session",
     "Session": ".incremental.session", "UpdateStats": ".incremental.protocol",
-    "open_session": ".incremental.open_session", "IncrementalSession": ".incremental.protocol",
+    "open_session": ".incremental.open_session", "LightSession": ".incremental.light_session", "IncrementalSession": ".incremental.protocol",
 }
 
 
@@ -74,5 +74,5 @@ __all__ = [
     "Engine", "Estimate", "Render", "Stats", "OclgiError", "OclgiWarning", "QueryPoints",
     "query_points", "read_points", "load_dict", "load_file", "Camera", "Material", "PointLight", "SpotLight",
     "SunLight", "SkyLight", "Scene", "Session", "PhotonMapSession", "UpdateStats",
-    "open_session", "IncrementalSession", "scene_path", "save_render", "__version__",
+    "open_session", "IncrementalSession", "LightSession", "scene_path", "save_render", "__version__",
 ]
