@@ -84,6 +84,12 @@ def _light_key(light, i: int) -> str:
     return f"light.{light.name if getattr(light, 'name', None) else f'#{i}'}"
 
 
+def light_name(scene, light) -> str:
+    """The parameters' name of ``light``, one of ``scene``'s lights ("light.NAME" or "light.#i")."""
+    i = next(k for k, other in enumerate(_lights(scene)) if other is light)
+    return _light_key(light, i)
+
+
 def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 

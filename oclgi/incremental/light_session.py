@@ -109,11 +109,9 @@ class LightSession(SessionBase):
         return done
 
     def _recompute(self, position, direction):
-        from ..parameters import _light_key, _lights
+        from ..parameters import light_name
 
-        scene = self.engine.scene
-        i = next(k for k, light in enumerate(_lights(scene)) if light is self.reuse.light)
-        key = _light_key(self.reuse.light, i)
+        key = light_name(self.engine.scene, self.reuse.light)
         changes = {f"{key}.position": position}
         if direction is not None:
             changes[f"{key}.direction"] = tuple(float(c) for c in direction)

@@ -212,7 +212,6 @@ class PhotonMapSession(SessionBase):
         depth re-trace the store; photons trace or drop the difference; a
         camera traces its points; then every point is searched again (a
         k-nearest estimate depends on every impact)."""
-        from ..cl.release import release
         from ..parameters import Updated, kinds
 
         t0 = time.perf_counter()
@@ -227,21 +226,7 @@ class PhotonMapSession(SessionBase):
                                      run.get("max_depth", p.max_depth), None,
                                      run.get("count_emitted", p.count_emitted))
         done = Updated(tables=compiled is not None)
-        self.engine.scene = scene
-        if compiled is not None:
-            self.engine.compiled = compiled
-        old = self.store
-        if compiled is not None or "trace" in what:
-            self.store = SegmentStore(self.engine, new.photons, new.seed, new.max_depth)
-            done.paths_traced = new.photons
-        elif "photons" in what:
-            self.store, _ = old.resized(new.photons)
-            done.paths_traced = max(new.photons - p.photons, 0)
-            done.paths_dropped = max(p.photons - new.photons, 0)
-        if self.store is not old:
-            release(old)
-            self.scale = self.store.scale
-        self.params = new
+        self._renew_store(scene, compiled, what, new, done)
         if self.view is not None and ("camera" in what or (compiled is not None and self.view.through)):
             from .dynamic_view import DynamicView
 

@@ -100,6 +100,32 @@ class SessionBase:
         compiled = self.engine.compiled.with_scene(scene) if "tables" in kinds(changes) else None
         return scene, compiled, run
 
+    def _renew_store(self, scene, compiled, what: set, new, done) -> None:
+        """An update's new scene and tables (``compiled``, None: unchanged)
+        on the session's engine view, and its store for the run parameters
+        ``new``: traced anew when the tables, seed or depth changed, resized
+        when only the photon count did (the kept paths copied), else kept;
+        ``done`` (an Updated) counts the paths traced and dropped."""
+        from ..cl.release import release
+        from .segment_store import SegmentStore
+
+        p = self.params
+        self.engine.scene = scene
+        if compiled is not None:
+            self.engine.compiled = compiled
+        old = self.store
+        if compiled is not None or "trace" in what:
+            self.store = SegmentStore(self.engine, new.photons, new.seed, new.max_depth)
+            done.paths_traced = new.photons
+        elif "photons" in what:
+            self.store, _ = old.resized(new.photons)
+            done.paths_traced = max(new.photons - p.photons, 0)
+            done.paths_dropped = max(p.photons - new.photons, 0)
+        if self.store is not old:
+            release(old)
+            self.scale = self.store.scale
+        self.params = new
+
     def _check_open(self) -> None:
         if self.closed:
             raise OclgiError(f"this {type(self).__name__} is closed")

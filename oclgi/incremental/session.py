@@ -209,7 +209,6 @@ class Session(SessionBase):
         """An update (oclgi/parameters.py): materials and lights, seed and
         depth re-trace the store; photons trace or drop only the difference;
         a camera traces its points; the estimator's parameters re-sum."""
-        from ..cl.release import release
         from ..parameters import Updated, kinds
 
         t0 = time.perf_counter()
@@ -228,21 +227,7 @@ class Session(SessionBase):
             self.set_photons(new.photons)
             done.seconds = time.perf_counter() - t0
             return done
-        self.engine.scene = scene
-        if compiled is not None:
-            self.engine.compiled = compiled
-        old = self.store
-        if compiled is not None or "trace" in what:
-            self.store = SegmentStore(self.engine, new.photons, new.seed, new.max_depth)
-            done.paths_traced = new.photons
-        elif "photons" in what:
-            self.store, _ = old.resized(new.photons)
-            done.paths_traced = max(new.photons - p.photons, 0)
-            done.paths_dropped = max(p.photons - new.photons, 0)
-        if self.store is not old:
-            release(old)
-            self.scale = self.store.scale
-        self.params = new
+        self._renew_store(scene, compiled, what, new, done)
         if self.view is not None and ("camera" in what or (compiled is not None and self.view.through)):
             self._new_view(changes.get("camera", self.view.cam))
             done.points_traced = len(self.points)
