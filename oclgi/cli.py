@@ -4,7 +4,8 @@
                        [--checkpoint FILE.npz | --resume FILE.npz [--more N]] [--progressive N]
     oclgi irradiance SCENE --points FILE.npy|.csv -o OUT.npy|.csv [--checkpoint FILE.npz | --resume ...]
     oclgi animate SCENE --path line:DX,DY,DZ|orbit:R|KEYS.csv [--frames N] -o DIR
-    oclgi animate SCENE --light NAME --light-path FILE.npy|x,y,z;x,y,z;... [--frames N] -o DIR
+    oclgi animate SCENE --light NAME [--light-path FILE.npy|x,y,z;x,y,z;...] [--frames N] -o DIR
+    oclgi bake SCENE -o OUT.glb [--quantity irradiance|radiance] [--edge E] [--exposure X]
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
                       [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
@@ -211,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "frame (path reuse; --photons counts the paths per position)")
     a.add_argument("--light-path", metavar="FILE.npy|x,y,z;...",
                    help="the light's keyframes, rows x,y,z (or x,y,z,dx,dy,dz: a spot's position and axis), "
-                        "interpolated over the frames")
+                        "interpolated over the frames (default: the light's own path in the scene file)")
     a.add_argument("--frames", type=_param(budget.frames, "--frames"), default=30, help="number of frames (default 30)")
     a.add_argument("-o", "--output", type=Path, required=True, help="folder for frame_NNNN.png and timing.csv")
     a.add_argument("--exr", action="store_true", help="also write each frame's linear EXR")
@@ -476,7 +477,8 @@ def cmd_animate(args):
     if args.light is not None or args.light_path is not None:
         return _animate_light(args)
     if args.path is None:
-        raise OclgiError("animate needs --path (an object's) or --light with --light-path")
+        raise OclgiError("animate needs --path (an object's) or --light (with --light-path, or a light with a path "
+                         "in the scene file)")
     from .incremental.animate import animate, poses
     from .incremental.session import Session
     from .io import check_not_input, check_output
@@ -525,12 +527,20 @@ def _animate_light(args):
 
     if args.path is not None or args.object is not None or args.dynamic is not None or args.video is not None:
         raise OclgiError("--light moves a light: --path, --object, --dynamic and --video go with objects")
-    if args.light is None or args.light_path is None:
-        raise OclgiError("--light and --light-path go together")
-    out, _ = _animation_folder(args, args.light_path, "the light's keyframes file (--light-path)")
-    positions, directions = light_path(args.light_path, args.frames)  # a bad path fails before any work
+    if args.light is None:
+        raise OclgiError("--light-path needs --light (the light it moves)")
+    out, _ = _animation_folder(args, args.light_path or "", "the light's keyframes file (--light-path)")
+    if args.light_path is not None:
+        positions, directions = light_path(args.light_path, args.frames)  # a bad path fails before any work
     engine = _engine(args)
     light = int(args.light) if args.light.isdigit() else args.light
+    if args.light_path is None:  # the light's own path, from the scene file
+        from .tracing.light_reuse import find_light
+
+        _, found = find_light(engine.scene, light)
+        if found.path is None:
+            raise OclgiError(f"light {args.light!r} has no path in the scene file: give --light-path")
+        positions, directions = light_path(np.array(found.path, np.float64), args.frames, f"light {args.light!r} path")
     options = dict(args.option)
     est_args = {k: options.pop(k) for k in ("extension", "count_emitted") if k in options}
     reuse = LightReuse(engine, light, positions, directions, photons=args.photons, seed=args.seed,

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 import oclgi
+from cli_run import in_process
 from oclgi.incremental.light_session import LightSession
 from oclgi.tracing.light_reuse import LightReuse
-from test_light_reuse import AXES, POSITIONS, RADIUS, box, points
+from test_light_reuse import AXES, BOX, POSITIONS, RADIUS, box, points
 
+BOX_PATH = BOX
 N = 1000
 
 
@@ -64,3 +66,36 @@ def test_light_session_protocol():
         s.move_light(POSITIONS[0])
     with pytest.raises(oclgi.OclgiError, match="positions"):
         LightSession(engine, points(), light="lamp")
+
+
+def test_a_light_path_in_the_scene_file(tmp_path, monkeypatch, capsys):
+    """``path`` in a [[point_light]] table: the session's default positions
+    and animate's default --light-path, the same frames byte for byte."""
+    text = (f'name = "lit"\n[[mesh]]\npath = "{BOX_PATH}"\n[mesh.materials.light]\nemission = [0, 0, 0]\n'
+            '[[point_light]]\nname = "lamp"\nposition = [0, 1.5, 0]\nintensity = [1, 0.8, 0.6]\n'
+            'path = [[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4]]\n'
+            '[photons]\ncount = 3000\nmax_depth = 6\n[camera]\nposition = [0, 1, 3.94]\nlook_at = [0, 1, 0]\n'
+            'width = 16\nheight = 16\n')
+    scene_file = tmp_path / "lit.toml"
+    scene_file.write_text(text)
+    scene = oclgi.load_file(scene_file)
+    assert scene.point_lights[0].path == ((-0.5, 1.5, 0.0), (0.5, 1.6, 0.2), (0.0, 1.8, -0.4))
+    s = LightSession(oclgi.Engine(scene), points(), light="lamp", photons=N, radius=RADIUS)
+    assert s.reuse.frames == 3 and s.move_light((0.5, 1.6, 0.2)).reused
+    s.close()
+    common = ["animate", scene_file, "--light", "lamp", "--frames", 4, "--photons", 500, "--quiet"]
+    a = in_process(monkeypatch, capsys, tmp_path, *common, "-o", tmp_path / "a")
+    b = in_process(monkeypatch, capsys, tmp_path, *common, "-o", tmp_path / "b",
+                   "--light-path=-0.5,1.5,0;0.5,1.6,0.2;0,1.8,-0.4")
+    assert a.returncode == 0 and b.returncode == 0, (a.stderr, b.stderr)
+    for k in range(4):
+        name = f"frame_{k:04d}.png"
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    for bad, words in (("path = [[0, 1]]", "every row must have 3"), ("path = []", "expected a list of rows"),
+                       ("path = [[0, 1, 1e300]]", "path"), ('path = "up"', "expected a list of rows")):
+        scene_file.write_text(text.replace("path = [[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4]]", bad))
+        with pytest.raises(oclgi.OclgiError, match=words):
+            oclgi.load_file(scene_file)
+    scene_file.write_text(text.replace("path = [[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4]]\n", ""))
+    r = in_process(monkeypatch, capsys, tmp_path, *common, "-o", tmp_path / "c")
+    assert r.returncode == 2 and "has no path in the scene file" in r.stderr

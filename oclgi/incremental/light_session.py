@@ -39,7 +39,8 @@ class LightUpdate:
 
 
 class LightSession(SessionBase):
-    """``light``, ``positions`` (F, 3), ``directions``, ``photons`` (per
+    """``light``, ``positions`` (F, 3; default: the light's ``path`` in the
+    scene file, one position a keyframe), ``directions``, ``photons`` (per
     position), ``seed``, ``max_depth``: as for ``LightReuse``; ``points``
     fixed query points or None for ``camera``'s view (the scene's by
     default); ``method``, ``radius`` and ``options`` the estimator's (any
@@ -49,9 +50,15 @@ class LightSession(SessionBase):
     def __init__(self, engine, points=None, light=None, positions=None, directions=None, photons=None, seed=None,
                  max_depth=None, method=None, radius=None, camera=None, **options):
         from ..tracing.light_reuse import LightReuse
+        from ..tracing.light_reuse import find_light
 
-        if positions is None:
-            raise OclgiError("a light session needs the light's positions (an (F, 3) array)")
+        if positions is None:  # the light's own path, from the scene file
+            _, found = find_light(engine.scene, 0 if light is None else light)
+            if found.path is None:
+                raise OclgiError("a light session needs the light's positions (an (F, 3) array), or a light with "
+                                 "a path in the scene file")
+            keys = np.array(found.path, np.float64)
+            positions, directions = keys[:, :3], (keys[:, 3:] if keys.shape[1] == 6 else directions)
         self.engine = engine.posed(owner=self)
         self.queue = engine.queue
         self.camera = None

@@ -41,7 +41,10 @@ table           parameters (defaults)
 ==============  ============================================================
 
 Point and spot lights take an optional ``name`` (a string: what ``oclgi
-animate --light`` moves them by). Unknown keys are errors, as everywhere in
+animate --light`` moves them by) and an optional ``path``, the keyframes
+of its animation (rows ``[x, y, z]``; a spot's may be ``[x, y, z, dx, dy,
+dz]``, position and axis), which ``animate --light NAME`` and
+``oclgi.LightSession`` take when no other path is given. Unknown keys are errors, as everywhere in
 a scene file. The sun and sky
 cover the scene's geometry as loaded (its bounding sphere): a movable
 object moved outside that sphere is not lit by them.
@@ -60,7 +63,7 @@ photon carries more than 1.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -74,8 +77,9 @@ from . import values
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
 TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
 _KEYS = {
-    "point_light": {"position", "intensity", "candela", "colour", "name"},
-    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta", "name"},
+    "point_light": {"position", "intensity", "candela", "colour", "name", "path"},
+    "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta", "name",
+                   "path"},
     "sun": {"direction", "irradiance", "lux", "colour"},
     "sky": {"radiance", "hemisphere", "up", "map", "scale"},
 }
@@ -137,12 +141,14 @@ class PointLight:
     position    3 numbers, world space
     intensity   RGB radiant intensity, W/sr per channel
     name        optional, what a light animation calls it
+    path        optional keyframes of a light animation: rows x, y, z
     ==========  =========================================
     """
 
     position: tuple[float, float, float]
     intensity: tuple[float, float, float]  # W/sr per channel
     name: str | None = None
+    path: tuple | None = field(default=None, repr=False)  # keyframes (rows of 3), oclgi animate --light
 
     table = "point_light"
 
@@ -174,6 +180,8 @@ class SpotLight:
     cone_delta   width of the falloff band inside the cone, degrees, in
                  [0, cone_angle]
     name         optional, what a light animation calls it
+    path         optional keyframes of a light animation: rows x, y, z or
+                 x, y, z, dx, dy, dz (position and axis)
     ===========  ==============================================================
     """
 
@@ -183,6 +191,7 @@ class SpotLight:
     cone_angle: float = SPOT_CONE_ANGLE
     cone_delta: float = SPOT_CONE_DELTA
     name: str | None = None
+    path: tuple | None = field(default=None, repr=False)  # keyframes (rows of 3 or 6), oclgi animate --light
 
     table = "spot_light"
 
@@ -528,8 +537,31 @@ def read(desc: dict, base_dir=None) -> tuple[list, list]:
         for where, t in tables:
             values.check_keys(t, _KEYS[name], where)
             light = _READERS[name](t, where) if name != "sky" else _read_sky(t, where, base_dir)
+            if "path" in t:
+                light.path = _path(t["path"], f"{where}.path", 6 if name == "spot_light" else 3)
             (points if name == "point_light" else others).append(light)
     return points, others
+
+
+def _path(rows, where: str, widest: int) -> tuple:
+    """A light animation's keyframes: at least one row of 3 numbers
+    (position), or of 6 for a spot (position and axis), finite and within
+    the scene's coordinates; the axes not zero."""
+    if not isinstance(rows, list) or not rows or not all(isinstance(r, list) for r in rows):
+        raise OclgiError(f"{where}: expected a list of rows [x, y, z]" + (" or [x, y, z, dx, dy, dz]"
+                                                                           if widest == 6 else ""))
+    width = len(rows[0])
+    if width not in (3, widest) or any(len(r) != width for r in rows):
+        raise OclgiError(f"{where}: every row must have 3" + (" or every row 6" if widest == 6 else "") +
+                         f" numbers, got rows of {sorted({len(r) for r in rows})}")
+    out = []
+    for i, r in enumerate(rows):
+        pos = values.vec3(r[:3], f"{where}[{i}]", MAX_COORDINATE)
+        if width == 6:
+            out.append((*pos, *_unit(values.vec3(r[3:], f"{where}[{i}] axis"), f"{where}[{i}] axis")))
+        else:
+            out.append(tuple(pos))
+    return tuple(tuple(float(c) for c in row) for row in out)
 
 
 def _required(t: dict, key: str, where: str):
