@@ -286,3 +286,53 @@ def test_cli_errors_are_one_line(monkeypatch, capsys, tmp_path, args, match):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and match in lines[0], r.stderr
     assert not (tmp_path / "out").exists()
+
+
+SPONZA_POSITIONS = np.array([[0.0, 6.0, 0.0], [-5.0, 5.0, 1.0], [4.0, 7.0, -1.0], [8.0, 4.0, 0.5]])
+
+
+def _sponza_points(scene, n=24):
+    """Points on Sponza's floor and lower walls, area-weighted, seed fixed."""
+    r = np.random.default_rng(3)
+    nrm = scene.triangle_normals()
+    v = scene.vertices[scene.faces]
+    centre = v.mean(axis=1)
+    area = scene.triangle_areas()
+    floor = np.nonzero((nrm[:, 1] > 0.99) & (centre[:, 1] < 0.5) & (area > 0.05))[0]
+    tri = r.choice(floor, n, p=area[floor] / area[floor].sum())
+    b = r.dirichlet([3, 3, 3], n)  # away from the triangles' edges
+    p = np.einsum("rk,rkc->rc", b, v[tri])
+    return np.hstack([p, nrm[tri]])
+
+
+def test_each_frame_is_unbiased_in_sponza(scenes_dir):
+    """The same z-tests on a real scene: Sponza's atrium (66k triangles),
+    its point light moved among four positions."""
+    scene = oclgi.load_file(scenes_dir / "sponza.toml")
+    engine = oclgi.Engine(scene)
+    pts = _sponza_points(scene)
+    n, seeds, radius = 2500, 12, 0.5
+    reuse = []
+    for s in range(seeds):
+        lr = LightReuse(engine, 0, SPONZA_POSITIONS, photons=n, seed=500 + s, max_depth=5)
+        reuse.append([e.irradiance.sum(axis=1) for e in lr.frames_irradiance(pts, radius=radius)])
+    reuse = np.array(reuse)
+    ref = []
+    for j, pos in enumerate(SPONZA_POSITIONS):
+        scene.point_lights[0].position = tuple(pos)
+        eng = oclgi.Engine(scene)
+        ref.append([eng.irradiance(pts, photons=len(SPONZA_POSITIONS) * n, radius=radius, seed=1 + s,
+                                   max_depth=5).irradiance.sum(axis=1) for s in range(seeds)])
+    ref = np.array(ref).transpose(1, 0, 2)
+    m1, m2 = reuse.mean(0), ref.mean(0)
+    v1, v2 = reuse.var(0, ddof=1), ref.var(0, ddof=1)
+    se = np.sqrt(v1 / seeds + v2 / seeds)
+    lit = se > 0
+    z = np.abs(m1 - m2)[lit] / se[lit]
+    z_crit = NormalDist().inv_cdf(1 - ALPHA / (2 * z.size))
+    print(f"\nSponza: {z.size} tests, max |z| {z.max():.2f} (critical {z_crit:.2f}); variance reuse / recompute "
+          f"per frame (median over points): {[float(np.median((v1 / np.maximum(v2, 1e-30))[j][lit[j]])) for j in range(4)]}")
+    assert lit.sum() >= 0.8 * lit.size
+    assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
+    z_wrong = np.abs(m1 - np.roll(m2, 1, axis=0)) / np.sqrt(v1 / seeds + np.roll(v2, 1, axis=0) / seeds + 1e-30)
+    assert z_wrong.max() > 3 * z_crit  # the test can see a wrong frame
