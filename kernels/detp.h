@@ -22,6 +22,19 @@
 
 #include "constants.h"
 
+/* Surface-consistent counting (the estimators' option ``consistent``): a
+ * segment also has to END near the disc's plane, within SPAN after
+ * crossing it (t* >= t_end + ext - SPAN, SPAN = ext + the option's span),
+ * so that a ray which crosses the disc where the surface is not (beside a
+ * leaf smaller than the disc, through a gap) and goes on to land elsewhere
+ * is not counted. Division-free as the rest: num <= (tmax - SPAN) wn.
+ * Built in when OCLGI_CONSISTENT_SPAN is defined (a float, the build's). */
+#ifdef OCLGI_CONSISTENT_SPAN
+#define DETP_CONSISTENT(res, num, wn, tmax) res = (res) & ((num) <= ((tmax) - (OCLGI_CONSISTENT_SPAN)) * (wn))
+#else
+#define DETP_CONSISTENT(res, num, wn, tmax)
+#endif
+
 /* res = the test's truth value (1 for scalars, -1 lanes for vectors).
  * p*: disc centre, n*: disc normal, o*: segment origin, w*: direction,
  * tmax = t_end + ext, r2 = d^2. T is the type of the point-side values. */
@@ -35,6 +48,7 @@
         T cz_ = num_ * (wz) - wn_ * az_;                                            \
         res = (wn_ < -OCLGI_FRONT_COS_EPS) & (num_ < 0.0f) & (num_ >= (tmax) * wn_) \
             & (cx_ * cx_ + cy_ * cy_ + cz_ * cz_ <= (r2) * (wn_ * wn_));             \
+        DETP_CONSISTENT(res, num_, wn_, (tmax));                                    \
     } while (0)
 
 inline int detp_crosses(float3 x, float3 n, float radius2, float ext,

@@ -152,8 +152,10 @@ class DetpEstimator(Estimator):
 
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
-                 radius_min: float = 0.25, radii=None, pilot=None, **kw):
+                 radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
+                 consistent_span: float = 1.0, **kw):
         radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
+        span = radius_options.consistent_span(consistent, consistent_span)
         if radius_mode == "adaptive" and self.radii_maker is None:
             raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
         given = radius_options.given_radii(radii, radius_mode, len(points))
@@ -172,6 +174,11 @@ class DetpEstimator(Estimator):
         # The user's extension plus a scene-relative tolerance, so segments
         # ending on the disc's own surface survive float rounding.
         self.ext = float(extension) + 10.0 * compiled.eps
+        self.consistent = span is not None
+        if self.consistent:
+            # the build's constant (kernels/detp.h DETP_CONSISTENT): ext plus
+            # the span in units of the radius, as a float32 literal
+            self.defines = dict(self.defines, consistent_span=f"{float(np.float32(self.ext + span * radius))!r}f")
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
         self.acc = self.zeros(self.n * 3 * 8)

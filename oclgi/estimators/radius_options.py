@@ -51,3 +51,16 @@ def given_radii(radii, radius_mode: str, n: int):
         raise OclgiError(f"radii must be {n} positive finite numbers (one per point), got {len(r)}"
                          + ("" if len(r) != n else " with some not positive or not finite"))
     return r
+
+
+def consistent_span(consistent, span):
+    """Surface-consistent counting's span in radii, or None when it is off; one error line for a bad value."""
+    if not isinstance(consistent, (bool, np.bool_)):
+        raise OclgiError(f"consistent must be true or false, got {consistent!r}")
+    try:
+        f = float(span)
+    except (TypeError, ValueError):
+        f = math.nan
+    if isinstance(span, bool) or not 0.0 < f <= 100.0:
+        raise OclgiError(f"consistent_span must be a number of radii in (0, 100], got {span!r}")
+    return f if consistent else None
