@@ -1,5 +1,6 @@
 """Accuracy on complex geometry against Mitsuba 3 (issue 16, items 2 to 4):
-fixed-radius DETP, adaptive DETP, Ray Maps kNN and Photon Maps at equal
+fixed-radius DETP, adaptive DETP, surface-consistent DETP (with fixed or
+adaptive radii), Ray Maps kNN and Photon Maps at equal
 time on the generated scenes of bench/complex_scenes.py (a tree of small
 leaves under a sun; a closed room with columns, arches, a gallery and a
 pillar by a wall, under a ceiling light).
@@ -57,6 +58,8 @@ RESULTS = ROOT / "bench" / "results"
 METHODS = [
     ("DETP, fixed radius", "detp_disc_index", {}),
     ("DETP, adaptive radii", "detp_disc_index", {"radius_mode": "adaptive"}),
+    ("DETP, consistent", "detp_disc_index", {"consistent": True}),
+    ("DETP, adaptive + consistent", "detp_disc_index", {"radius_mode": "adaptive", "consistent": True}),
     ("Ray Maps kNN", "ray_map_knn", {}),
     ("Photon Maps", "photon_map", {}),
 ]
