@@ -41,6 +41,7 @@ import numpy as np
 
 import oclgi
 from oclgi.tracing.light_reuse import LightReuse
+from oclgi.tracing.light_reweight import Reweighting
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "bench" / "results"
@@ -87,6 +88,11 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
     reuse = LightReuse(engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
     setup = time.perf_counter() - t0
     est = reuse.estimator(pts, method=method, radius=RADIUS)
+    rw_est = rw = None
+    if method == "detp_disc_index":  # the tails' stored pairs re-weighted (oclgi/tracing/light_reweight.py)
+        rw_est = reuse.estimator(pts, method=method, radius=RADIUS)
+        rw = Reweighting(reuse, rw_est)
+    rw_s = []
     err_frames = sorted(set(np.linspace(0, frames - 1, ERROR_FRAMES).round().astype(int).tolist()))
     connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace, refs = [], [], [], [], [], [], [], {}
     for j in range(frames):
@@ -97,6 +103,11 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
         t1 = time.perf_counter()
         e = reuse.estimate(j, est)
         frame_s.append(time.perf_counter() - t1)
+        if rw is not None:
+            t1 = time.perf_counter()
+            e_rw = reuse.estimate(j, rw_est, reweighting=rw)
+            rw_s.append(time.perf_counter() - t1)
+            assert np.array_equal(e_rw.accumulators, e.accumulators), "a re-weighted frame differs"
         # the direct light alone: what a frame would still estimate if the
         # tails' contributions were kept per point and only re-weighted
         t1 = time.perf_counter()
@@ -133,6 +144,7 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
     rec_frame = float(np.mean(rec_s))
     eq_paths = (err_rec / err_reuse) ** 2  # recomputation's paths for reuse's error, relative to N
     direct_frame = setup / frames + float(np.mean(direct_s))
+    rw_frame = (setup + rw.seconds) / frames + float(np.mean(rw_s)) if rw is not None else float("nan")
     return {"method": method, "span": span, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
             "store_trace_s": reuse.seconds["trace"], "weights_s": reuse.seconds["weights"], "setup_s": setup,
             "connect_s": float(np.mean(connect)), "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
@@ -141,7 +153,9 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
             "speedup_equal_paths": rec_frame / reuse_frame,
             "speedup_equal_error": rec_frame * eq_paths / reuse_frame,
             "variance_gain": eq_paths, "direct_frame_s": direct_frame,
-            "bound_equal_error": rec_frame * eq_paths / direct_frame}
+            "bound_equal_error": rec_frame * eq_paths / direct_frame,
+            "pairs": rw.n_pairs if rw is not None else 0, "pairs_s": rw.seconds if rw is not None else 0.0,
+            "rw_frame_s": rw_frame, "rw_equal_error": rec_frame * eq_paths / rw_frame}
 
 
 def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
@@ -150,7 +164,7 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
     header = ("| method | span m | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
               "recompute frame ms | err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
               "speedup, equal error (Sbert: up to F) | variance gain | direct-only frame ms | "
-              "re-weighting bound, equal error |")
+              "re-weighting bound, equal error | pairs | re-weighted frame ms | re-weighted, equal error |")
     setting = (f"Cornell box (area light off), a point light circling under the ceiling (radius: span); {points} query points on "
                f"the floor and walls, radius {RADIUS} (DETP), max_depth {MAX_DEPTH}; N = {paths:,} paths per "
                f"frame (reuse: N / F per position); errors: relative RMS against {REF_FACTOR} N paths on "
@@ -163,16 +177,20 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
              "store's cost per frame plus estimating segment 0 of every path alone; the re-weighting bound is the "
              "equal-error speedup if the tails' contributions cost nothing per frame (an estimator keeping, per "
              "point, the stored tail segments it counts would pay a sparse product over them on top): an upper "
-             "bound on what that design can gain.")
+             "bound on what that design can gain. Re-weighted: that design built (oclgi/tracing/light_reweight.py: "
+             "the (disc, tail segment) pairs found once, their count in 'pairs', then per frame segment 0 through "
+             "the estimator and one pass over the pairs), its frames equal to reuse's bit for bit (asserted), the "
+             "pairs' search spread over the F frames like the store's trace.")
     lines = ["# Light reuse against per-frame recomputation (bench/light_reuse.py)", "", setting, "", header,
-             "|---" * 17 + "|"]
+             "|---" * 20 + "|"]
     for r in rows:
         lines.append(f"| {r['method']} | {r['span']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
                      f"{r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | "
                      f"{r['err_reuse']:.4f} | {r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
                      f"{r['speedup_equal_paths']:.2f} | {r['speedup_equal_error']:.2f} ({r['F']}) | "
                      f"{r['variance_gain']:.2f} | {r['direct_frame_s'] * 1e3:.0f} | "
-                     f"{r['bound_equal_error']:.2f} |")
+                     f"{r['bound_equal_error']:.2f} | {r['pairs']:,} | {r['rw_frame_s'] * 1e3:.0f} | "
+                     f"{r['rw_equal_error']:.2f} |")
     lines += ["", notes, ""]
     out.write_text("\n".join(lines))
     return out

@@ -10,47 +10,58 @@
 #include "detp.h"
 #include "box_bvh.h"
 
-/* One segment (s, read from `slot`) against the tree: every leaf it meets,
- * 8 discs at a time, each disc with its own squared radius (DiscBlock r2). */
+/* The discs one segment (o, w, tmax = t_end + ext) crosses: every leaf of
+ * the tree it meets, 8 discs at a time, each disc with its own squared
+ * radius (DiscBlock r2); ON_HIT(id) runs once per crossed disc, in the
+ * tree's order. `n_visited` and `n_tests` count nodes and disc tests. One walk
+ * for every use (the sums here, light_reweight.cl's pair lists). */
+#define DISC_INDEX_WALK(nodes, discs, o, w, tmax, n_visited, n_tests, ON_HIT)                          \
+    do {                                                                                        \
+        float3 inv_ = 1.0f / (w);                                                               \
+        BoxBvhWalk walk_;                                                                       \
+        box_bvh_start(&walk_);                                                                  \
+        int leaf_;                                                                              \
+        while ((leaf_ = box_bvh_next_segment(&walk_, (nodes), (o), inv_, (tmax))) >= 0) {       \
+            int count_ = (nodes)[leaf_].count;                                                  \
+            int first_ = (nodes)[leaf_].first;                                                  \
+            (n_tests) += (ulong)count_;                                                           \
+            for (int blk_ = first_; blk_ < first_ + (count_ + OCLGI_LANES - 1) / OCLGI_LANES; ++blk_) { \
+                __global const DiscBlock *b_ = (discs) + blk_;                                  \
+                int8 hit_;                                                                      \
+                DETP_TEST(float8, hit_, b_->x, b_->y, b_->z, b_->nx, b_->ny, b_->nz, (o).x, (o).y, (o).z, \
+                          (w).x, (w).y, (w).z, (tmax), b_->r2);                                 \
+                if (!any(hit_)) continue;                                                       \
+                int ids_[OCLGI_LANES], h_[OCLGI_LANES];                                          \
+                vstore8(b_->id, 0, ids_);                                                       \
+                vstore8(hit_, 0, h_);                                                           \
+                for (int k_ = 0; k_ < OCLGI_LANES; ++k_) {                                      \
+                    if (!h_[k_]) continue;                                                      \
+                    ON_HIT(ids_[k_]);                                                           \
+                }                                                                               \
+            }                                                                                   \
+        }                                                                                       \
+        (n_visited) += walk_.visited;                                                             \
+    } while (0)
+
+/* One segment (s, read from `slot`) against the tree, its fixed-point
+ * power added to every disc it crosses (quantised once per segment, as
+ * detp_plain does). */
 inline void disc_index_segment(__global const BvhNode *nodes, __global const DiscBlock *discs,
                                __global const Segment *slot, const SegmentView *s, float ext,
                                __global long *acc, uint *visited, ulong *tests)
 {
     float3 o = s->o, w = s->w;
     float tmax = s->t_end + ext; /* exactly as detp_plain */
-    float3 inv = 1.0f / w;
-    long3 q = 0;
-    int have_q = 0;
-    BoxBvhWalk walk;
-    box_bvh_start(&walk);
-    int leaf;
-    while ((leaf = box_bvh_next_segment(&walk, nodes, o, inv, tmax)) >= 0) {
-        int count = nodes[leaf].count;
-        int first = nodes[leaf].first;
-        *tests += (ulong)count;
-        for (int blk = first; blk < first + (count + OCLGI_LANES - 1) / OCLGI_LANES; ++blk) {
-            __global const DiscBlock *b = discs + blk;
-            int8 hit;
-            DETP_TEST(float8, hit, b->x, b->y, b->z, b->nx, b->ny, b->nz, o.x, o.y, o.z, w.x, w.y, w.z,
-                      tmax, b->r2);
-            if (!any(hit)) continue;
-            if (!have_q) { /* quantised once per segment, as detp_plain does */
-                q = segment_fixed_power(slot);
-                have_q = 1;
-            }
-            int ids[OCLGI_LANES], h[OCLGI_LANES];
-            vstore8(b->id, 0, ids);
-            vstore8(hit, 0, h);
-            for (int k = 0; k < OCLGI_LANES; ++k) {
-                if (!h[k]) continue;
-                __global long *a = acc + 3 * (size_t)ids[k];
-                atom_add(a + 0, q.x);
-                atom_add(a + 1, q.y);
-                atom_add(a + 2, q.z);
-            }
-        }
-    }
-    *visited += walk.visited;
+    long3 q = segment_fixed_power(slot);
+#define DISC_INDEX_ADD(id)                               \
+    do {                                                 \
+        __global long *a_ = acc + 3 * (size_t)(id);      \
+        atom_add(a_ + 0, q.x);                           \
+        atom_add(a_ + 1, q.y);                           \
+        atom_add(a_ + 2, q.z);                           \
+    } while (0)
+    DISC_INDEX_WALK(nodes, discs, o, w, tmax, *visited, *tests, DISC_INDEX_ADD);
+#undef DISC_INDEX_ADD
 }
 
 #endif

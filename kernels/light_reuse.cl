@@ -21,56 +21,7 @@
  * the same order, so the weight p_j / D is the same whichever kernel or
  * batch computes it, and frames are bit-exact whatever the split.
  */
-#include "bvh.h"
-#include "light.h"
-#include "segment.h"
-
-/* pbrt-v4's spot profile, as light_sample_le applies it; 1 for a point. */
-inline float reuse_profile(__global const Emitter *em, float3 d)
-{
-    if (em->kind != OCLGI_EMITTER_SPOT) return 1.0f;
-    return light_smoothstep(dot(d, vload3(0, em->e1)), em->a, em->b);
-}
-
-/* The density (per m^2 at x, visibility left out) of light em emitting a
- * photon whose first hit is x on a surface of normal n, arriving on the
- * side `side` (the sign of dot(n, d) of the stored segment 0): light_pdf_dir
- * times cos / r^2. 0 when the light is on the other side or does not emit
- * towards x. *d and *r: the direction and distance from the light to x. */
-inline float reuse_density(__global const Emitter *em, __global const float *table, float3 x, float3 n,
-                           float side, float3 *d, float *r)
-{
-    float3 v = x - vload3(0, em->p);
-    float r2 = dot(v, v);
-    *r = sqrt(r2);
-    *d = v / *r;
-    if (!(r2 > 0.0f)) return 0.0f;
-    float c = dot(n, *d);
-    if (!(c * side > 0.0f)) return 0.0f;
-    return light_pdf_dir(em, *d, table) * fabs(c) / r2;
-}
-
-/* Can light position em see x? Nothing is hit on the way there short of
- * x less eps (the ray offset of oclgi/scene/compiled.py): x's own
- * triangle, or a neighbour of the same face at an edge, lies beyond. An
- * any-hit query: the first occluder found ends it. */
-inline int reuse_visible(SCENE_ARGS, __global const Emitter *em, float3 d, float r, float eps)
-{
-    return !scene_any_hit(SCENE_PASS, vload3(0, em->p), d, r - eps);
-}
-
-/* The first hit of a stored path: 0 when segment 0 escaped. */
-inline int reuse_first_hit(__global const Segment *slot, __global const float4 *tri_normals, float3 *x,
-                           float3 *n, float *side, int *tri)
-{
-    SegmentView s;
-    if (!segment_read(slot, &s) || s.tri < 0) return 0;
-    *x = segment_end(&s);
-    *n = tri_normals[s.tri].xyz;
-    *side = dot(*n, s.w) > 0.0f ? 1.0f : -1.0f;
-    *tri = s.tri;
-    return 1;
-}
+#include "light_reuse.h"
 
 /* visible: words_per_path uints per path, bit l of word l / 32 for position l. */
 __kernel void reuse_weights(SCENE_ARGS, __global const float4 *tri_normals, __global const Emitter *lights,
@@ -125,26 +76,17 @@ __kernel void reuse_frame(__global const float4 *tri_normals, __global const Emi
     __global const Segment *src = &store[(size_t)i * max_depth];
     __global Segment *dst = &out[(size_t)k * max_depth];
     int path = src->path;
-    float3 x, n;
-    float side;
+    float3 d;
+    float r, c, scale;
     int tri;
-    int seen = (visible[(size_t)i * words_per_path + (frame >> 5)] >> (frame & 31)) & 1u;
-    if (!seen || !reuse_first_hit(src, tri_normals, &x, &n, &side, &tri)) {
+    if (!reuse_path_frame(tri_normals, lights, table, frame, paths_per_position, src, density_sum[i],
+                          reuse_seen(visible, words_per_path, i, frame), &d, &r, &tri, &c, &scale)) {
         for (int b = 0; b < max_depth; ++b) segment_write_empty(&dst[b], path);
         out_len[k] = 0;
         return;
     }
     __global const Emitter *em = &lights[frame];
-    float3 d;
-    float r;
-    float p = reuse_density(em, table, x, n, side, &d, &r);
-    float c = reuse_profile(em, d) * (p / density_sum[i]);
     segment_write(&dst[0], vload3(0, em->p), r, d, tri, vload3(0, em->power) * c, path);
-    /* the profile the stored path was traced with, from its own direction */
-    SegmentView s0;
-    segment_load(src, &s0);
-    float traced = reuse_profile(&lights[path / paths_per_position], s0.w);
-    float scale = traced > 0.0f ? c / traced : 0.0f;
     int len = tails ? store_len[i] : 1;
     for (int b = 1; b < max_depth; ++b) {
         if (b >= len) {

@@ -272,7 +272,8 @@ def test_cli_animates_a_light(monkeypatch, capsys, tmp_path):
 
 @pytest.mark.parametrize("args, match", [
     (["--light", "nope", "--light-path", "0,1.5,0"], "no point or spot light of that name"),
-    (["--light", "lamp"], "--light and --light-path go together"),
+    (["--light", "lamp"], "has no path in the scene file: give --light-path"),
+    (["--light-path", "0,1.5,0"], "--light-path needs --light"),
     (["--light", "lamp", "--light-path", "0,1.5"], "rows of 3"),
     (["--light", "lamp", "--light-path", "0,1.5,0", "--path", "line:1,0,0"], "go with objects"),
     (["--light", "lamp", "--light-path", "missing.npy"], "no such file"),
@@ -336,3 +337,28 @@ def test_each_frame_is_unbiased_in_sponza(scenes_dir):
     assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
     z_wrong = np.abs(m1 - np.roll(m2, 1, axis=0)) / np.sqrt(v1 / seeds + np.roll(v2, 1, axis=0) / seeds + 1e-30)
     assert z_wrong.max() > 3 * z_crit  # the test can see a wrong frame
+
+
+@pytest.mark.parametrize("spot", [False, True], ids=["point", "spot"])
+@pytest.mark.parametrize("consistent", [False, True], ids=["standard", "consistent"])
+def test_reweighted_frames_equal_the_frames(spot, consistent):
+    """A frame as segment 0 plus the stored tail pairs re-weighted
+    (oclgi/tracing/light_reweight.py) has the frame's sums bit for bit."""
+    from oclgi.tracing.light_reweight import Reweighting
+
+    axes = AXES if spot else None
+    engine = oclgi.Engine(box(POSITIONS[0], AXES[0] if spot else None))
+    reuse = LightReuse(engine, "lamp", POSITIONS, axes, photons=1200, seed=9, max_depth=6)
+    full = reuse.estimator(points(), radius=RADIUS, consistent=consistent)
+    est = reuse.estimator(points(), radius=RADIUS, consistent=consistent)
+    rw = Reweighting(reuse, est)
+    assert rw.n_pairs > 20
+    for j in (1, 0, 3, 2, 1):
+        a = reuse.estimate(j, full)
+        b = reuse.estimate(j, est, reweighting=rw)
+        assert np.array_equal(a.accumulators, b.accumulators), j
+        np.testing.assert_array_equal(a.irradiance, b.irradiance)
+    with pytest.raises(OclgiError, match="detp_disc_index"):
+        Reweighting(reuse, reuse.estimator(points(), method="detp", radius=RADIUS))
+    with pytest.raises(OclgiError, match="another animation or estimator"):
+        reuse.estimate(0, full, reweighting=rw)

@@ -288,8 +288,7 @@ class LightReuse:
         """Frame ``frame``'s F n paths as PathBatches of at most ``batch_paths``
         (one reused buffer: use each before asking for the next); ``tails``
         False: segment 0 alone, the direct light (for studies)."""
-        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < self.frames:
-            raise OclgiError(f"frame must be an index below {self.frames}, got {frame!r}")
+        self._check_frame(frame)
         c = self.compiled
         for first in range(0, self.n_paths, self.batch):
             m = min(self.batch, self.n_paths - first)
@@ -298,6 +297,10 @@ class LightReuse:
                    self.words, first, m, self.max_depth, self.frame_segments, self.frame_len,
                    local_size=self.engine.local_size)
             yield PathBatch(self.frame_segments, self.frame_len, first, m, self.max_depth)
+
+    def _check_frame(self, frame) -> None:
+        if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or not 0 <= frame < self.frames:
+            raise OclgiError(f"frame must be an index below {self.frames}, got {frame!r}")
 
     def estimator(self, points, method=None, radius=None, extension=None, count_emitted=None, **options):
         """A fresh estimator for this animation's frames (``Engine.estimator``
@@ -313,20 +316,24 @@ class LightReuse:
                                                  self.max_depth, extension, count_emitted)
         return self.engine.estimator(points, self.run_params, **options)
 
-    def estimate(self, frame: int, estimator) -> Estimate:
+    def estimate(self, frame: int, estimator, reweighting=None) -> Estimate:
         """Frame ``frame`` accumulated into ``estimator`` (its sums reset to
         what it held when made) and resolved: the irradiance with the light
-        at ``positions[frame]``."""
+        at ``positions[frame]``. ``reweighting``: a Reweighting of this
+        animation over ``estimator`` (oclgi/tracing/light_reweight.py): the
+        tails' sums by their stored pairs, the same bits."""
         if not hasattr(estimator, "_reuse_empty"):
             estimator._reuse_empty = estimator.state()
         estimator.restore(estimator._reuse_empty)
         t0 = time.perf_counter()
-        connect = 0.0
-        for batch in self.batches(frame):
-            ta = time.perf_counter()
-            self.queue.finish()
-            connect += time.perf_counter() - ta
-            estimator.accumulate(batch)
+        if reweighting is not None:
+            if reweighting.reuse is not self or reweighting.estimator is not estimator:
+                raise OclgiError("the re-weighting belongs to another animation or estimator")
+            self._check_frame(frame)
+            reweighting.accumulate(frame)
+        else:
+            for batch in self.batches(frame):
+                estimator.accumulate(batch)
         self.queue.finish()
         t1 = time.perf_counter()
         scale = self.compiled.fixed_scale(self.paths_per_position)
