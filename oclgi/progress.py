@@ -20,6 +20,7 @@ Progress never goes to stdout; ``progress=False`` (``--quiet``) silences it.
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 import time
 
@@ -57,7 +58,7 @@ def in_notebook() -> bool:
 def _tqdm(label: str, total: int, unit: str, stream, notebook: bool):
     """A tqdm bar, or None when tqdm is not installed. In a notebook,
     tqdm.auto's widget, or tqdm's text bar when the widget cannot be made
-    (no ipywidgets: tqdm.notebook raises ImportError when it draws)."""
+    (no ipywidgets; tqdm.notebook would raise ImportError when it draws)."""
     try:
         from tqdm import tqdm as text_bar
     except ImportError:
@@ -65,7 +66,8 @@ def _tqdm(label: str, total: int, unit: str, stream, notebook: bool):
     # leave=False: the bar goes on close, as the summary line follows it
     options = {"desc": label, "total": total, "unit": f" {unit}", "unit_scale": True, "leave": False,
                "file": stream}
-    if notebook:
+    # tqdm.auto warns on import when the notebook has no ipywidgets: ask first
+    if notebook and importlib.util.find_spec("ipywidgets") is not None:
         try:
             from tqdm.auto import tqdm as auto_bar
 
