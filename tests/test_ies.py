@@ -13,17 +13,15 @@ bad files and tables are refused in one line.
 """
 
 import math
-import re
 import warnings
 
 import numpy as np
 import pyopencl as cl
 import pytest
-from cli_run import in_process
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from reference import ies_candela
-from test_lights import PDF_PROBE, _both, _disc_mean, _points, _quad
+from test_lights import PDF_PROBE, _both, _disc_mean, _points, _quad, _scene_file, refused_in_one_line
 
 import oclgi
 from oclgi.cl.programs import ProgramCache
@@ -320,13 +318,6 @@ def test_too_large_and_missing_files(tmp_path, monkeypatch):
         ies.read(tmp_path)
 
 
-def _scene_file(tmp_path, table: str):
-    _file(tmp_path, GOOD)
-    _file(tmp_path, ies_text([90, 135, 180], [0], [100, 80, 0]), "up.ies")  # light above the horizontal only
-    (tmp_path / "s.toml").write_text(
-        "[[mesh]]\nvertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]\nfaces = [[0, 2, 1], [0, 3, 2]]\n"
-        "[photons]\ncount = 1000\n" + table)
-    (tmp_path / "p.csv").write_text("x,y,z,nx,ny,nz\n0,0,0,0,1,0\n")
 
 
 @pytest.mark.parametrize("table, match", [
@@ -357,12 +348,10 @@ def _scene_file(tmp_path, table: str):
     ('[[point_light]]\nposition = [0, 1, 0]\nies = 5\n', r"point_light\[0\]\.ies: expected an IES file name"),
 ])
 def test_bad_ies_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, table, match):
+    _file(tmp_path, GOOD)
+    _file(tmp_path, ies_text([90, 135, 180], [0], [100, 80, 0]), "up.ies")  # light above the horizontal only
     _scene_file(tmp_path, table)
-    res = in_process(monkeypatch, capsys, tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv")
-    lines = res.stderr.splitlines()
-    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
-    assert lines and lines[-1].startswith("oclgi: error: ") and re.search(match, lines[-1]), res.stderr
-    assert not (tmp_path / "e.csv").exists()
+    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
 
 
 @settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])

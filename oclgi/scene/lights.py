@@ -727,12 +727,25 @@ def _read_spot(t: dict, where: str) -> SpotLight:
     return light
 
 
-def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
-    """A point or spot light with ``ies = FILE``: the profile, its scaling
-    (``candela``: the peak; ``lumens``: the flux), ``colour`` and orientation."""
+def _file_path(t: dict, key: str, where: str, base_dir, what: str):
+    """The file a light's ``key`` names (a string or a path-like), relative to ``base_dir``."""
     import os
     from pathlib import Path
 
+    given = t[key]
+    if isinstance(given, os.PathLike):
+        given = os.fspath(given)
+    if not isinstance(given, str) or not given.strip():
+        raise OclgiError(f"{where}.{key}: expected {what}, got {t[key]!r}")
+    path = Path(given)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    return path
+
+
+def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
+    """A point or spot light with ``ies = FILE``: the profile, its scaling
+    (``candela``: the peak; ``lumens``: the flux), ``colour`` and orientation."""
     from . import ies
 
     if "intensity" in t:
@@ -740,15 +753,7 @@ def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
                          "candela = the peak, or lumens = the flux)")
     if "candela" in t and "lumens" in t:
         raise OclgiError(f"{where}: give candela (the peak) or lumens (the flux), not both")
-    given = t["ies"]
-    if isinstance(given, os.PathLike):
-        given = os.fspath(given)
-    if not isinstance(given, str) or not given.strip():
-        raise OclgiError(f"{where}.ies: expected an IES file name, got {t['ies']!r}")
-    path = Path(given)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
-    profile = ies.read(path, where + ".ies")
+    profile = ies.read(_file_path(t, "ies", where, base_dir, "an IES file name"), where + ".ies")
     direction, c0 = _ies_frame(t, where, spot)
     light = IesLight(position=values.vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
                      profile=profile, direction=direction, c0=c0,
@@ -819,20 +824,10 @@ def _read_sky(t: dict, where: str, base_dir=None):
 
 def _read_envmap(t: dict, where: str, base_dir) -> EnvMapLight:
     """``map`` (an image file, through OpenImageIO) times ``scale``."""
-    import os
-    from pathlib import Path
-
     other = sorted({"radiance", "hemisphere", "up"} & set(t))
     if other:
         raise OclgiError(f"{where}: map takes no {', '.join(other)} (the image is the radiance, +y its zenith)")
-    given = t["map"]
-    if isinstance(given, os.PathLike):
-        given = os.fspath(given)
-    if not isinstance(given, str) or not given.strip():
-        raise OclgiError(f"{where}.map: expected an image file name, got {t['map']!r}")
-    path = Path(given)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
+    path = _file_path(t, "map", where, base_dir, "an image file name")
     scale = values.number(t.get("scale", 1.0), where + ".scale")
     if not scale > 0:
         raise OclgiError(f"{where}.scale: expected a number > 0, got {t['scale']!r}")
