@@ -19,6 +19,7 @@
     [[point_light]]
     position = [0, 1.9, 0]
     intensity = [1, 1, 1]           # W/sr (or candela = 100, colour = [1, 1, 1])
+    # or: ies = "lamp.ies"          # an IES profile (scaled by candela or lumens; direction, c0 or matrix)
 
     [[spot_light]]
     position = [0, 1.9, 0]
