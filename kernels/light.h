@@ -47,6 +47,18 @@
  *             luminance). tri: offset of its tables in ``table``: H row
  *             CDF values, H x W column CDFs, H x W x 3 g; e2 = (W, H, 0).
  *
+ *   IES       a point (a = b = -1) or spot light with a tabulated profile
+ *             (oclgi/scene/ies.py): at p, nadir e1, C = 0 along e2, C = 90
+ *             along e2 x e1. tri: offset of its table in ``table``: V, H,
+ *             the V + 1 vertical bin edges as -cos gamma (ascending), the
+ *             H + 1 horizontal edges (radians, ascending), the V row CDF
+ *             values, the V x H column CDFs. A bin from the row CDF (r0.y),
+ *             one of its columns (r0.z), then uniform in cos gamma (r0.w)
+ *             and in C (r1.x) within it: bins are chosen by candela x solid
+ *             angle, so every photon carries the same power, times a spot's
+ *             smoothstep(a, b, cos gamma) (the host's power is the flux of
+ *             the bins that reach into the cone, unmasked: <= phi_max).
+ *
  * Event 0's random numbers are used as they always were for the triangle
  * and point kinds, and with the same float operations in the same order,
  * so those photons are the same bit for bit as before this header.
@@ -110,6 +122,27 @@ inline float3 light_envmap_dir(int i, int j, int W, int H, float u, float v)
     return (float3)(st * sin(phi), y, -st * cos(phi));
 }
 
+/* The bin k of x in ascending edges[0..n] (edges[k] <= x < edges[k + 1],
+ * clamped to 0..n-1), by bisection. */
+inline int light_bin(__global const float *edges, int n, float x)
+{
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (x >= edges[mid]) lo = mid; else hi = mid - 1;
+    }
+    return lo;
+}
+
+/* An IES light's direction of cos gamma z and horizontal angle phi in its
+ * frame (nadir, C0, C90 = C0 x nadir). */
+inline float3 light_ies_dir(__global const Emitter *em, float z, float phi)
+{
+    float3 nadir = vload3(0, em->e1), c0 = vload3(0, em->e2);
+    float st = sqrt(fmax(0.0f, 1.0f - z * z));
+    return normalize(st * cos(phi) * c0 + st * sin(phi) * cross(c0, nadir) + z * nadir);
+}
+
 inline LightSample light_sample_le(__global const Emitter *em, float4 r0, float4 r1, float eps,
                                    __global const float *table)
 {
@@ -131,6 +164,16 @@ inline LightSample light_sample_le(__global const Emitter *em, float4 r0, float4
         s.o = vload3(0, em->p);
         s.d = light_dir_about(axis, z, r0.z);
         s.power *= light_smoothstep(dot(s.d, axis), em->a, em->b);
+    } else if (kind == OCLGI_EMITTER_IES) {
+        __global const float *t = table + em->tri;
+        int V = (int)t[0], H = (int)t[1];
+        __global const float *vz = t + 2, *ph = vz + V + 1, *rows = ph + H + 1, *cols = rows + V;
+        int i = light_pick(rows, V, r0.y);
+        int j = light_pick(cols + i * H, H, r0.z);
+        float z = -(vz[i] + r0.w * (vz[i + 1] - vz[i])); /* uniform in cos gamma: uniform in solid angle */
+        s.o = vload3(0, em->p);
+        s.d = light_ies_dir(em, z, ph[j] + r1.x * (ph[j + 1] - ph[j]));
+        s.power *= light_smoothstep(z, em->a, em->b);
     } else {
         float3 d;
         if (kind == OCLGI_EMITTER_SUN) {
@@ -174,6 +217,22 @@ inline float light_pdf_dir(__global const Emitter *em, float3 d, __global const 
     if (kind == OCLGI_EMITTER_SPOT) {
         float cos_t = dot(d, vload3(0, em->e1));
         return cos_t >= em->a ? 1.0f / (2.0f * OCLGI_PI * (1.0f - em->a)) : 0.0f;
+    }
+    if (kind == OCLGI_EMITTER_IES) {
+        __global const float *t = table + em->tri;
+        int V = (int)t[0], H = (int)t[1];
+        __global const float *vz = t + 2, *ph = vz + V + 1, *rows = ph + H + 1, *cols = rows + V;
+        float3 nadir = vload3(0, em->e1), c0 = vload3(0, em->e2);
+        float mz = -dot(d, nadir);
+        if (mz < vz[0] || mz > vz[V]) return 0.0f; /* outside the profile's vertical range */
+        float phi = atan2(dot(d, cross(c0, nadir)), dot(d, c0));
+        phi -= 2.0f * OCLGI_PI * floor((phi - ph[0]) / (2.0f * OCLGI_PI)); /* into [ph[0], ph[0] + 2 pi) */
+        int i = light_bin(vz, V, mz), j = light_bin(ph, H, phi);
+        float p_row = rows[i] - (i > 0 ? rows[i - 1] : 0.0f);
+        __global const float *c = cols + i * H;
+        float p_col = c[j] - (j > 0 ? c[j - 1] : 0.0f);
+        float omega = (vz[i + 1] - vz[i]) * (ph[j + 1] - ph[j]); /* the bin's solid angle */
+        return omega > 0.0f ? p_row * p_col / omega : 0.0f;
     }
     float pdf_pos = 1.0f / (OCLGI_PI * em->a * em->a);
     if (kind == OCLGI_EMITTER_SUN) return pdf_pos;

@@ -129,9 +129,10 @@ typedef struct {
  *   SUN       sphere c     unit travel   0        sphere R    0
  *   SKY       sphere c     unit up       0        sphere R    1: upper hemisphere, 0: sphere
  *   ENVMAP    sphere c     0             (W,H,0)  sphere R    0
+ *   IES       position     unit nadir    unit C0  cos(cone)   cos(falloff start) (-1, -1: no cone)
  * (c, R: the scene's bounding sphere, which the sun's and sky's discs lie
- * outside.) tri: the triangle's id (scene order); an ENVMAP's tables'
- * offset in the emitter CDF buffer (light.h); -1 for the other kinds.
+ * outside.) tri: the triangle's id (scene order); an ENVMAP's or IES's
+ * tables' offset in the emitter CDF buffer (light.h); -1 for the other kinds.
  * power: the largest power the kind gives a photon / its selection
  * probability, in units of phi_max, so never above 1. */
 typedef struct {

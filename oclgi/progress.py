@@ -1,17 +1,26 @@
 """Progress of a long run on stderr, with the time left.
 
-On a terminal: a bar redrawn in place (``\\r``). Elsewhere (a log file, a CI
-job, a pipe): one line every PERIOD seconds, such as
+Three ways, chosen by where stderr goes:
 
-    oclgi: detp 36% (7.3M of 20M paths), 18 s left
+- a terminal: a bar redrawn in place, through tqdm (a hand-drawn ``\\r``
+  bar where tqdm is not installed);
+- a Jupyter notebook: tqdm.auto's widget (tqdm's text bar on stderr when
+  the notebook has no ipywidgets);
+- elsewhere (a log file, a CI job, a pipe): one line every PERIOD seconds,
+  such as
 
-so that a long run under ``nohup`` or in a batch job still says how far it
-is; a run shorter than PERIOD prints nothing, so short runs' stderr stays
-empty.
+      oclgi: detp 36% (7.3M of 20M paths), 18 s left
+
+  so that a long run under ``nohup`` or in a batch job still says how far
+  it is; a run shorter than PERIOD prints nothing, so short runs' stderr
+  stays empty.
+
+Progress never goes to stdout; ``progress=False`` (``--quiet``) silences it.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 import time
 
@@ -39,10 +48,40 @@ def time_left_text(seconds: float) -> str:
     return f"{seconds / 3600:.1f} h left"
 
 
+def in_notebook() -> bool:
+    """Whether this process is a Jupyter kernel (IPython under ipykernel), as tqdm.auto tells it."""
+    ipython = sys.modules.get("IPython")
+    shell = ipython.get_ipython() if ipython is not None and hasattr(ipython, "get_ipython") else None
+    return shell is not None and "IPKernelApp" in getattr(shell, "config", {})
+
+
+def _tqdm(label: str, total: int, unit: str, stream, notebook: bool):
+    """A tqdm bar, or None when tqdm is not installed. In a notebook,
+    tqdm.auto's widget, or tqdm's text bar when the widget cannot be made
+    (no ipywidgets; tqdm.notebook would raise ImportError when it draws)."""
+    try:
+        from tqdm import tqdm as text_bar
+    except ImportError:
+        return None
+    # leave=False: the bar goes on close, as the summary line follows it
+    options = {"desc": label, "total": total, "unit": f" {unit}", "unit_scale": True, "leave": False,
+               "file": stream}
+    # tqdm.auto warns on import when the notebook has no ipywidgets: ask first
+    if notebook and importlib.util.find_spec("ipywidgets") is not None:
+        try:
+            from tqdm.auto import tqdm as auto_bar
+
+            return auto_bar(**options)
+        except ImportError:
+            pass
+    return text_bar(dynamic_ncols=True, **options)
+
+
 class Progress:
-    """``enabled``: None (default) shows progress (a bar on a terminal, periodic
-    lines elsewhere), False nothing, True forces it. ``clock`` and ``period``
-    are there for tests."""
+    """``enabled``: None (default) shows progress (a bar on a terminal or in a
+    notebook, periodic lines elsewhere), False nothing, True forces it.
+    ``clock`` and ``period`` are there for tests (the periodic lines';
+    tqdm keeps its own clock)."""
 
     def __init__(self, label: str, total: int, enabled: bool | None = None, stream=None,
                  unit: str = "paths", period: float = PERIOD, clock=time.monotonic):
@@ -55,6 +94,9 @@ class Progress:
         self.label, self.total, self.done, self.unit = label, total, 0, unit
         self.period, self.clock = period, clock
         self.t0 = self.last = clock()
+        notebook = self.enabled and not self.terminal and in_notebook()
+        self.bar = _tqdm(label, total, unit, self.stream, notebook) if self.enabled and (
+            self.terminal or notebook) else None
 
     def _time_left(self, frac: float, now: float) -> float:
         return (now - self.t0) * (1 - frac) / frac if frac > 0 else 0.0
@@ -62,6 +104,9 @@ class Progress:
     def update(self, amount: int):
         self.done += amount
         if not self.enabled:
+            return
+        if self.bar is not None:
+            self.bar.update(amount)
             return
         now = self.clock()
         frac = min(self.done / max(self.total, 1), 1.0)
@@ -77,6 +122,8 @@ class Progress:
             self.stream.flush()
 
     def close(self):
-        if self.enabled and self.terminal:
+        if self.bar is not None:
+            self.bar.close()
+        elif self.enabled and self.terminal:
             self.stream.write("\r" + " " * 70 + "\r")
             self.stream.flush()

@@ -68,3 +68,31 @@ def fresnel_dielectric(cos_i: float, eta: float) -> float:
     rs = (cos_i - eta * ct) / (cos_i + eta * ct)
     rp = (eta * cos_i - ct) / (eta * cos_i + ct)
     return float(0.5 * (rs ** 2 + rp ** 2))
+
+
+def ies_candela(vertical, horizontal, candela, gamma, c):
+    """An IES type C table's intensity in directions (gamma, C), degrees, as
+    oclgi defines it (bins centred on the tabulated angles, so: the value at
+    the nearest tabulated angle), straight from the file's table: the
+    horizontal angles ``horizontal`` as the file gives them (last 0, 90,
+    180 or 360), folded by the symmetry they state, not expanded; 0 outside
+    the vertical angles' range."""
+    vertical, horizontal = np.asarray(vertical, np.float64), np.asarray(horizontal, np.float64)
+    table = np.asarray(candela, np.float64).reshape(len(horizontal), len(vertical))
+    gamma, c = np.broadcast_arrays(np.asarray(gamma, np.float64), np.asarray(c, np.float64))
+    c = np.mod(c, 360.0)
+    last = horizontal[-1]
+    if last <= 180:  # bilateral (or finer): C and 360 - C alike
+        c = np.where(c > 180, 360 - c, c)
+    if last <= 90:  # quadrant: C and 180 - C alike
+        c = np.where(c > 90, 180 - c, c)
+    if last == 0:
+        c = np.zeros_like(c)
+    # nearest horizontal angle on the circle (360 wraps onto 0 when the table is whole)
+    dc = np.abs(c[..., None] - horizontal)
+    if last == 360:
+        dc = np.minimum(dc, 360 - dc)
+    j = np.argmin(dc, axis=-1)
+    i = np.argmin(np.abs(gamma[..., None] - vertical), axis=-1)
+    inside = (gamma >= vertical[0]) & (gamma <= vertical[-1])
+    return np.where(inside, table[j, i], 0.0)

@@ -47,7 +47,7 @@ CHECKED_BY = {
         "test_resources.py::test_study_points_refused_before_they_are_drawn",
         "test_resources.py::test_animation_frames_capped_with_the_estimate",
         "test_resources.py::test_long_run_gives_a_time_estimate",
-        "test_signals.py::test_progress_off_a_terminal_is_a_line_every_period_with_the_time_left",
+        "test_progress.py::test_progress_off_a_terminal_is_a_line_every_period_with_the_time_left",
     ],
     "Hostile files are bounded.": [
         "test_formats.py::test_zip_bound_covers_all_members_together",

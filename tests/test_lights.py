@@ -477,9 +477,14 @@ def _scene_file(tmp_path, tables: str):
     ("[sky]\nradiance = [0, 0, 0]\n", r"the scene has no emitter"),
 ])
 def test_bad_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, tables, match):
+    _scene_file(tmp_path, tables)
+    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
+
+
+def refused_in_one_line(monkeypatch, capsys, tmp_path, match):
+    """``oclgi irradiance`` of _scene_file's scene ends with status 2 and one error line matching ``match``."""
     import re
 
-    _scene_file(tmp_path, tables)
     res = in_process(monkeypatch, capsys, tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv")
     lines = res.stderr.splitlines()
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr

@@ -1,13 +1,12 @@
 """Signals and streams: Ctrl-C at any moment ends the command with one line
 and status 130, a SIGINT ignored at start stays ignored (kernel builds
-included), a closed or full stdout ends without a traceback, and progress
-shows on streams that are not terminals.
+included), and a closed or full stdout ends without a traceback (progress on each kind
+of stream: tests/test_progress.py).
 
 Commands run in subprocesses, as a user runs them; SIGINT is sent the way a
 terminal sends Ctrl-C.
 """
 
-import io
 import os
 import signal
 import subprocess
@@ -18,8 +17,6 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT
-
-from oclgi.progress import Progress
 
 BOX = ROOT / "scenes" / "cornell_box.toml"
 INTERRUPTED = "oclgi: interrupted\n"
@@ -214,55 +211,3 @@ def test_full_stdout_is_one_line_and_status_2(tmp_path):
     assert p.returncode == 2
     assert err == "oclgi: error: cannot write to standard output: No space left on device\n"
     assert (tmp_path / "f.exr").is_file()
-
-
-# -- progress --------------------------------------------------------------------
-
-class _Clock:
-    def __init__(self):
-        self.now = 100.0
-
-    def __call__(self):
-        return self.now
-
-
-def test_progress_off_a_terminal_is_a_line_every_period_with_the_time_left():
-    stream, clock = io.StringIO(), _Clock()
-    bar = Progress("detp", 20_000_000, stream=stream, period=10.0, clock=clock)
-    clock.now += 4.0
-    bar.update(2_000_000)
-    assert stream.getvalue() == ""  # shorter than a period: nothing yet
-    clock.now += 6.55
-    bar.update(5_300_000)  # 36.5% after 10.55 s: 18.3 s left
-    assert stream.getvalue() == "oclgi: detp 36% (7.3M of 20M paths), 18 s left\n"
-    clock.now += 1.0
-    bar.update(1_000_000)
-    assert stream.getvalue().count("\n") == 1  # one line per period
-    clock.now += 10.0
-    bar.update(1_700_000)
-    assert stream.getvalue().splitlines()[1] == "oclgi: detp 50% (10M of 20M paths), 22 s left"
-    bar.update(10_000_000)
-    bar.close()
-    assert stream.getvalue().count("\n") == 2  # nothing at 100% nor on close
-
-
-def test_progress_on_a_terminal_keeps_the_bar():
-    class Tty(io.StringIO):
-        def isatty(self):
-            return True
-
-    stream, clock = Tty(), _Clock()
-    bar = Progress("detp", 1000, stream=stream, clock=clock)
-    clock.now += 1.0
-    bar.update(250)
-    assert stream.getvalue().startswith("\rdetp [#######") and " 25.0%" in stream.getvalue()
-    assert "\n" not in stream.getvalue()
-
-
-def test_progress_disabled_prints_nothing():
-    stream, clock = io.StringIO(), _Clock()
-    bar = Progress("detp", 10, enabled=False, stream=stream, period=0.0, clock=clock)
-    clock.now += 60
-    bar.update(5)
-    bar.close()
-    assert stream.getvalue() == ""

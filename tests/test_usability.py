@@ -94,3 +94,52 @@ def test_the_summary_stages_add_up_to_the_total(scenes_dir):
         assert s["camera"] + s["trace"] + s["estimate"] + s["resolve"] <= s["total"], s
         engine_part, run_part = stats.summary().split(" | ")[1:]
         assert engine_part.startswith("load ") and run_part.startswith("camera ") and " total " in run_part
+
+
+def _up_and_down_sums(engine):
+    """Sums at points facing up (light from the quad) and facing down (light the floor reflects)."""
+    xz = np.array([[x, z] for x in (-0.5, 0.0, 0.5) for z in (-0.5, 0.5)])
+    up = np.column_stack([xz[:, 0], np.zeros(6), xz[:, 1]])
+    down = np.column_stack([xz[:, 0], np.full(6, 0.5), xz[:, 1]])
+    pts = oclgi.query_points(np.vstack([up, down]), np.vstack([np.tile([0.0, 1.0, 0.0], (6, 1)),
+                                                               np.tile([0.0, -1.0, 0.0], (6, 1))]))
+    return engine.irradiance(pts, photons=20_000, radius=0.1).accumulators
+
+
+def test_vertex_albedo_gives_the_bits_of_the_glb_with_its_colours(tmp_path):
+    import trimesh
+    from trimesh.visual import TextureVisuals
+    from trimesh.visual.material import PBRMaterial
+
+    # 8-bit colours, as a glTF's COLOR_0 holds them after trimesh's export
+    rgb8 = np.array([[230, 40, 40], [40, 230, 40], [40, 40, 230], [200, 200, 200]], np.uint8)
+    floor = trimesh.Trimesh(V[:4], F[:2], vertex_colors=np.hstack([rgb8, np.full((4, 1), 255, np.uint8)]),
+                            process=False)
+    light = trimesh.Trimesh(V[4:], F[2:] - 4, process=False)
+    light.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 1, 1]))
+    trimesh.Scene({"floor": floor, "light": light}).export(tmp_path / "s.glb")
+    (tmp_path / "s.toml").write_text('[[mesh]]\npath = "s.glb"\nalbedo = [1, 1, 1]\n')
+    scene = oclgi.load_file(tmp_path / "s.toml")
+    assert scene.tri_colour is not None  # the file's COLOR_0 reached the scene
+    from_file = _up_and_down_sums(oclgi.Engine(scene))
+    arrays = oclgi.load_dict({"mesh": [
+        {"vertices": V[:4], "faces": F[:2], "vertex_albedo": rgb8 / 255.0},
+        {"vertices": V[4:], "faces": F[2:] - 4, "albedo": [0, 0, 0], "emission": [1, 1, 1]}]})
+    sums = _up_and_down_sums(oclgi.Engine(arrays))
+    assert sums[6:].min() > 0  # the floor's reflection reached the points facing down
+    assert np.array_equal(sums, from_file)
+    # and the colours matter: a grey floor gives other sums
+    grey = oclgi.load_dict({"mesh": [
+        {"vertices": V[:4], "faces": F[:2], "albedo": [0.6, 0.6, 0.6]},
+        {"vertices": V[4:], "faces": F[2:] - 4, "albedo": [0, 0, 0], "emission": [1, 1, 1]}]})
+    assert not np.array_equal(_up_and_down_sums(oclgi.Engine(grey))[6:], sums[6:])
+
+
+def test_vertex_albedo_is_checked():
+    with pytest.raises(oclgi.OclgiError, match=r"vertex_albedo: expected an \(8, 3\) array"):
+        oclgi.load_dict({"mesh": [{"vertices": V, "faces": F, "vertex_albedo": [[0.5, 0.5, 0.5]]}]})
+    with pytest.raises(oclgi.OclgiError, match=r"vertex_albedo\[2\]: an albedo is linear RGB from 0 to 1"):
+        oclgi.load_dict({"mesh": [{"vertices": V, "faces": F,
+                                   "vertex_albedo": [[0.5] * 3] * 2 + [[1.5, 0, 0]] + [[0.5] * 3] * 5}]})
+    with pytest.raises(oclgi.OclgiError, match=r"vertex_albedo goes with 'vertices' and 'faces'"):
+        oclgi.load_dict({"mesh": [{"path": "x.obj", "vertex_albedo": [[0.5] * 3]}]})

@@ -77,6 +77,7 @@ EMITTER_SPOT = 2
 EMITTER_SUN = 3
 EMITTER_SKY = 4
 EMITTER_ENVMAP = 5
+EMITTER_IES = 6  # a point or spot light with an IES profile (oclgi/scene/ies.py)
 
 # Material.kind (oclgi/cl/layout.py Material; kernels/bsdf.h scatters by it,
 # oclgi/scene/materials.py names the kinds) and Material.flags.
@@ -128,6 +129,7 @@ DEFINES = {
     "emitter_sun": EMITTER_SUN,
     "emitter_sky": EMITTER_SKY,
     "emitter_envmap": EMITTER_ENVMAP,
+    "emitter_ies": EMITTER_IES,
 }
 
 

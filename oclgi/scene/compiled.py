@@ -17,7 +17,7 @@ import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, FIXED_ONE
+from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
 from ..cl.layout import Emitter, Instance, Tri
 from ..errors import OclgiError
 from . import background, materials, textures
@@ -135,9 +135,9 @@ class CompiledScene:
         em = np.zeros(len(rows.kind), dtype=Emitter)
         em["kind"], em["tri"], em["p"], em["e1"], em["e2"] = rows.kind, rows.tri, rows.p, rows.e1, rows.e2
         em["a"], em["b"] = rows.a, rows.b
-        # one buffer: the CDF, then the environment maps' tables (kernels/light.h;
-        # their records' tri is their offset in it)
-        em["tri"][rows.kind == EMITTER_ENVMAP] += len(em)
+        # one buffer: the CDF, then the environment maps' and IES profiles'
+        # tables (kernels/light.h; their records' tri is their offset in it)
+        em["tri"][np.isin(rows.kind, (EMITTER_ENVMAP, EMITTER_IES))] += len(em)
         cdf_table = np.concatenate([cdf, rows.table]).astype(np.float32)
         keep = prob > 0
         # the largest power a photon path of each emitter carries (times

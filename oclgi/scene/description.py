@@ -19,6 +19,7 @@
     [[point_light]]
     position = [0, 1.9, 0]
     intensity = [1, 1, 1]           # W/sr (or candela = 100, colour = [1, 1, 1])
+    # or: ies = "lamp.ies"          # an IES profile (scaled by candela or lumens; direction, c0 or matrix)
 
     [[spot_light]]
     position = [0, 1.9, 0]
@@ -87,7 +88,7 @@ from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
 _TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name"}
-_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "trimesh", "albedo", "emission", "material",
+_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "vertex_albedo", "trimesh", "albedo", "emission", "material",
          "lumens", "materials",
          "transform", "movable", "name"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
@@ -184,11 +185,17 @@ def _transform(t, where):
 def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
+    per_element = [k for k in ("face_albedo", "face_emission", "vertex_albedo") if k in desc]
+    if per_element and not ("vertices" in desc and "faces" in desc):
+        raise OclgiError(f"{where}: {' and '.join(per_element)} go{'es' if len(per_element) == 1 else ''} with "
+                         "'vertices' and 'faces'")
     read = _Readers(base_dir)
     loaded = None
+    # vertex_albedo is the albedo itself: the mesh's albedo (which multiplies it) is 1 unless given
+    plain = (1.0, 1.0, 1.0) if "vertex_albedo" in desc else (0.5, 0.5, 0.5)
     default = Material(
         name=f"{where}.default",
-        albedo=_vec3(desc.get("albedo", (0.5, 0.5, 0.5)), where + ".albedo"),
+        albedo=_vec3(desc.get("albedo", plain), where + ".albedo"),
         emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"),
     )
     if "material" in desc:  # the kind and parameters of the faces the file gives no material
@@ -227,8 +234,6 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
         label = where
     else:
         raise OclgiError(f"{where}: give 'path', 'trimesh', or 'vertices' and 'faces'")
-    if ("face_albedo" in desc or "face_emission" in desc) and not ("vertices" in desc and "faces" in desc):
-        raise OclgiError(f"{where}: face_albedo and face_emission go with 'vertices' and 'faces'")
     unknown = set(overrides) - set(names)
     if unknown:
         raise OclgiError(f"{where}.materials: {sorted(unknown)} not in the mesh's materials {sorted(n for n in names if n)}")
@@ -258,6 +263,9 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
     if bad.any():
         raise OclgiError(f"{label}: {int(bad.sum())} vertices have NaN or infinite coordinates "
                          f"(the first is vertex {int(np.argmax(bad)) + 1})")
+    face_colour = getattr(loaded, "face_colour", None)
+    if "vertex_albedo" in desc:
+        face_colour = _vertex_albedo(desc["vertex_albedo"], vertices, faces, where)
     m, shift = np.eye(3), np.zeros(3)
     if "transform" in desc:
         m, shift = _transform(desc["transform"], where + ".transform")
@@ -282,7 +290,6 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
                             where + ".lumens")
         for k in set(local):
             materials[k].emission = radiance
-    face_colour = getattr(loaded, "face_colour", None)
     if face_colour is not None:  # the mesh's diffuse materials take its vertex colours
         for k in set(local):
             materials[k].vertex_colours = materials[k].kind == "diffuse"
@@ -327,6 +334,21 @@ def _face_materials(desc, n_faces: int, where: str):
         names.append(f"#{k}")
         mats[f"#{k}"] = FileMaterial(albedo=albedo, emission=emission)
     return fmat.astype(np.int64), names, mats
+
+
+def _vertex_albedo(value, vertices, faces, where: str) -> np.ndarray:
+    """``vertex_albedo`` ((V, 3) linear RGB in [0, 1]) as the (F, 3, 3) corner
+    colours a glTF's COLOR_0 gives (the same device colour maps)."""
+    a = np.asarray(value)
+    if a.shape != (len(vertices), 3) or a.dtype.kind not in "iuf":
+        raise OclgiError(f"{where}.vertex_albedo: expected an ({len(vertices)}, 3) array of numbers (one row per "
+                         f"vertex), got {a.dtype} {a.shape}")
+    a = a.astype(np.float64)
+    bad = ~((a >= 0) & (a <= 1)).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise OclgiError(f"{where}.vertex_albedo[{k}]: an albedo is linear RGB from 0 to 1, got {a[k].tolist()}")
+    return a[faces]
 
 
 def _inline_arrays(vertices, faces, where):

@@ -31,6 +31,20 @@ table           parameters (defaults)
                 a disc of radius R perpendicular to it, outside the bounding
                 sphere: power L pi R^2 times the solid angle (2 pi or 4 pi).
                 An unoccluded plane facing ``up`` receives pi L either way.
+IES profiles    ``ies = "file.ies"`` in a [[point_light]] or [[spot_light]]
+                (relative to the scene file; oclgi/scene/ies.py reads it):
+                the file's candela distribution (type C) instead of a
+                uniform intensity; ``candela`` (the peak, cd) or
+                ``lumens`` (the light's total flux) rescales it, ``colour``
+                tints it (default white). Orientation: ``direction`` (where
+                the nadir, gamma = 0, points; [0, -1, 0] for a point light,
+                the axis for a spot) and ``c0`` (the direction of the C = 0
+                half-plane, made perpendicular to it; default world x, or z
+                when the nadir is along x), or ``matrix`` (3 rows of 3, a
+                rotation whose columns are the luminaire's x = C 0, y = C 90
+                and z = zenith axes in the scene; points only). A spot
+                multiplies the profile by its cone's smoothstep. Power: the
+                profile's flux (ies.tables), exact for its bins.
 [sky] with map  ``map``: an equirectangular image (EXR, HDR, ... through
                 OpenImageIO; relative to the scene file) of radiance
                 (W/m^2/sr), Mitsuba's orientation (row 0 the zenith +y,
@@ -55,7 +69,9 @@ the photon count), where bound_i is power_i for the kinds whose photons all
 carry the same, and more for the two whose photons vary: the spot (photons
 leave uniformly over the cone, weighted by its profile: bound = power x
 the cone's solid angle / the profile's integral) and the environment map
-(texels chosen by luminance, weighted by their colour). The largest of
+(texels chosen by luminance, weighted by their colour); an IES spot's
+photons sample the profile's bins that reach into the cone and carry its
+smoothstep (bound = the flux of those bins, unmasked). The largest of
 these is phi_max (oclgi/scene/compiled.py), the device's unit, so no
 photon carries more than 1.
 """
@@ -67,7 +83,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..cl.constants import (EMITTER_ENVMAP, EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN,
+from ..cl.constants import (EMITTER_ENVMAP, EMITTER_IES, EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN,
                             EMITTER_TRIANGLE)
 from ..errors import OclgiError
 from ..params import MAX_LENGTH as MAX_COORDINATE  # as for vertices (oclgi/scene/scene.py)
@@ -77,12 +93,15 @@ from . import values
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
 TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
 _KEYS = {
-    "point_light": {"position", "intensity", "candela", "colour", "name", "path"},
+    "point_light": {"position", "intensity", "candela", "colour", "name", "ies", "lumens", "direction", "c0", "matrix",
+                    "path"},
     "spot_light": {"position", "direction", "intensity", "candela", "colour", "cone_angle", "cone_delta", "name",
-                   "path"},
+                   "ies", "lumens", "c0", "path"},
     "sun": {"direction", "irradiance", "lux", "colour"},
     "sky": {"radiance", "hemisphere", "up", "map", "scale"},
 }
+# Keys that only an IES light takes (its flux and its orientation about the nadir).
+_IES_ONLY = ("lumens", "c0", "matrix")
 # An environment map's largest size (texels): its tables are 4 floats a texel on the device.
 ENVMAP_MAX_TEXELS = 1 << 24
 SPOT_CONE_ANGLE = 30.0  # degrees, pbrt-v4's default coneangle
@@ -419,7 +438,112 @@ class EnvMapLight:
         return {"type": "envmap", "bitmap": mi.Bitmap(np.ascontiguousarray(self.radiance, dtype=np.float32))}
 
 
-LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight, EnvMapLight)
+@dataclass(eq=False)
+class IesLight:
+    """A point or spot light with an IES profile (oclgi/scene/ies.py): the
+    intensity in direction (gamma, C) of the luminaire's frame is the
+    profile's candela there times ``scale``, of ``colour``; a spot's cone
+    multiplies it by its smoothstep (as SpotLight's).
+
+    ===========  ==============================================================
+    position     3 numbers, world space
+    profile      the IesProfile (whole circle)
+    direction    unit nadir (gamma = 0) in the scene
+    c0           unit direction of the C = 0 half-plane, perpendicular to it
+                 (C = 90 is c0 x direction: LM-63's counter-clockwise seen
+                 from above)
+    scale        factor on the profile's candela
+    colour       RGB, scaled to luminance 1 (photometry.intensity_from_candela)
+    cone_angle   a spot's cone half-angle, degrees; None for a point light
+    cone_delta   a spot's falloff band, degrees
+    name         optional, as for point and spot lights
+    ===========  ==============================================================
+    """
+
+    position: tuple[float, float, float]
+    profile: object
+    direction: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    c0: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    scale: float = 1.0
+    colour: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    cone_angle: float | None = None
+    cone_delta: float = SPOT_CONE_DELTA
+    name: str | None = None
+    where: str | None = None  # the scene file's table, for messages
+
+    @property
+    def table(self) -> str:
+        return "point_light" if self.cone_angle is None else "spot_light"
+
+    @property
+    def cone(self) -> tuple[float, float]:
+        """(cos of the cone's half-angle, cos of the falloff's start); (-1, -1): no cone."""
+        if self.cone_angle is None:
+            return -1.0, -1.0
+        return math.cos(math.radians(self.cone_angle)), math.cos(math.radians(self.cone_angle - self.cone_delta))
+
+    @property
+    def rgb_per_candela(self) -> np.ndarray:
+        """RGB W/sr of one candela of the profile (its scale and colour included)."""
+        from ..photometry import intensity_from_candela
+
+        return np.asarray(intensity_from_candela(self.scale, self.colour))
+
+    def _tables(self):
+        key = (id(self.profile), self.cone)
+        if getattr(self, "_cached", (None,))[0] != key:
+            from .ies import tables
+
+            self._cached = (key, tables(self.profile, *self.cone))
+        return self._cached[1]
+
+    @property
+    def flux(self) -> float:
+        """Candela x sr (lumens) of the profile as emitted, before ``scale``."""
+        return self._tables()[1]
+
+    @property
+    def power(self) -> np.ndarray:
+        return self.flux * self.rgb_per_candela
+
+    def validate(self, where: str):
+        from .ies import IesProfile
+
+        where = self.where or where
+        _check_point(self.position, where + ".position")
+        d, c = _unit(self.direction, where + ".direction"), _unit(self.c0, where + ".c0")
+        if abs(float(d @ c)) > 1e-6:
+            raise OclgiError(f"{where}.c0: must be perpendicular to the direction (the nadir), got {self.c0!r}")
+        if not isinstance(self.profile, IesProfile):
+            raise OclgiError(f"{where}.ies: expected an IesProfile (oclgi.scene.ies), got "
+                             f"{type(self.profile).__name__}")
+        if isinstance(self.scale, bool) or not isinstance(self.scale, (int, float)) or not self.scale > 0:
+            raise OclgiError(f"{where}: the profile's scale must be a number > 0, got {self.scale!r}")
+        if self.cone_angle is not None:
+            SpotLight(self.position, self.direction, (1.0, 1.0, 1.0), self.cone_angle, self.cone_delta).validate(where)
+        _check_radiant(self.power, where + " (its power, W)")
+        _check_radiant(self.rgb_per_candela * self.profile.peak, where + " (its peak intensity, W/sr)")
+
+    def record(self, sphere) -> dict:
+        table, _, bound = self._tables()
+        a, b = self.cone
+        return {"kind": EMITTER_IES, "p": self.position, "e1": _unit(self.direction, "ies.direction"),
+                "e2": _unit(self.c0, "ies.c0"), "a": a, "b": b, "table": table,
+                "bound": bound * self.rgb_per_candela}
+
+    def to_mitsuba(self, mi, sphere):
+        """Mitsuba 3 has no IES (goniometric) emitter: the light is left out
+        of the Mitsuba scene, with a warning."""
+        import warnings
+
+        from ..errors import OclgiWarning
+
+        warnings.warn(f"{self.where or self.table}: Mitsuba 3 has no IES profiles; {self.profile.name} is left "
+                      "out of the Mitsuba scene", OclgiWarning, stacklevel=2)
+        return None
+
+
+LIGHT_TYPES = (PointLight, SpotLight, SunLight, SkyLight, EnvMapLight, IesLight)
 
 
 def bounding_sphere(scene) -> tuple[np.ndarray, float]:
@@ -451,7 +575,7 @@ class EmitterRows:
     maps' tables, which ``tri`` of their rows indexes (kernels/light.h)."""
 
     kind: np.ndarray  # (E,) int32
-    tri: np.ndarray  # (E,) int32: the triangle's id, an environment map's table offset, else -1
+    tri: np.ndarray  # (E,) int32: the triangle's id, an environment map's or IES profile's table offset, else -1
     p: np.ndarray  # (E, 3)
     e1: np.ndarray  # (E, 3)
     e2: np.ndarray  # (E, 3)
@@ -536,6 +660,13 @@ def read(desc: dict, base_dir=None) -> tuple[list, list]:
             tables = [(name, desc[name])]
         for where, t in tables:
             values.check_keys(t, _KEYS[name], where)
+            if "ies" in t:
+                others.append(_read_ies(t, where, base_dir, spot=name == "spot_light"))
+                continue
+            given = [k for k in _IES_ONLY if k in t] + (["direction"] if name == "point_light" and "direction" in t
+                                                        else [])
+            if given:
+                raise OclgiError(f"{where}.{given[0]} goes with ies (an IES profile's flux and orientation)")
             light = _READERS[name](t, where) if name != "sky" else _read_sky(t, where, base_dir)
             if "path" in t:
                 light.path = _path(t["path"], f"{where}.path", 6 if name == "spot_light" else 3)
@@ -628,6 +759,81 @@ def _read_spot(t: dict, where: str) -> SpotLight:
     return light
 
 
+def _file_path(t: dict, key: str, where: str, base_dir, what: str):
+    """The file a light's ``key`` names (a string or a path-like), relative to ``base_dir``."""
+    import os
+    from pathlib import Path
+
+    given = t[key]
+    if isinstance(given, os.PathLike):
+        given = os.fspath(given)
+    if not isinstance(given, str) or not given.strip():
+        raise OclgiError(f"{where}.{key}: expected {what}, got {t[key]!r}")
+    path = Path(given)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    return path
+
+
+def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
+    """A point or spot light with ``ies = FILE``: the profile, its scaling
+    (``candela``: the peak; ``lumens``: the flux), ``colour`` and orientation."""
+    from . import ies
+
+    if "intensity" in t:
+        raise OclgiError(f"{where}.intensity: an IES light's intensity is its file's candela (rescale it with "
+                         "candela = the peak, or lumens = the flux)")
+    if "candela" in t and "lumens" in t:
+        raise OclgiError(f"{where}: give candela (the peak) or lumens (the flux), not both")
+    profile = ies.read(_file_path(t, "ies", where, base_dir, "an IES file name"), where + ".ies")
+    direction, c0 = _ies_frame(t, where, spot)
+    light = IesLight(position=values.vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
+                     profile=profile, direction=direction, c0=c0,
+                     colour=values.vec3(t.get("colour", (1.0, 1.0, 1.0)), where + ".colour"), name=_name(t, where),
+                     where=where)
+    if spot:
+        light.cone_angle = values.number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle")
+        light.cone_delta = values.number(t.get("cone_delta", min(SPOT_CONE_DELTA, light.cone_angle)),
+                                         where + ".cone_delta")
+    for key, unit, current in (("candela", "a luminous intensity (cd)", lambda: profile.peak),
+                               ("lumens", "a luminous flux (lm)", lambda: light.flux)):
+        if key in t:
+            value = values.number(t[key], f"{where}.{key}")
+            if not value > 0:
+                raise OclgiError(f"{where}.{key}: expected {unit} > 0, got {t[key]!r}")
+            light.scale = value / current()
+    light.validate(where)
+    return light
+
+
+def _ies_frame(t: dict, where: str, spot: bool):
+    """(nadir, c0) of an IES light: ``matrix`` (a rotation: the luminaire's x
+    = C 0, y = C 90, z = zenith as its columns), or ``direction`` and ``c0``."""
+    if "matrix" in t:
+        other = [k for k in ("direction", "c0") if k in t]
+        if other:
+            raise OclgiError(f"{where}: give matrix or {' and '.join(other)}, not both")
+        rows = t["matrix"]
+        if not isinstance(rows, (list, tuple)) or len(rows) != 3:
+            raise OclgiError(f"{where}.matrix: expected 3 rows of 3 numbers, got {rows!r}")
+        m = np.array([values.vec3(r, f"{where}.matrix[{k}]") for k, r in enumerate(rows)])
+        if np.abs(m.T @ m - np.eye(3)).max() > 1e-6 or np.linalg.det(m) < 0:
+            raise OclgiError(f"{where}.matrix: expected a rotation (orthonormal columns, determinant +1), got "
+                             f"{rows!r}")
+        return tuple(float(x) for x in -m[:, 2]), tuple(float(x) for x in m[:, 0])
+    raw = _required(t, "direction", where) if spot else t.get("direction", (0.0, -1.0, 0.0))
+    nadir = _unit(values.vec3(raw, where + ".direction"), where + ".direction")
+    if "c0" in t:
+        c = _unit(values.vec3(t["c0"], where + ".c0"), where + ".c0")
+    else:
+        c = np.array([1.0, 0.0, 0.0]) if abs(nadir[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    c = c - (c @ nadir) * nadir
+    if not np.linalg.norm(c) > 1e-6:
+        raise OclgiError(f"{where}.c0: must not be parallel to the direction (the nadir), got {t.get('c0')!r}")
+    c /= np.linalg.norm(c)
+    return tuple(float(x) for x in nadir), tuple(float(x) for x in c)
+
+
 def _read_sun(t: dict, where: str) -> SunLight:
     from ..photometry import irradiance_from_lux
 
@@ -650,20 +856,10 @@ def _read_sky(t: dict, where: str, base_dir=None):
 
 def _read_envmap(t: dict, where: str, base_dir) -> EnvMapLight:
     """``map`` (an image file, through OpenImageIO) times ``scale``."""
-    import os
-    from pathlib import Path
-
     other = sorted({"radiance", "hemisphere", "up"} & set(t))
     if other:
         raise OclgiError(f"{where}: map takes no {', '.join(other)} (the image is the radiance, +y its zenith)")
-    given = t["map"]
-    if isinstance(given, os.PathLike):
-        given = os.fspath(given)
-    if not isinstance(given, str) or not given.strip():
-        raise OclgiError(f"{where}.map: expected an image file name, got {t['map']!r}")
-    path = Path(given)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
+    path = _file_path(t, "map", where, base_dir, "an image file name")
     scale = values.number(t.get("scale", 1.0), where + ".scale")
     if not scale > 0:
         raise OclgiError(f"{where}.scale: expected a number > 0, got {t['scale']!r}")
@@ -756,5 +952,7 @@ def mitsuba_emitters(mi, scene) -> dict:
         i = counts.get(light.table, 0)
         counts[light.table] = i + 1
         if power(light, sphere).max() > 0:
-            out[f"{light.table}_{i}"] = light.to_mitsuba(mi, sphere)
+            entry = light.to_mitsuba(mi, sphere)
+            if entry is not None:  # None: a kind Mitsuba lacks (it warned)
+                out[f"{light.table}_{i}"] = entry
     return out
