@@ -60,6 +60,23 @@ class Camera:
 MAX_COORDINATE = MAX_LENGTH  # squared lengths stay finite in float32 (params.MAX_LENGTH)
 
 
+def _corner_normals(normals, n_faces: int, name: str) -> np.ndarray | None:
+    """Vertex normals of the corners as unit float64 vectors; a triangle
+    with a corner missing (NaN), non-finite or of zero length keeps its
+    geometric normal (all three NaN). None when no triangle has a full set."""
+    vn = np.asarray(normals, np.float64)
+    if vn.shape != (n_faces, 3, 3):
+        raise OclgiError(f"{name}: tri_vertex_normals must be (F, 3, 3) corner normals, got {vn.shape}")
+    with np.errstate(invalid="ignore"):
+        length = np.linalg.norm(vn, axis=2, keepdims=True)
+        full = (np.isfinite(length) & (length > 1e-12)).all(axis=1)[:, 0]
+    if not full.any():
+        return None
+    out = np.full_like(vn, np.nan)
+    out[full] = vn[full] / length[full]
+    return out
+
+
 @dataclass
 class Scene:
     vertices: np.ndarray  # (V, 3) float64
@@ -77,6 +94,9 @@ class Scene:
     tri_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (vertex colours), NaN: none
     # spot, sun and sky lights (oclgi.scene.lights); last, so that positional fields keep their places
     lights: list = field(default_factory=list)
+    # (F, 3, 3) unit vertex normals of the corners (shading normals: OBJ vn,
+    # glTF/PLY normals), NaN for a triangle without a full set; None: none
+    tri_vertex_normals: np.ndarray | None = None
 
     def __post_init__(self):
         if self.tri_object is None:
@@ -151,6 +171,8 @@ class Scene:
                 self.tri_uv = np.asarray(self.tri_uv)[keep]
             if self.tri_colour is not None:
                 self.tri_colour = np.asarray(self.tri_colour)[keep]
+            if self.tri_vertex_normals is not None:
+                self.tri_vertex_normals = np.asarray(self.tri_vertex_normals)[keep]
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
                           "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
@@ -176,6 +198,8 @@ class Scene:
             if ((col < 0) | (col > 1)).any():
                 raise OclgiError(f"{self.name}: vertex colours must lie in [0, 1]")
             self.tri_colour = col
+        if self.tri_vertex_normals is not None:
+            self.tri_vertex_normals = _corner_normals(self.tri_vertex_normals, len(self.faces), self.name)
         if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
             raise OclgiError(f"{self.name}: triangles must be grouped object by object")
         counts = np.bincount(self.tri_object, minlength=len(self.objects))
