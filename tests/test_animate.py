@@ -100,6 +100,44 @@ def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
     assert engine.compiled.instances_host.tobytes() == before  # a refused move changes nothing
 
 
+def test_animate_writes_an_mp4_of_its_frames(tmp_path):
+    """Through imageio's ffmpeg (the test extra installs imageio-ffmpeg's own
+    binary): read back, the MP4 has every frame, the frames' size and rate,
+    and the frames' pixels within H.264's loss."""
+    import imageio_ffmpeg
+
+    from oclgi.io import read_image
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    out = tmp_path / "anim"
+    r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 5, "-o", out, "--video",
+            tmp_path / "a.mp4", "--fps", 12, "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[-1] == f"wrote {tmp_path / 'a.mp4'}"
+    png = np.rint(read_image(out / "frame_0004.png") * 255).astype(np.uint8)
+    h, w = png.shape[:2]
+    assert imageio_ffmpeg.count_frames_and_secs(str(tmp_path / "a.mp4"))[0] == 5
+    reader = imageio_ffmpeg.read_frames(str(tmp_path / "a.mp4"))
+    meta = next(reader)
+    assert tuple(meta["size"]) == (w + w % 2, h + h % 2) and meta["fps"] == 12
+    last = [np.frombuffer(f, np.uint8) for f in reader][-1].reshape(h + h % 2, w + w % 2, 3)[:h, :w]
+    over_black = (png[..., :3].astype(np.uint16) * png[..., 3:] // 255).astype(np.int16)
+    assert np.abs(last.astype(np.int16) - over_black).mean() < 6  # H.264 and its 4:2:0 colour
+
+
+def test_mp4_of_odd_size_is_padded_to_even(tmp_path):
+    """yuv420p needs even sides: the last column and row are repeated, not an ffmpeg failure."""
+    import imageio_ffmpeg
+
+    from oclgi.video import write_video
+
+    frames = [np.full((17, 33, 4), (30 * k, 100, 200, 255), np.uint8) for k in range(3)]
+    path = write_video(tmp_path / "odd.mp4", frames, 10)
+    assert imageio_ffmpeg.count_frames_and_secs(str(path))[0] == 3
+    assert tuple(next(imageio_ffmpeg.read_frames(str(path)))["size"]) == (34, 18)
+
+
 def test_animate_writes_a_gif_of_its_frames(tmp_path):
     from PIL import Image
 
