@@ -122,6 +122,19 @@ def test_scene_keeps_unit_normals_and_drops_partial_sets(tmp_path):
         oclgi.load_dict({"mesh": [dict(desc["mesh"][0], smooth="no")]})
 
 
+def test_normals_that_do_not_describe_the_triangle_stay_flat(tmp_path):
+    """A corner normal beyond 60 degrees of its face's (a hard edge averaged
+    over) leaves the triangle flat; normals all opposing the winding are
+    turned round."""
+    f = tmp_path / "three.obj"
+    f.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nvn 0 0 1\nvn 0 0.8 0.6\nvn 0 0.9 0.43589\nvn 0 0 -1\n"
+                 "f 1//1 2//1 3//2\nf 1//1 2//1 3//3\nf 1//4 2//4 3//4\n")
+    vn = oclgi.load_dict({"mesh": [{"path": str(f), "emission": [1, 1, 1]}]}).tri_vertex_normals
+    np.testing.assert_allclose(vn[0, 2], [0, 0.8, 0.6])  # 53 degrees: kept
+    assert np.isnan(vn[1]).all()  # 64 degrees: flat
+    np.testing.assert_array_equal(vn[2], [[0, 0, 1]] * 3)  # reversed: turned to the face's side
+
+
 def test_transform_turns_normals(tmp_path):
     """A mesh's transform turns its normals by the inverse transpose (a
     non-uniform scale bends them away from the scaled direction)."""

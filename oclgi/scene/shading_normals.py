@@ -30,8 +30,10 @@ Like texture coordinates (oclgi/scene/textures.py), the normal at a point
 comes from the point itself through each triangle's affine map from its
 plane to the interpolated normal, in object space (moved objects: through
 their instance's transform in the kernel), so no barycentrics are needed.
-A triangle without a full set of corner normals has an all-zero map: the
-kernel then takes the geometric normal, bit for bit what it took before.
+A triangle without a full set of corner normals, or with one further than
+60 degrees from its own normal (oclgi/scene/scene.py MAX_SHADING_ANGLE: a
+hard edge the file averaged over), has an all-zero map: the kernel then
+takes the geometric normal, bit for bit what it took before.
 """
 
 from __future__ import annotations
