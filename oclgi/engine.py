@@ -271,6 +271,9 @@ class Engine:
         stays in front of its triangle: oclgi/scene/shading_normals.py);
         None: the scene's radius."""
         lift = self.scene.radius if lift is None else lift
+        if isinstance(lift, bool) or not isinstance(lift, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(lift) and 0 <= lift <= params.F32_MAX):
+            raise OclgiError(f"lift: expected a disc radius >= 0 (a float32), got {lift!r}")
         x0, y0, rw, rh = (int(v) for v in rect)
         eye, fwd, right, up = cam.frame()
         n = rw * rh

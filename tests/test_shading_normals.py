@@ -199,8 +199,12 @@ def test_sphere_renders_smooth_and_closer_to_the_exact_irradiance(spheres):
 def test_unlifted_discs_would_lose_half_the_light(spheres):
     """Why the camera lifts a turned disc (oclgi/scene/shading_normals.py):
     without it, the half behind the triangle sees no segment."""
-    err, _ = sphere_errors(oclgi.Engine(sphere_scene(spheres[0])), lift=0.0)
+    engine = oclgi.Engine(sphere_scene(spheres[0]))
+    err, _ = sphere_errors(engine, lift=0.0)
     assert err.mean() < -0.3
+    for bad in (-1.0, float("nan"), "0.1", True):
+        with pytest.raises(OclgiError, match="lift: expected a disc radius"):
+            engine.camera_points(lift=bad)
 
 
 def test_moved_object_turns_its_shading_normals(spheres, tmp_path):

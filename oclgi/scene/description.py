@@ -1,5 +1,7 @@
 """Scene descriptions: a TOML file, or the same structure as a Python dict.
 
+    smooth = true                   # (before any table) the meshes' default for their own `smooth`
+
     [[mesh]]                        # one or more; a file, or inline arrays
     path = "cornell-box/CornellBox-Original.obj"   # relative to the TOML file
     albedo = [0.5, 0.5, 0.5]        # faces the file gives no material (default 0.5)
@@ -16,8 +18,6 @@
     ior = 1.5
     [mesh.materials.floor]
     texture = "floor.png"           # a diffuse albedo's texture, relative to the TOML file
-
-    smooth = true                   # the meshes' default for their own `smooth`
 
     [[point_light]]
     position = [0, 1.9, 0]
@@ -299,7 +299,7 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None, smooth=True):
         camera = replace(camera, position=tuple(m @ np.asarray(camera.position) + shift),
                          look_at=tuple(m @ np.asarray(camera.look_at) + shift),
                          up=tuple(m @ np.asarray(camera.up)))
-    # the file's vertex normals (kernels/shading_normal.h), read only for a smooth mesh
+    # the file's vertex normals (kernels/shading_normals.h), read only for a smooth mesh
     face_normal = loaded.face_normal() if smooth and loaded is not None else None
     if face_normal is not None and "transform" in desc:
         face_normal = np.where(np.isnan(face_normal), np.nan, transform_normals(face_normal, m))
