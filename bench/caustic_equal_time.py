@@ -40,8 +40,8 @@ from pathlib import Path
 import numpy as np
 
 import oclgi
-from oclgi.photometry import LUMINANCE
 from oclgi.study import mitsuba as mitsuba_reference
+from reference_images import reference_pair, rel_rms
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
@@ -61,11 +61,6 @@ def caustic_region(engine, points, radius: float) -> np.ndarray:
     xz = points.positions[:, [0, 2]].astype(np.float64)
     near = np.hypot(xz[:, 0] - centre[0], xz[:, 1] - centre[2]) < radius
     return (on_floor & direct & near).reshape(points.shape)
-
-
-def rel_rms(image, ref, region) -> float:
-    a, b = image[region] @ LUMINANCE, ref[region] @ LUMINANCE
-    return float(np.sqrt(np.mean(((a - b) / b) ** 2)))
 
 
 def main():
@@ -91,17 +86,7 @@ def main():
         warnings.simplefilter("ignore", oclgi.OclgiWarning)  # the file's Kd on the mirror and glass
         engine = oclgi.Engine(oclgi.load_file(SCENE), progress=False)
 
-    t0 = time.perf_counter()
-    cached = args.out / f"reference_{s}_{args.ref_spp}_{args.variant}.npz"  # the reference is the slow part
-    if cached.is_file():
-        with np.load(cached) as z:
-            ref_a, ref_b, ref_seconds = z["a"], z["b"], float(z["seconds"])
-    else:
-        ref_a = mitsuba_reference.render(engine, width=s, height=s, spp=args.ref_spp, seed=1000, variant=args.variant)
-        ref_b = mitsuba_reference.render(engine, width=s, height=s, spp=args.ref_spp, seed=2000, variant=args.variant)
-        ref_seconds = time.perf_counter() - t0
-        args.out.mkdir(parents=True, exist_ok=True)
-        np.savez(cached, a=ref_a, b=ref_b, seconds=ref_seconds)
+    ref_a, ref_b, ref_seconds = reference_pair(engine, s, args.ref_spp, args.variant, args.out)
     ref = 0.5 * (ref_a + ref_b)
     points = engine.camera_points(width=s, height=s)
     region = caustic_region(engine, points, args.caustic_radius)

@@ -10,9 +10,14 @@
  *
  * The ray goes on through mirrors and glass, and samples the highlight of
  * glossy surfaces (bsdf.h, radiance mode), until it reaches a surface with
- * a diffuse part: that surface's point (w = as_float(tri)), its geometric
- * normal turned towards the arriving ray (w = 1 when the triangle's own
- * normal faces it, which is when a one-sided emitter is seen), the hit
+ * a diffuse part: that surface's point (w = as_float(tri)), its normal
+ * turned towards the arriving ray (w = 1 when the triangle's own normal
+ * faces it, which is when a one-sided emitter is seen): the geometric
+ * normal, or the mesh's shading normal where it has vertex normals
+ * (shading_normals.h), the point then lifted off the triangle by
+ * lift * sin(angle between the two), lift the disc radius, so that the
+ * turned disc lies wholly in front of its triangle (oclgi/scene/
+ * shading_normals.py says why); the hit
  * barycentrics, and the weight the point's radiance is seen with (the
  * product of the sample weights on the way; 1 for a direct view). A
  * modified Phong surface is the point with probability p_d (its diffuse
@@ -32,16 +37,18 @@
 #include "bsdf.h"
 #include "bvh.h"
 #include "rng.h"
+#include "shading_normals.h"
 
 #define CAMERA_SEED_LO 0x85EBCA6Bu
 #define CAMERA_SEED_HI 0xC2B2AE35u
 
 __kernel void camera_visible_points(SCENE_ARGS,
                                     __global const float4 *tri_normals, __global const int *tri_material,
-                                    __global const Material *materials,
+                                    __global const Material *materials, __global const float4 *tri_shading,
+                                    __global const int *tri_object, __global const Instance *poses,
                                     float4 eye, float4 forward, float4 right, float4 up,
                                     int width, int height, int x0, int y0, int rw, int rh, float2 offset,
-                                    int sample, float eps,
+                                    int sample, float eps, float lift,
                                     __global float4 *positions, __global float4 *normals,
                                     __global float2 *barys, __global float4 *weights)
 {
@@ -77,8 +84,11 @@ __kernel void camera_visible_points(SCENE_ARGS,
             if (front == 0.0f && !(m->flags & OCLGI_MATERIAL_TWOSIDED)) break; /* a black back */
             float pd = kind == OCLGI_BSDF_PHONG ? phong_p_diffuse(m) : 1.0f;
             if (u.w < pd) {
+                int smooth;
+                float3 nsh = shading_normal(tri_shading, tri_object, poses, h.tri, p, ns, &smooth);
+                if (smooth) p += (lift * length(cross(nsh, ns))) * ns; /* d sin(a): the disc in front */
                 positions[i] = (float4)(p, as_float(h.tri));
-                normals[i] = (float4)(ns, front);
+                normals[i] = (float4)(nsh, front);
                 barys[i] = (float2)(h.u, h.v);
                 weights[i] = (float4)(weight / pd, 1.0f);
                 return;

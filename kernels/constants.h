@@ -25,6 +25,10 @@
 #error "oclgi's material constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 
+#if !defined(OCLGI_VIEW_SRGB) || !defined(OCLGI_VIEW_AGX) || !defined(OCLGI_VIEW_FILMIC)
+#error "oclgi's view constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
+#endif
+
 /* One photon's largest power in fixed-point units (segment.h). */
 #define OCLGI_FIXED_ONE ((float)(1L << OCLGI_FIXED_BITS))
 

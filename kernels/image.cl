@@ -9,13 +9,15 @@
  *                 alpha is 1 where it met a surface, and everywhere when
  *                 the background has radiance (a sky is part of the image). The albedo (textured) times
  *                 the weight goes to `albedo` (the render's albedo layer).
- * image_tonemap   one work-item per pixel: exposure, clamp, sRGB encoding,
- *                 8 bits per channel; alpha is the coverage (radiance.w:
+ * image_tonemap   one work-item per pixel: exposure, the view transform
+ *                 (view_transform.h: clamp and sRGB encoding, AgX or
+ *                 filmic), 8 bits per channel; alpha is the coverage (radiance.w:
  *                 1 where a sample hit geometry, 0 on the background,
  *                 between for a pixel's averaged samples).
  */
 #include "background.h"
 #include "texture.h"
+#include "view_transform.h"
 
 __kernel void image_shade(__global const float4 *positions, __global const float4 *normals,
                           __global const float4 *irradiance, __global const int *tri_material,
@@ -42,20 +44,12 @@ __kernel void image_shade(__global const float4 *positions, __global const float
     albedo[i] = (float4)(a * weights[i].xyz, 0.0f);
 }
 
-inline float srgb_encode(float c)
-{
-    c = clamp(c, 0.0f, 1.0f);
-    return c <= 0.0031308f ? 12.92f * c : 1.055f * pow(c, 1.0f / 2.4f) - 0.055f;
-}
-
-__kernel void image_tonemap(__global const float4 *radiance, int n, float exposure,
+__kernel void image_tonemap(__global const float4 *radiance, int n, float exposure, int view,
                             __global uchar4 *pixels)
 {
     int i = get_global_id(0);
     if (i >= n) return;
-    float3 c = radiance[i].xyz * exposure;
-    pixels[i] = (uchar4)(convert_uchar_sat_rte(255.0f * srgb_encode(c.x)),
-                         convert_uchar_sat_rte(255.0f * srgb_encode(c.y)),
-                         convert_uchar_sat_rte(255.0f * srgb_encode(c.z)),
-                         convert_uchar_sat_rte(255.0f * radiance[i].w));
+    float3 d = view_transform(radiance[i].xyz * exposure, view);
+    pixels[i] = (uchar4)(convert_uchar_sat_rte(255.0f * d.x), convert_uchar_sat_rte(255.0f * d.y),
+                         convert_uchar_sat_rte(255.0f * d.z), convert_uchar_sat_rte(255.0f * radiance[i].w));
 }

@@ -185,6 +185,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image height (default: the scene camera's)")
     r.add_argument("--exposure", type=_param(params.exposure, "--exposure", _auto_or_number), default=1.0,
                    help="PNG exposure multiplier, or 'auto' (the image's log-average luminance to middle grey)")
+    r.add_argument("--view", type=_param(params.view, "--view", str), default="srgb", metavar="|".join(params.VIEWS),
+                   help="the PNG's view transform: srgb (the default: clamp and sRGB encoding, the same pixels as "
+                        "before the option existed; highlights clip), agx (Sobotka's AgX: highlights roll off and "
+                        "desaturate) or filmic (an ACES fit); the EXR stays linear radiance, and the PNG and EXR "
+                        "record the view (oclgi:view)")
     r.add_argument("--layers", action="store_true",
                    help="also write the irradiance, albedo, normal and depth layers into the EXR "
                         "(irradiance.R, albedo.R, normal.X, depth.Z, ...; for compositing and denoisers)")
@@ -360,7 +365,7 @@ def cmd_render(args):
 
         engine = _mpi_engine(args, comm)
         result = distributed.render(engine, comm, width=args.width, height=args.height, exposure=args.exposure,
-                                    spp=args.spp, **_est_kwargs(args))
+                                    spp=args.spp, view=args.view, **_est_kwargs(args))
         if distributed.is_root(comm):
             write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths},
                          metadata=result.metadata)
@@ -372,7 +377,7 @@ def cmd_render(args):
     engine = _engine(args)
 
     def write(run, est):  # all or none: a failure leaves neither file
-        result = engine.render_result(run, est, args.exposure, args.layers)
+        result = engine.render_result(run, est, args.exposure, args.layers, args.view)
         exr, channels = result.exr_channels()
         write_images({p: exr if p.suffix.lower() == ".exr" else result.pixels for p in paths},
                      metadata=result.metadata, channels={p: channels for p in paths if p.suffix.lower() == ".exr"})

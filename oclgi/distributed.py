@@ -347,7 +347,7 @@ class EveryRank:
 
 
 def render(engine, comm, camera=None, width: int | None = None, height: int | None = None,
-           exposure: float = 1.0, spp: int = 1, **estimate_args):
+           exposure: float = 1.0, spp: int = 1, view: str = "srgb", **estimate_args):
     """``engine.render`` over the ranks of ``comm``: the Render on rank 0,
     None on the others (rank 0's camera and sizes are used). ``comm`` None:
     one process."""
@@ -355,12 +355,13 @@ def render(engine, comm, camera=None, width: int | None = None, height: int | No
     from .engine import Render, render_metadata
 
     if comm is None:
-        return engine.render(camera, width, height, exposure, spp=spp, **estimate_args)
+        return engine.render(camera, width, height, exposure, spp=spp, view=view, **estimate_args)
     t0 = time.perf_counter()
     pts = None
     with _phase(comm):
         if comm.rank == 0:
             exposure = params.exposure(exposure, "exposure")
+            view = params.view(view)
             r = engine.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
             cam, spp, pts = engine.render_points(camera, width, height, spp, estimate_args)
     t_cam = time.perf_counter() - t0
@@ -368,9 +369,9 @@ def render(engine, comm, camera=None, width: int | None = None, height: int | No
     result = None
     with _phase(comm):
         if comm.rank == 0:
-            radiance, pixels = engine.shade(est.points, est.estimator.irr, exposure, spp)  # resolved by finish
+            radiance, pixels = engine.shade(est.points, est.estimator.irr, exposure, spp, view)  # resolved by finish
             est.stats.seconds = {"camera": t_cam, **est.stats.seconds, "total": time.perf_counter() - t0}
-            result = Render(radiance, pixels, est, render_metadata(engine, r, est, cam, spp, exposure))
+            result = Render(radiance, pixels, est, render_metadata(engine, r, est, cam, spp, exposure, view))
     return result
 
 

@@ -23,6 +23,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import budget, params, queries
+from .cl import constants
 from .cl.device import create_context
 from .cl.programs import launch, programs
 from .errors import OclgiError
@@ -39,6 +40,9 @@ from .scene.scene import Camera, Scene
 
 DEFAULT_BATCH_BYTES = 256 << 20
 
+
+# params.VIEWS by the ids the tone mapping kernel takes (kernels/view_transform.h)
+VIEW_IDS = {"srgb": constants.VIEW_SRGB, "agx": constants.VIEW_AGX, "filmic": constants.VIEW_FILMIC}
 
 LAYER_CHANNELS = {"irradiance": "RGB", "albedo": "RGB", "normal": "XYZ", "depth": "Z"}
 
@@ -62,7 +66,7 @@ def render_layers(points, irradiance: np.ndarray, albedo: np.ndarray, camera, sp
             for k, v in raw.items()}
 
 
-def render_metadata(engine, run_params, est, camera, spp: int, exposure: float) -> dict:
+def render_metadata(engine, run_params, est, camera, spp: int, exposure: float, view: str = "srgb") -> dict:
     """What made an image, as the attributes its files carry (``oclgi:``
     names, text values: PNG keeps text only): the scene, the method and its
     parameters, the photons traced, the camera, the samples per pixel,
@@ -74,7 +78,7 @@ def render_metadata(engine, run_params, est, camera, spp: int, exposure: float) 
             "photons": est.stats.photons, "segments": est.stats.segments, "seed": p["seed"],
             "radius": f"{p['radius']:.9g}", "max_depth": p["max_depth"], "extension": f"{p['extension']:.9g}",
             "count_emitted": str(p["count_emitted"]).lower(), "spp": spp,
-            "exposure": exposure if isinstance(exposure, str) else f"{exposure:.9g}"}
+            "exposure": exposure if isinstance(exposure, str) else f"{exposure:.9g}", "view": view}
     if camera is not None:
         meta.update({f"camera_{k}": " ".join(f"{v:.9g}" for v in getattr(camera, k))
                      for k in ("position", "look_at", "up")})
@@ -284,14 +288,15 @@ class Engine:
 
     # -- query points -------------------------------------------------------
     def camera_points(self, camera: Camera | None = None, width: int | None = None,
-                      height: int | None = None, spp: int = 1) -> queries.QueryPoints:
+                      height: int | None = None, spp: int = 1, lift: float | None = None) -> queries.QueryPoints:
         """The visible point of every pixel; with ``spp`` > 1 samples per
         pixel, one image of points per sample (``sample_offsets``), stacked:
-        shape (spp * height, width)."""
+        shape (spp * height, width). ``lift``: the disc radius they are for
+        (``view_points``; None: the scene's)."""
         cam = self.view_camera(camera, width, height)
         spp = params.samples_per_pixel(spp)
         budget.check(budget.camera_need(cam.width, cam.height * spp), self.queue.device)
-        images = [self.view_points(cam, (0, 0, cam.width, cam.height), offset=o, sample=k)
+        images = [self.view_points(cam, (0, 0, cam.width, cam.height), offset=o, sample=k, lift=lift)
                   for k, o in enumerate(sample_offsets(spp))]
         return images[0] if spp == 1 else queries.stack(images)
 
@@ -308,12 +313,21 @@ class Engine:
         height = None if height is None else params.image_size(height, "height")
         return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))
 
-    def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5), sample: int = 0) -> queries.QueryPoints:
+    def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5), sample: int = 0,
+                    lift: float | None = None) -> queries.QueryPoints:
         """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
         against all instances or against ``instances`` = (buffer, count), each
         through its pixel's point ``offset`` (pixel units from its corner);
         ``sample`` numbers a pixel's samples (the random numbers of its path
-        through mirrors, glass and highlights, kernels/camera.cl)."""
+        through mirrors, glass and highlights, kernels/camera.cl). ``lift``:
+        the disc radius the points' discs will have, how far a point with a
+        shading normal is lifted (times the sine of its tilt, so its disc
+        stays in front of its triangle: oclgi/scene/shading_normals.py);
+        None: the scene's radius."""
+        lift = self.scene.radius if lift is None else lift
+        if isinstance(lift, bool) or not isinstance(lift, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(lift) and 0 <= lift <= params.F32_MAX):
+            raise OclgiError(f"lift: expected a disc radius >= 0 (a float32), got {lift!r}")
         x0, y0, rw, rh = (int(v) for v in rect)
         eye, fwd, right, up = cam.frame()
         n = rw * rh
@@ -325,9 +339,10 @@ class Engine:
         as4 = lambda v: np.array([*v, 0.0], np.float32)  # noqa: E731
         host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
         if n:
-            launch(self.queue, k, n, *scene_args, c.tri_normals, c.tri_material, c.materials, as4(eye), as4(fwd),
-                   as4(right), as4(up), cam.width, cam.height, x0, y0, rw, rh, np.array(offset, np.float32),
-                   int(sample), np.float32(c.eps), pos, nrm, bary, wt, local_size=self.local_size)
+            launch(self.queue, k, n, *scene_args, c.tri_normals, c.tri_material, c.materials, c.tri_shading,
+                   c.tri_object, c.instances, as4(eye), as4(fwd), as4(right), as4(up), cam.width, cam.height,
+                   x0, y0, rw, rh, np.array(offset, np.float32), int(sample), np.float32(c.eps), np.float32(lift),
+                   pos, nrm, bary, wt, local_size=self.local_size)
             for h, dev in zip(host, (pos, nrm, bary, wt)):
                 cl.enqueue_copy(self.queue, h, dev)
         # made once filled: QueryPoints checks its values
@@ -467,15 +482,19 @@ class Engine:
 
     # -- images -----------------------------------------------------------------
     def render(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
-               exposure: float = 1.0, layers: bool = False, **estimate_args) -> Render:
+               exposure: float = 1.0, layers: bool = False, view: str = "srgb", **estimate_args) -> Render:
         """Radiance image L = Le + albedo E / pi of the visible points, and its tone-mapped pixels.
         ``width``, ``height``: None for the camera's; ``spp``: samples per
         pixel; ``layers``: also irradiance, albedo, normal and depth
-        (``Render.layers``, written into the EXR by ``save_render``)."""
+        (``Render.layers``, written into the EXR by ``save_render``);
+        ``view``: the pixels' view transform, "srgb" (clamp, as always),
+        "agx" or "filmic" (kernels/view_transform.h; the radiance is linear
+        whatever the view)."""
         exposure = params.exposure(exposure, "exposure")
         layers = params.flag(layers, "layers")
+        view = params.view(view)
         run = self.render_run(camera, width, height, **estimate_args)
-        return self.render_result(run, run.complete(self.progress), exposure, layers)
+        return self.render_result(run, run.complete(self.progress), exposure, layers, view)
 
     def render_run(self, camera: Camera | None = None, width: int | None = None, height: int | None = None,
                    paths: PathRange | None = None, spp: int = 1, **estimate_args) -> Run:
@@ -497,29 +516,35 @@ class Engine:
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
         budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
                                         self.batch_bytes, estimate_args.get("k")), self.queue.device)
-        return cam, spp, self.camera_points(cam, spp=spp)
+        return cam, spp, self.camera_points(cam, spp=spp, lift=r.radius)
 
-    def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False) -> Render:
+    def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False,
+                      view: str = "srgb") -> Render:
         """The image of a render run's estimate (resolved: ``Run.finish``);
-        ``layers``: also the irradiance, albedo, normal and depth layers."""
+        ``layers``: also the irradiance, albedo, normal and depth layers;
+        ``view``: the pixels' view transform (``render``)."""
         spp, cam = run.spp, run.camera
         want = bool(layers and cam)
-        radiance, pixels, albedo = self.shade_albedo(run.estimator.points, est.estimator.irr, exposure, spp, want)
+        radiance, pixels, albedo = self.shade_albedo(run.estimator.points, est.estimator.irr, exposure, spp, want,
+                                                     view)
         extra = render_layers(run.estimator.points, est.irradiance, albedo, cam, spp) if want else {}
-        return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure), extra)
+        return Render(radiance, pixels, est, render_metadata(self, run.params, est, cam, spp, exposure, view), extra)
 
-    def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1):
+    def shade(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0, spp: int = 1,
+              view: str = "srgb"):
         """(radiance, pixels): see ``shade_albedo``."""
-        return self.shade_albedo(points, irradiance, exposure, spp, albedo=False)[:2]
+        return self.shade_albedo(points, irradiance, exposure, spp, albedo=False, view=view)[:2]
 
     def shade_albedo(self, points: queries.QueryPoints, irradiance: cl.Buffer, exposure: float = 1.0,
-                     spp: int = 1, albedo: bool = True):
+                     spp: int = 1, albedo: bool = True, view: str = "srgb"):
         """Radiance L = Le + albedo E / pi of camera points and its tone-mapped
         pixels, from the irradiance (a device float4 buffer, one per point);
         with ``albedo``, each point's albedo too (the render's layer), else None.
         ``spp`` > 1: the points are ``camera_points``' stacked samples, and a
-        pixel is the mean of its samples' radiance (its alpha, their coverage)."""
+        pixel is the mean of its samples' radiance (its alpha, their coverage).
+        ``view``: the pixels' view transform (params.VIEWS, kernels/view_transform.h)."""
         exposure = params.exposure(exposure, "exposure")
+        view_id = VIEW_IDS[params.view(view)]
         spp = params.samples_per_pixel(spp)
         if not isinstance(points, queries.QueryPoints) or points.shape is None:
             raise OclgiError("shade: points must be a camera's QueryPoints (Engine.camera_points), with a shape")
@@ -557,7 +582,7 @@ class Engine:
                 image = np.empty((n, 4), np.float32)
                 cl.enqueue_copy(self.queue, image, rad)
             exposure = auto_exposure(image)
-        launch(self.queue, prog.image_tonemap, n, rad, n, exposure, pix)
+        launch(self.queue, prog.image_tonemap, n, rad, n, exposure, view_id, pix)
         radiance = np.empty((h, w, 4), np.float32)
         pixels = np.empty((h, w, 4), np.uint8)
         cl.enqueue_copy(self.queue, radiance, rad)

@@ -227,6 +227,18 @@ def exposure(value, name: str = "exposure") -> float | str:
     return r
 
 
+# The views from radiance to display pixels (kernels/view_transform.h);
+# "srgb", the first, is the default: clamp and the sRGB encoding, as before.
+VIEWS = ("srgb", "agx", "filmic")
+
+
+def view(value, name: str = "view") -> str:
+    """A view transform's name (VIEWS), case-insensitive."""
+    if isinstance(value, str) and value.strip().lower() in VIEWS:
+        return value.strip().lower()
+    raise ParamError(name, f"expected one of {', '.join(VIEWS)}, got {_show(value)}")
+
+
 def image_size(value, name: str = "width") -> int:
     """An image's width or height in pixels (the camera's limit, oclgi/scene/description.py)."""
     return _integer_in(value, name, 1, MAX_IMAGE_SIDE, f"an integer in 1..{MAX_IMAGE_SIDE}")

@@ -2,7 +2,11 @@
 through imageio's ffmpeg plugin; both come with ``pip install 'oclgi[video]'``.
 
 The file is written under a temporary name and renamed into place when it
-is complete (oclgi/io.py), as every other output.
+is complete (oclgi/io.py), as every other output. H.264 in the yuv420p
+pixels every player reads halves the colour resolution, so an MP4's width
+and height must be even: a frame of odd size gets its last column or row
+repeated once (ffmpeg itself refuses odd sizes with an error about the
+encoder, not the image).
 """
 
 from __future__ import annotations
@@ -40,6 +44,12 @@ def _rgb(pixels: np.ndarray) -> np.ndarray:
     return (pixels[..., :3].astype(np.uint16) * a // 255).astype(np.uint8)
 
 
+def _even(frame: np.ndarray) -> np.ndarray:
+    """The frame with its last column and row repeated where its width or height is odd."""
+    h, w = frame.shape[:2]
+    return np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
+
+
 def write_video(path: Path, frames: list, fps: float) -> Path:
     """``frames``: (H, W, 4) uint8 arrays, in order."""
     from .io import atomic_path
@@ -58,6 +68,6 @@ def write_video(path: Path, frames: list, fps: float) -> Path:
         else:
             import imageio.v3 as iio
 
-            iio.imwrite(tmp, np.stack([_rgb(f) for f in frames]), extension=".mp4", fps=fps,
+            iio.imwrite(tmp, np.stack([_even(_rgb(f)) for f in frames]), extension=".mp4", fps=fps,
                         codec="libx264", macro_block_size=1)
     return path

@@ -100,29 +100,64 @@ def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
     assert engine.compiled.instances_host.tobytes() == before  # a refused move changes nothing
 
 
-def test_animate_writes_a_gif_of_its_frames(tmp_path):
-    from PIL import Image
-
+def _animate_video(tmp_path, video: str, frames: int, fps: int, frame: int):
+    """``animate --video`` of SCENE's block into tmp_path; (the video's path,
+    frame number ``frame``'s PNG as 8-bit RGBA)."""
     from oclgi.io import read_image
 
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "anim"
-    r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--video",
-            tmp_path / "a.gif", "--fps", 10, "--quiet")
+    r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", frames, "-o", out, "--video",
+            tmp_path / video, "--fps", fps, "--quiet")
     assert r.returncode == 0, r.stderr
-    assert r.stdout.splitlines()[-1] == f"wrote {tmp_path / 'a.gif'}"
-    with Image.open(tmp_path / "a.gif") as gif:
+    assert r.stdout.splitlines()[-1] == f"wrote {tmp_path / video}"
+    return tmp_path / video, np.rint(read_image(out / f"frame_{frame:04d}.png") * 255).astype(np.uint8)
+
+
+def test_animate_writes_an_mp4_of_its_frames(tmp_path):
+    """Through imageio's ffmpeg (the test extra installs imageio-ffmpeg's own
+    binary): read back, the MP4 has every frame, the frames' size and rate,
+    and the frames' pixels within H.264's loss."""
+    import imageio_ffmpeg
+
+    video, png = _animate_video(tmp_path, "a.mp4", 5, 12, 4)
+    h, w = png.shape[:2]
+    assert imageio_ffmpeg.count_frames_and_secs(str(video))[0] == 5
+    reader = imageio_ffmpeg.read_frames(str(video))
+    meta = next(reader)
+    assert tuple(meta["size"]) == (w + w % 2, h + h % 2) and meta["fps"] == 12
+    last = [np.frombuffer(f, np.uint8) for f in reader][-1].reshape(h + h % 2, w + w % 2, 3)[:h, :w]
+    over_black = (png[..., :3].astype(np.uint16) * png[..., 3:] // 255).astype(np.int16)
+    assert np.abs(last.astype(np.int16) - over_black).mean() < 6  # H.264 and its 4:2:0 colour
+
+
+def test_mp4_of_odd_size_is_padded_to_even(tmp_path):
+    """yuv420p needs even sides: the last column and row are repeated, not an ffmpeg failure."""
+    import imageio_ffmpeg
+
+    from oclgi.video import write_video
+
+    frames = [np.full((17, 33, 4), (30 * k, 100, 200, 255), np.uint8) for k in range(3)]
+    path = write_video(tmp_path / "odd.mp4", frames, 10)
+    assert imageio_ffmpeg.count_frames_and_secs(str(path))[0] == 3
+    assert tuple(next(imageio_ffmpeg.read_frames(str(path)))["size"]) == (34, 18)
+
+
+def test_animate_writes_a_gif_of_its_frames(tmp_path):
+    from PIL import Image
+
+    video, png = _animate_video(tmp_path, "a.gif", 3, 10, 0)
+    with Image.open(video) as gif:
         first = np.asarray(gif.convert("RGBA"))
         total = 0  # Pillow folds a frame equal to the one before into its duration
         for k in range(gif.n_frames):
             gif.seek(k)
             total += gif.info["duration"]
         assert total == 300
-    png = np.rint(read_image(out / "frame_0000.png") * 255).astype(np.uint8)
     over_black = (png[..., :3].astype(np.uint16) * png[..., 3:] // 255).astype(np.int16)
     assert np.abs(first[..., :3].astype(np.int16) - over_black).max() <= 24  # GIF's 256-colour palette
     for bad, match in (("a.avi", "must end in .gif or .mp4"),):
-        r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", tmp_path / "b",
+        r = run(None, "animate", tmp_path / "s.toml", "--path", "line:0.5,0,0", "--frames", 3, "-o", tmp_path / "b",
                 "--video", tmp_path / bad)
         assert r.returncode == 2 and match in r.stderr and not (tmp_path / "b").exists()

@@ -96,6 +96,12 @@ MATERIAL_VERTEX_COLOUR = 4  # the albedo times the mesh's vertex colours (kernel
 # (kernels/camera.cl); a ray still on its way after them sees black.
 CAMERA_MAX_DEPTH = 8
 
+# The views image_tonemap maps radiance to display pixels with
+# (kernels/view_transform.h; oclgi.params.VIEWS names them).
+VIEW_SRGB = 0
+VIEW_AGX = 1
+VIEW_FILMIC = 2
+
 # name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
 # 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
 # the kernel rounds to float (as it always has).
@@ -130,6 +136,9 @@ DEFINES = {
     "emitter_sky": EMITTER_SKY,
     "emitter_envmap": EMITTER_ENVMAP,
     "emitter_ies": EMITTER_IES,
+    "view_srgb": VIEW_SRGB,
+    "view_agx": VIEW_AGX,
+    "view_filmic": VIEW_FILMIC,
 }
 
 

@@ -20,7 +20,7 @@ from ..accel.bvh_wide import WIDE_STACK, collapse
 from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
 from ..cl.layout import Emitter, Instance, Tri
 from ..errors import OclgiError
-from . import background, materials, textures
+from . import background, materials, shading_normals, textures
 from .lights import emitter_rows, escaping_area_lights
 from .pose import Pose, place_record
 from .scene import OclgiWarning, Scene
@@ -107,6 +107,10 @@ class CompiledScene:
         coloured = scene.tri_colour is not None and any(m.vertex_colours for m in scene.materials)
         colourmap = (textures.colour_maps(v, scene.tri_colour) if coloured else np.zeros((3 * len(v), 4), np.float32))
         self.tri_colourmap = _buffer(ctx, colourmap)
+        # object space, as the uv maps; the camera alone reads them (oclgi/scene/shading_normals.py),
+        # so they are not part of the fingerprint (no photon path depends on them)
+        self.shading_host = shading_normals.normal_maps(v, scene.tri_vertex_normals)
+        self.tri_shading = _buffer(ctx, self.shading_host)
         bg, bg_texels = background.record(scene)
         self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
         self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))

@@ -1,5 +1,7 @@
 """Scene descriptions: a TOML file, or the same structure as a Python dict.
 
+    smooth = true                   # (before any table) the meshes' default for their own `smooth`
+
     [[mesh]]                        # one or more; a file, or inline arrays
     path = "cornell-box/CornellBox-Original.obj"   # relative to the TOML file
     albedo = [0.5, 0.5, 0.5]        # faces the file gives no material (default 0.5)
@@ -7,6 +9,7 @@
     material = { kind = "diffuse" } # or the kind and parameters of those faces (oclgi/scene/materials.py)
     transform = { scale = 1.0, rotate = [0, 1, 0, 30], translate = [0, 0, 0] }
     movable = false                 # true: an object of its own that Engine.move places
+    smooth = true                   # shade with the file's vertex normals (OBJ vn, glTF/PLY normals)
     name = "bunny"                  # a movable object's name (default: the file's stem)
     [mesh.materials.light]          # override one material the file names
     emission = [17, 12, 4]
@@ -79,7 +82,7 @@ import numpy as np
 
 from ..errors import OclgiError
 from .. import params
-from .mesh import from_trimesh, is_file, load_mesh
+from .mesh import from_trimesh, is_file, load_mesh, transform_normals
 from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
 from . import lights as lights_mod
 from .values import check_keys as _check_keys, number as _number, radiant as _radiant, table_list as _table_list
@@ -87,10 +90,10 @@ from .values import vec3 as _vec3
 from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
-_TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name"}
+_TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name", "smooth"}
 _MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "vertex_albedo", "trimesh", "albedo", "emission", "material",
          "lumens", "materials",
-         "transform", "movable", "name"}
+         "transform", "movable", "name", "smooth"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 # The run parameters a scene file sets: (table, key) -> RunParams field.
 _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("photons", "max_depth"): "max_depth",
@@ -182,13 +185,14 @@ def _transform(t, where):
     return m, shift
 
 
-def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
+def _mesh(desc, i, base_dir, materials, mat_index, lights=None, smooth=True):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
     per_element = [k for k in ("face_albedo", "face_emission", "vertex_albedo") if k in desc]
     if per_element and not ("vertices" in desc and "faces" in desc):
         raise OclgiError(f"{where}: {' and '.join(per_element)} go{'es' if len(per_element) == 1 else ''} with "
                          "'vertices' and 'faces'")
+    smooth = _flag(desc.get("smooth", smooth), where + ".smooth")
     read = _Readers(base_dir)
     loaded = None
     # vertex_albedo is the albedo itself: the mesh's albedo (which multiplies it) is 1 unless given
@@ -302,7 +306,11 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None):
         camera = replace(camera, position=tuple(m @ np.asarray(camera.position) + shift),
                          look_at=tuple(m @ np.asarray(camera.look_at) + shift),
                          up=tuple(m @ np.asarray(camera.up)))
-    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour, camera
+    # the file's vertex normals (kernels/shading_normals.h), read only for a smooth mesh
+    face_normal = loaded.face_normal() if smooth and loaded is not None else None
+    if face_normal is not None and "transform" in desc:
+        face_normal = np.where(np.isnan(face_normal), np.nan, transform_normals(face_normal, m))
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour, camera, face_normal
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -389,7 +397,8 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         raise OclgiError("scene: no [[mesh]] given")
     materials: list[Material] = []
     verts, faces, fmats, fobjs, offset = [], [], [], [], 0
-    uvs, any_uv, colours, any_colour = [], False, [], False
+    uvs, any_uv, colours, any_colour, normals, any_normal = [], False, [], False, [], False
+    smooth = _flag(desc.get("smooth", True), "smooth")
     cameras = []  # the meshes' own (glTF) cameras
     # Static meshes form object 0; each movable mesh is an object of its own
     # (an instance with a transform over its own BVH). Triangles are stored
@@ -400,8 +409,10 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm, uv, colour, file_camera = _mesh(m, i, base_dir, materials, None, file_lights)
+        v, f, fm, uv, colour, file_camera, vn = _mesh(m, i, base_dir, materials, None, file_lights, smooth)
         cameras.append(file_camera)
+        normals.append(vn if vn is not None else np.full((len(f), 3, 3), np.nan))
+        any_normal = any_normal or vn is not None
         uvs.append(uv if uv is not None else np.full((len(f), 3, 2), np.nan))
         any_uv = any_uv or uv is not None
         colours.append(colour if colour is not None else np.full((len(f), 3, 3), np.nan))
@@ -456,6 +467,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         tri_object=np.concatenate(fobjs),
         tri_uv=np.concatenate(uvs) if any_uv else None,
         tri_colour=np.concatenate(colours) if any_colour else None,
+        tri_vertex_normals=np.concatenate(normals) if any_normal else None,
         objects=objects,
         point_lights=point_lights,
         lights=lights,
@@ -465,13 +477,16 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     )
 
 
+def _flag(value, where) -> bool:
+    if not isinstance(value, bool):
+        raise OclgiError(f"{where}: expected true or false, got {value!r}")
+    return value
+
+
 def _movable(desc, i) -> bool:
     if not isinstance(desc, dict):
         return False  # _mesh reports the type error
-    value = desc.get("movable", False)
-    if not isinstance(value, bool):
-        raise OclgiError(f"mesh[{i}].movable: expected true or false, got {value!r}")
-    return value
+    return _flag(desc.get("movable", False), f"mesh[{i}].movable")
 
 
 def _object_name(desc, i) -> str:

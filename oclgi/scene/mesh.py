@@ -41,6 +41,7 @@ class LoadedMesh:
     materials: dict[str, FileMaterial]
     face_uv: object = lambda: None  # () -> (F, 3, 2) texture coordinates (NaN where a face has none) or None
     face_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (NaN where none), or None
+    face_normal: object = lambda: None  # () -> (F, 3, 3) the file's vertex normals of the corners (NaN: none) or None
     read_file: object = None  # name -> Path, bytes (a zip member) or None: the files a material names (textures)
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
     camera: object = None  # a glTF's camera (gltf_lights.read_camera), or None
@@ -78,7 +79,7 @@ def load_mesh(path: Path) -> LoadedMesh:
 def _from_obj(obj, read_file=None) -> LoadedMesh:
     names = [""] + obj.material_names
     return LoadedMesh(obj.vertices, obj.faces, obj.face_material + 1, names, obj.materials, face_uv=obj.face_uv,
-                      read_file=read_file)
+                      face_normal=obj.face_normal, read_file=read_file)
 
 
 def _beside(path: Path):
@@ -178,7 +179,7 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
 
         loaded = trimesh.Scene(loaded)
     path = label
-    verts, faces, fmat, names, mats, uvs, colours = [], [], [], [""], {}, [], []
+    verts, faces, fmat, names, mats, uvs, colours, normals = [], [], [], [""], {}, [], [], []
     # glTF's COLOR_0 is linear; PLY's colours are 8-bit display (sRGB) values
     srgb = str(label).lower().endswith(".ply")
     offset = 0
@@ -194,10 +195,14 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
         nodes = loaded.graph.geometry_nodes.get(name, [None])
         for node in nodes:
             v = np.asarray(geom.vertices, dtype=np.float64)
+            vn = _file_normals(geom)
             if node is not None:
                 m, _ = loaded.graph[node]
                 v = v @ m[:3, :3].T + m[:3, 3]
+                if vn is not None:
+                    vn = transform_normals(vn, m[:3, :3])
             verts.append(v)
+            normals.append(vn[f] if vn is not None else np.full((len(f), 3, 3), np.nan))
             faces.append(f + offset)
             offset += len(v)
             colours.append(_corner_colours(geom, f, srgb))
@@ -219,8 +224,30 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
         raise OclgiError(f"{path}: no faces")
     face_uv = np.concatenate(uvs)
     face_colour = np.concatenate(colours) if any(not np.isnan(c).all() for c in colours) else None
+    face_normal = np.concatenate(normals) if any(not np.isnan(n).all() for n in normals) else None
     return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats,
-                      lambda: face_uv, face_colour=face_colour)
+                      lambda: face_uv, face_colour=face_colour, face_normal=lambda: face_normal)
+
+
+def _file_normals(geom) -> np.ndarray | None:
+    """(V, 3) the vertex normals a file gave (glTF NORMAL, PLY nx ny nz),
+    or None. trimesh computes vertex normals from the faces when asked for
+    ones it was not given, so only those in its cache before any question
+    came from the file."""
+    cache = getattr(getattr(geom, "_cache", None), "cache", {})
+    if "vertex_normals" not in cache:
+        return None
+    vn = np.asarray(cache["vertex_normals"], np.float64)
+    return vn if vn.shape == (len(geom.vertices), 3) else None
+
+
+def transform_normals(normals: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Normals (..., 3) under the linear map m (3x3) of their points:
+    through the inverse transpose, renormalised (right for scales and
+    shears, not only rotations); a zero normal stays zero."""
+    n = normals @ np.linalg.inv(m)  # (m^-T n) as rows: n^T m^-1
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
 def _corner_colours(geom, f, srgb: bool) -> np.ndarray:

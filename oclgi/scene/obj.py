@@ -7,7 +7,9 @@ negative indices count back from the last vertex read so far, polygons are
 fan-triangulated, ``usemtl`` names the material of the faces that follow and
 ``mtllib`` files give each material's ``Kd Ke Ks Ns Ni d Tr Tf illum`` and
 texture names (``map_*``), which :func:`oclgi.scene.materials.from_file`
-turns into a kind. A material library that cannot be found is a warning
+turns into a kind. ``vt`` and ``vn`` records (texture coordinates and
+vertex normals, the second and third fields of ``v/vt/vn``) are read
+per face corner, and only when asked for (``face_uv``, ``face_normal``). A material library that cannot be found is a warning
 (its materials keep the defaults); a NaN or infinite vertex coordinate is an
 error naming its line. A file without any ``usemtl`` takes its groups
 (``g``) as the material names of their faces, each with the mesh's default
@@ -44,6 +46,9 @@ class ObjMesh:
     # () -> (F, 3, 2) texture coordinates, NaN where a face has none, or None
     # when the file has none: read when a texture needs them
     face_uv: Callable[[], np.ndarray | None] = lambda: None
+    # () -> (F, 3, 3) vertex normals (vn) of the corners, NaN where a corner
+    # has none, or None when the file has none: read when a mesh is smooth
+    face_normal: Callable[[], np.ndarray | None] = lambda: None
 
 
 def _plain(words) -> bool:
@@ -138,8 +143,9 @@ def read_obj(path: Path, text: str | None = None,
             raise OclgiError(f"cannot read {path}: {exc.strerror}") from None
     verts: list[list[float]] = []
     uvs: list[str] = []  # the vt records' lines
+    vns: list[str] = []  # the vn records' lines
     faces: list[tuple[int, int, int]] = []
-    face_lines: list = []  # faces with a v/vt field: (line number, words, vt so far, faces after it)
+    face_lines: list = []  # faces with a v/vt/vn field: (line number, words, (vt, vn) so far, faces after it)
     face_mat: list[int] = []
     names: list[str] = []
     name_index: dict[str, int] = {}
@@ -159,8 +165,10 @@ def read_obj(path: Path, text: str | None = None,
             if not all(math.isfinite(x) for x in xyz):
                 raise OclgiError(f"{path}:{lineno}: vertex coordinate is NaN or infinite: {' '.join(line[1:4])!r}")
             verts.append(xyz)
-        elif key == "vt":  # read only if a texture needs them (_face_uvs)
+        elif key == "vt":  # read only if a texture needs them (_corner_values)
             uvs.append(raw)  # a string: kept lists would slow the collector down (2-3x on Sponza)
+        elif key == "vn":  # read only if a smooth mesh needs them
+            vns.append(raw)
         elif key == "f":
             if len(line) < 4:
                 raise OclgiError(f"{path}:{lineno}: a face needs at least 3 vertices")
@@ -186,8 +194,8 @@ def read_obj(path: Path, text: str | None = None,
                 faces.append((idx[0], idx[j], idx[j + 1]))
                 face_mat.append(cur_mat)
                 face_group.append(cur_group)
-            if "/" in line[1]:  # texture coordinates, read at the end if a texture needs them
-                face_lines.append((lineno, raw, len(uvs), len(faces)))
+            if "/" in line[1]:  # texture coordinates or normals, read at the end if needed
+                face_lines.append((lineno, raw, (len(uvs), len(vns)), len(faces)))
         elif key == "g":  # a group: the material name of its faces when the file uses no usemtl
             group = " ".join(line[1:]) or "default"
             if group not in group_index:
@@ -219,7 +227,10 @@ def read_obj(path: Path, text: str | None = None,
         # so a scene file can give each its own ([mesh.materials.floors])
         names, face_mat = groups, face_group
     def face_uv():
-        return _face_uvs(face_lines, uvs, len(faces), path) if uvs and face_lines else None
+        return _corner_values(face_lines, uvs, _UV, len(faces), path) if uvs and face_lines else None
+
+    def face_normal():
+        return _corner_values(face_lines, vns, _NORMAL, len(faces), path) if vns and face_lines else None
     return ObjMesh(
         vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
         faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
@@ -227,39 +238,61 @@ def read_obj(path: Path, text: str | None = None,
         material_names=names,
         materials=materials,
         face_uv=face_uv,
+        face_normal=face_normal,
     )
 
 
-def _face_uvs(face_lines, uvs, n_faces: int, path) -> np.ndarray:
-    """(F, 3, 2) texture coordinates of the fan-triangulated faces, NaN
-    where a face gives none."""
+@dataclass(frozen=True)
+class _Corner:
+    """What a face corner's field (v/vt/vn) names: its place in the field,
+    the record's key and width, what it is called in errors."""
+    field: int
+    key: str
+    width: int
+    what: str
+
+
+_UV = _Corner(1, "vt", 2, "texture coordinate")
+_NORMAL = _Corner(2, "vn", 3, "normal")
+
+
+def _corner_values(face_lines, records, kind: _Corner, n_faces: int, path) -> np.ndarray:
+    """(F, 3, width) values of the fan-triangulated faces' corners (texture
+    coordinates: vt's v defaults to 0; normals: vn x y z), NaN where a
+    corner gives none."""
     corner = np.full((n_faces, 3), -1, np.int64)
-    for lineno, raw, n_uvs, end in face_lines:
+    slot = 0 if kind is _UV else 1
+    for lineno, raw, counts, end in face_lines:
         words = raw.split("#", 1)[0].split()
         plain = _plain(words[1:])
-        tex = [_uv_index(f[1], n_uvs, tok, path, lineno, plain) if len(f) > 1 and f[1] else -1
+        idx = [_corner_index(f[kind.field], counts[slot], tok, path, lineno, plain, kind)
+               if len(f) > kind.field and f[kind.field] else -1
                for tok in words[1:] for f in (tok.split("/"),)]
-        first = end - (len(tex) - 2)
-        for j in range(1, len(tex) - 1):
-            corner[first + j - 1] = (tex[0], tex[j], tex[j + 1])
-    table = np.full((len(uvs) + 1, 2), np.nan)  # the last row: a corner without one
-    for k, raw in enumerate(uvs):
+        first = end - (len(idx) - 2)
+        for j in range(1, len(idx) - 1):
+            corner[first + j - 1] = (idx[0], idx[j], idx[j + 1])
+    table = np.full((len(records) + 1, kind.width), np.nan)  # the last row: a corner without one
+    for k, raw in enumerate(records):
         words = raw.split("#", 1)[0].split()
-        lineno = f"vt {k + 1}"  # the k-th texture coordinate record
-        uv = _floats(words[1:], path, lineno, 1)
-        table[k] = (uv[0], _floats(words[1:], path, lineno, 2)[1] if len(words) > 2 else 0.0)
+        lineno = f"{kind.key} {k + 1}"  # the k-th record of its kind
+        if kind is _UV:
+            uv = _floats(words[1:], path, lineno, 1)
+            table[k] = (uv[0], _floats(words[1:], path, lineno, 2)[1] if len(words) > 2 else 0.0)
+        else:
+            table[k] = _floats(words[1:], path, lineno, 3)
     return table[corner]
 
 
-def _uv_index(text: str, n_uvs: int, tok: str, path, lineno: int, plain: bool) -> int:
-    """A face corner's texture coordinate index (the second field of v/vt/vn), 0-based."""
+def _corner_index(text: str, n_records: int, tok: str, path, lineno: int, plain: bool, kind: _Corner) -> int:
+    """A face corner's texture coordinate or normal index (the second or
+    third field of v/vt/vn), 0-based."""
     try:
         if not plain and not _plain([text]):
             raise ValueError
         k = int(text)
     except ValueError:
-        raise OclgiError(f"{path}:{lineno}: malformed texture coordinate index in {tok!r}") from None
-    j = n_uvs + k if k < 0 else k - 1
-    if k == 0 or j < 0 or j >= n_uvs:
-        raise OclgiError(f"{path}:{lineno}: {tok!r} refers to no texture coordinate (vt)")
+        raise OclgiError(f"{path}:{lineno}: malformed {kind.what} index in {tok!r}") from None
+    j = n_records + k if k < 0 else k - 1
+    if k == 0 or j < 0 or j >= n_records:
+        raise OclgiError(f"{path}:{lineno}: {tok!r} refers to no {kind.what} ({kind.key})")
     return j

@@ -60,6 +60,39 @@ class Camera:
 MAX_COORDINATE = MAX_LENGTH  # squared lengths stay finite in float32 (params.MAX_LENGTH)
 
 
+# A corner normal further than this from its triangle's own normal does not
+# describe that triangle's surface (a hard edge the file did not split, a
+# sheet whose two sides share vertices): such a triangle stays flat. Within
+# it, an interpolated normal stays within 60 degrees too, so a disc is
+# lifted by at most d sin(60) (oclgi/scene/shading_normals.py).
+MAX_SHADING_ANGLE = 60.0  # degrees
+
+
+def _corner_normals(normals, faces_normals: np.ndarray, name: str) -> np.ndarray | None:
+    """Vertex normals of the corners as unit float64 vectors on the side of
+    the triangle's own normal (``faces_normals``; a file whose normals all
+    oppose its winding is turned round); a triangle with a corner missing
+    (NaN), non-finite, of zero length or beyond MAX_SHADING_ANGLE of the
+    triangle's normal keeps its geometric normal (all three NaN). None when
+    no triangle has a full set."""
+    vn = np.asarray(normals, np.float64)
+    n_faces = len(faces_normals)
+    if vn.shape != (n_faces, 3, 3):
+        raise OclgiError(f"{name}: tri_vertex_normals must be (F, 3, 3) corner normals, got {vn.shape}")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        length = np.linalg.norm(vn, axis=2, keepdims=True)
+        unit = vn / length
+        cos = np.einsum("fkj,fj->fk", unit, faces_normals)
+        side = np.where(np.nansum(cos, axis=1) < 0, -1.0, 1.0)
+        full = (np.isfinite(length) & (length > 1e-12)).all(axis=(1, 2))
+        full &= (cos * side[:, None] >= np.cos(np.radians(MAX_SHADING_ANGLE))).all(axis=1)
+    if not full.any():
+        return None
+    out = np.full_like(vn, np.nan)
+    out[full] = unit[full] * side[full, None, None]
+    return out
+
+
 @dataclass
 class Scene:
     vertices: np.ndarray  # (V, 3) float64
@@ -77,6 +110,9 @@ class Scene:
     tri_colour: np.ndarray | None = None  # (F, 3, 3) linear RGB of the corners (vertex colours), NaN: none
     # spot, sun and sky lights (oclgi.scene.lights); last, so that positional fields keep their places
     lights: list = field(default_factory=list)
+    # (F, 3, 3) unit vertex normals of the corners (shading normals: OBJ vn,
+    # glTF/PLY normals), NaN for a triangle without a full set; None: none
+    tri_vertex_normals: np.ndarray | None = None
 
     def __post_init__(self):
         if self.tri_object is None:
@@ -151,6 +187,8 @@ class Scene:
                 self.tri_uv = np.asarray(self.tri_uv)[keep]
             if self.tri_colour is not None:
                 self.tri_colour = np.asarray(self.tri_colour)[keep]
+            if self.tri_vertex_normals is not None:
+                self.tri_vertex_normals = np.asarray(self.tri_vertex_normals)[keep]
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
                           "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:
@@ -176,6 +214,8 @@ class Scene:
             if ((col < 0) | (col > 1)).any():
                 raise OclgiError(f"{self.name}: vertex colours must lie in [0, 1]")
             self.tri_colour = col
+        if self.tri_vertex_normals is not None:
+            self.tri_vertex_normals = _corner_normals(self.tri_vertex_normals, self.triangle_normals(), self.name)
         if len(self.tri_object) != len(self.faces) or (np.diff(self.tri_object) < 0).any():
             raise OclgiError(f"{self.name}: triangles must be grouped object by object")
         counts = np.bincount(self.tri_object, minlength=len(self.objects))

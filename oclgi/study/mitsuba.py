@@ -129,24 +129,47 @@ def world_triangles(scene_or_engine) -> np.ndarray:
     return tri
 
 
+def world_vertex_normals(scene_or_engine) -> np.ndarray | None:
+    """(F, 3, 3): the scene's vertex normals (NaN where a triangle has none)
+    turned as ``world_triangles`` places the triangles, or None."""
+    from ..scene.mesh import transform_normals
+
+    scene, engine = _split(scene_or_engine)
+    vn = scene.tri_vertex_normals
+    if vn is None or engine is None:
+        return vn
+    vn = vn.copy()
+    inst = engine.compiled.instances_host
+    for k, (a, b) in enumerate(scene.object_ranges()):
+        m = np.asarray(inst[k]["world_from_object"], dtype=np.float64)
+        if not np.array_equal(m, np.eye(4)[:3]):
+            vn[a:b] = transform_normals(vn[a:b], m[:, :3])
+    return vn
+
+
 def max_depth_for(oclgi_max_depth: int) -> int:
     """Mitsuba's ``max_depth`` matching oclgi's ``photons.max_depth`` (see the module docstring)."""
     return int(oclgi_max_depth) + 1
 
 
-def _mesh(mi, name, tris, bsdf, emitter=None, uv=None, colour=None):
-    """A Mitsuba mesh of separate triangles (F, 3, 3), without vertex
-    normals; ``uv`` (F, 3, 2): texture coordinates, v up as in OBJ and oclgi
-    (Mitsuba's v points down the image: 1 - v)."""
+def _mesh(mi, name, tris, bsdf, emitter=None, uv=None, colour=None, normals=None):
+    """A Mitsuba mesh of separate triangles (F, 3, 3); ``uv`` (F, 3, 2):
+    texture coordinates, v up as in OBJ and oclgi (Mitsuba's v points down
+    the image: 1 - v); ``normals`` (F, 3, 3): vertex normals (shading), else
+    none (flat)."""
     props = mi.Properties()
     props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
     n = len(tris)
-    mesh = mi.Mesh(name, 3 * n, n, props=props, has_vertex_normals=False, has_vertex_texcoords=uv is not None)
+    mesh = mi.Mesh(name, 3 * n, n, props=props, has_vertex_normals=normals is not None,
+                   has_vertex_texcoords=uv is not None)
     params = mi.traverse(mesh)
     params["vertex_positions"] = type(params["vertex_positions"])(
         np.ascontiguousarray(tris, dtype=np.float32).ravel())
+    if normals is not None:
+        params["vertex_normals"] = type(params["vertex_normals"])(
+            np.ascontiguousarray(normals, dtype=np.float32).ravel())
     if colour is not None:  # corner colours times the albedo: the reflectance (_bsdf)
         mesh.add_attribute("vertex_color", 3, np.ascontiguousarray(colour, np.float32).ravel())
     if uv is not None:
@@ -178,6 +201,7 @@ def scene_dict(mi, scene_or_engine) -> dict:
     """The shapes and emitters of the scene as a Mitsuba scene dict (no sensor, no integrator)."""
     scene, _ = _split(scene_or_engine)
     tris = world_triangles(scene_or_engine)
+    vn = world_vertex_normals(scene_or_engine)
     out = {"type": "scene"}
     for obj in range(len(scene.objects)):
         for mat_id in np.unique(scene.tri_material[scene.tri_object == obj]):
@@ -192,7 +216,15 @@ def scene_dict(mi, scene_or_engine) -> dict:
             colour = None
             if m.vertex_colours and scene.tri_colour is not None:
                 colour = np.where(np.isnan(scene.tri_colour[sel]), 1.0, scene.tri_colour[sel]) * np.asarray(m.albedo)
-            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv, colour)
+            # oclgi shades with vertex normals where its camera paths end, on diffuse surfaces
+            # (oclgi/scene/shading_normals.py); mirrors, glass and glossy lobes stay flat there
+            normals = None
+            if vn is not None and m.kind == "diffuse" and np.isfinite(vn[sel]).any():
+                t = tris[sel]
+                flat = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+                flat /= np.linalg.norm(flat, axis=1, keepdims=True)  # a flat triangle's three corners
+                normals = np.where(np.isfinite(vn[sel]), vn[sel], flat[:, None, :])
+            out[name] = _mesh(mi, name, tris[sel], _bsdf(mi, m), emitter, uv, colour, normals)
     out.update(lights.mitsuba_emitters(mi, scene))
     return out
 
