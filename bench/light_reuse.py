@@ -216,9 +216,9 @@ def main():
     warm = LightReuse(engine, "lamp", circle(2), photons=100)
     for method in sorted({m for _, ms in spans for m in ms}):
         warm.estimate(0, warm.estimator(pts, method=method, radius=RADIUS))
+        engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
     rw_est = warm.estimator(pts, method="detp_disc_index", radius=RADIUS)
     warm.estimate(0, rw_est, reweighting=Reweighting(warm, rw_est))  # its kernels built before any timing
-        engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
     rows = []
     for span, methods in spans:
         for method in methods:
