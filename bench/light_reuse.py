@@ -196,6 +196,41 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
     return out
 
 
+def plot(rows: list[dict]) -> Path:
+    """Speedups against F with the models: the tracing part against the
+    thesis' L, the whole frame at equal error (plain reuse and re-weighted)
+    against Sbert et al.'s bound F."""
+    import matplotlib
+
+    from matplotlib.figure import Figure
+
+    del matplotlib  # the figure is drawn on its own canvas: the user's backend is untouched
+    fig = Figure(figsize=(10, 4))
+    ax_t, ax_e = fig.subplots(1, 2)
+    fs = sorted({r["F"] for r in rows})
+    for key in sorted({(r["method"], r["span"]) for r in rows}):
+        sel = [r for r in rows if (r["method"], r["span"]) == key]
+        f = [r["F"] for r in sel]
+        label = f"{key[0]}, {key[1]} m"
+        ax_t.plot(f, [r["tracing_speedup"] for r in sel], "o-", label=label)
+        ax_e.plot(f, [r["speedup_equal_error"] for r in sel], "o-", label=f"{label}: reuse")
+        if sel[0]["pairs"]:
+            ax_e.plot(f, [r["rw_equal_error"] for r in sel], "s--", label=f"{label}: re-weighted")
+    mean_l = float(np.mean([r["L"] for r in rows]))
+    ax_t.axhline(mean_l, color="k", ls=":", label=f"thesis: L = {mean_l:.2f}")
+    ax_e.plot(fs, fs, "k:", label="Sbert et al.: up to F")
+    ax_e.axhline(2.0, color="grey", ls="--", lw=0.8, label="goal: 2x")
+    for ax, title in ((ax_t, "tracing speedup"), (ax_e, "frame speedup at equal error")):
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("frames F")
+        ax.set_title(title)
+        ax.legend(fontsize=7)
+    ax_e.set_yscale("log", base=2)
+    out = RESULTS / "light_reuse.png"
+    fig.savefig(out, dpi=110, bbox_inches="tight")
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paths", type=int, default=64_000, help="paths per frame, N (default 64000)")
@@ -217,13 +252,15 @@ def main():
     for method in sorted({m for _, ms in spans for m in ms}):
         warm.estimate(0, warm.estimator(pts, method=method, radius=RADIUS))
         engine.irradiance(pts, method=method, photons=1000, radius=RADIUS)
+    rw_est = warm.estimator(pts, method="detp_disc_index", radius=RADIUS)
+    warm.estimate(0, rw_est, reweighting=Reweighting(warm, rw_est))  # its kernels built before any timing
     rows = []
     for span, methods in spans:
         for method in methods:
             for f in frames:
                 rows.append(study(engine, f, paths, pts, method, span))
                 print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
-    print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)}")
+    print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)} and {plot(rows)}")
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ class LightSession(SessionBase):
                                 max_depth)
         self.points = self._points(points, camera)
         self.method, self.radius, self.options = method, radius, dict(options)
-        self.estimator = self.reuse.estimator(self.points, method, radius, **options)
+        self._set_estimator(self.reuse.estimator(self.points, method, radius, **options))
         self.params = self.reuse.run_params
         self.frame = None
         self.move_light(self.reuse.positions[0], None if self.reuse.directions is None else self.reuse.directions[0])
@@ -105,7 +105,7 @@ class LightSession(SessionBase):
             raise OclgiError(f"a light position is 3 finite numbers, got {position!r}")
         frame = self.frame_of(position, direction)
         if frame is not None:
-            self.result = self.reuse.estimate(frame, self.estimator)
+            self.result = self.reuse.estimate(frame, self.estimator, self.reweighting)
             self.device_irradiance = self.result.device_irradiance
             done = LightUpdate(reused=True, frame=frame)
         else:
@@ -133,6 +133,15 @@ class LightSession(SessionBase):
         self.device_irradiance = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                            hostbuf=irr)
 
+    def _set_estimator(self, est) -> None:
+        """The estimator of every frame; disc indexing re-weights the tails'
+        stored pairs (oclgi/tracing/light_reweight.py: the same sums, the
+        tails not walked again each frame)."""
+        from ..tracing.light_reweight import Reweighting
+
+        self.estimator = est
+        self.reweighting = Reweighting(self.reuse, est) if est.name == "detp_disc_index" else None
+
     def move(self, name: str, matrix):
         raise OclgiError("objects do not move in a light session (its stored paths are the light animation's); "
                          "move objects in an oclgi.Session")
@@ -159,7 +168,8 @@ class LightSession(SessionBase):
         t0 = time.perf_counter()
         est = self.reuse.estimator(self.points, method or self.params.method,
                                    self.params.radius if radius is None else radius, **options)
-        self.estimator, self.params, self.options = est, self.reuse.run_params, dict(options)
+        self._set_estimator(est)
+        self.params, self.options = self.reuse.run_params, dict(options)
         self.move_light(self.position, self._direction())
         return time.perf_counter() - t0
 
@@ -170,7 +180,8 @@ class LightSession(SessionBase):
             raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
         t0 = time.perf_counter()
         self.points = self._points(None, camera)
-        self.estimator = self.reuse.estimator(self.points, self.params.method, self.params.radius, **self.options)
+        self._set_estimator(self.reuse.estimator(self.points, self.params.method, self.params.radius,
+                                                 **self.options))
         self.move_light(self.position, self._direction())
         return time.perf_counter() - t0
 
