@@ -16,7 +16,8 @@ on the server, and the server must never fall behind a drag:
   moves wait and the page has not yet applied two frames, the frame of a
   pose already overtaken is not sent; the last one always is;
 - a flood (more than MAX_MESSAGES_PER_SECOND requests in a second) is
-  refused, with one error a second, and the session is left as it was.
+  refused, with one error a second, and the session is left as it was;
+  a ``sync`` is still answered, so the page learns where things stand.
 """
 
 from __future__ import annotations
@@ -135,8 +136,8 @@ class Connection:
             if self.in_flight > 0:
                 self.in_flight -= 1
             return None
-        self.window_count += 1
-        if self.window_count > MAX_MESSAGES_PER_SECOND:
+        self.window_count += req.kind != "sync"  # a sync is answered even in a flood (queued, it is bounded)
+        if req.kind != "sync" and self.window_count > MAX_MESSAGES_PER_SECOND:
             if self.window_warned:
                 return ""  # refused, already said this second
             self.window_warned = True
@@ -191,11 +192,18 @@ class Connection:
                 await self.send_frame(force=not newer_move)
             await self.send_frame()
 
-    async def close(self) -> None:
+    def close(self):
+        """Stop the work and close the session (now, in the device's thread,
+        even when the socket's handler is cancelled on the way out); a
+        future of that."""
         if self.task is not None:
             self.task.cancel()
-        if self.session is not None:
-            session, self.session = self.session, None
-            await self.viewer.device(session.close)
-            self.viewer.sessions_closed += 1
-            self.viewer.buffers_released += len(session.released_buffers)
+        session, self.session = self.session, None
+        return asyncio.wrap_future(self.viewer.executor.submit(self._close_session, session))
+
+    def _close_session(self, session) -> None:
+        if session is None:
+            return
+        session.close()
+        self.viewer.sessions_closed += 1
+        self.viewer.buffers_released += len(session.released_buffers)

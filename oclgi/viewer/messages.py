@@ -65,9 +65,19 @@ def _integer(msg: dict, key: str, kind: str, lo: int, hi: int) -> int:
     return int(v)
 
 
-def rigid_matrix(values, loaded: np.ndarray, name: str) -> np.ndarray:
-    """The 4x4 matrix of 16 row-major numbers, checked to be ``loaded``
-    (the object's transform as loaded) moved rigidly."""
+@dataclass(frozen=True)
+class Movable:
+    """What a move of one object is checked against."""
+
+    loaded: np.ndarray  # its world-from-object matrix when the tessellation was made
+    centre: np.ndarray  # the centre of its box then
+    lo: np.ndarray  # where its centre may go: the scene's box grown by its diagonal
+    hi: np.ndarray
+
+
+def rigid_matrix(values, obj: Movable, name: str) -> np.ndarray:
+    """The 4x4 matrix of 16 row-major numbers, checked to be the object's
+    loaded transform moved rigidly, and to keep it near the scene."""
     if not isinstance(values, list) or len(values) != 16 or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
         raise BadMessage(f"move: 'matrix' must be a list of 16 numbers (row-major 4x4), got {_short(values)}")
@@ -76,11 +86,15 @@ def rigid_matrix(values, loaded: np.ndarray, name: str) -> np.ndarray:
         raise BadMessage(f"move: the matrix of {name!r} has a NaN or infinite entry")
     if not np.allclose(m[3], [0, 0, 0, 1], atol=0, rtol=0):
         raise BadMessage(f"move: the matrix of {name!r} is not affine (its last row must be 0 0 0 1)")
-    rel = m @ np.linalg.inv(loaded)
+    rel = m @ np.linalg.inv(obj.loaded)
     r = rel[:3, :3]
     if not np.allclose(r.T @ r, np.eye(3), atol=RIGID_TOLERANCE) or np.linalg.det(r) <= 0:
         raise BadMessage(f"move: the matrix of {name!r} is not a rotation and translation of the object as "
                          "loaded (it scales, shears or mirrors it)")
+    c = r @ obj.centre + rel[:3, 3]
+    if not ((c >= obj.lo).all() and (c <= obj.hi).all()):
+        raise BadMessage(f"move: the matrix takes {name!r} to {np.round(c, 3).tolist()}, beyond the scene's box "
+                         "grown by its diagonal")
     return m
 
 
@@ -91,7 +105,7 @@ def _short(v) -> str:
 
 def parse(text, movable: dict, methods: tuple, diagonal: float) -> Request:
     """The request in ``text`` (a str from the socket), or BadMessage.
-    ``movable``: name -> the object's matrix as loaded; ``methods``: the
+    ``movable``: name -> Movable; ``methods``: the
     estimators this session can switch to; ``diagonal``: the scene's (the
     largest disc radius)."""
     if not isinstance(text, str):

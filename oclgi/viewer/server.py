@@ -40,6 +40,7 @@ class Viewer:
     def __init__(self, engine, tess, method=None, photons=None, radius=None):
         from ..estimators import ESTIMATORS
         from .mesh_payload import description, mesh_bytes, vertex_objects
+        from .messages import Movable
         from .vertex_colours import vertex_terms
 
         self.engine, self.tess = engine, tess
@@ -51,7 +52,13 @@ class Viewer:
         self.points = tess.points()
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
-        self.movable = {scene.objects[i].name: engine.pose_matrix(scene.objects[i].name) for i in movable}
+        self.movable = {}  # name -> messages.Movable
+        lo, hi = scene.bounds()
+        for rank, obj in enumerate(movable):
+            name = scene.objects[obj].name
+            v = tess.vertices[objects == rank + 1]
+            self.movable[name] = Movable(engine.pose_matrix(name), (v.min(axis=0) + v.max(axis=0)) / 2,
+                                         lo - scene.diagonal, hi + scene.diagonal)
         self.mesh = mesh_bytes(tess, objects)
         self.description = description(engine, tess, movable)
         self.diagonal = scene.diagonal
@@ -80,7 +87,7 @@ class Viewer:
         return await asyncio.get_running_loop().run_in_executor(self.executor, functools.partial(fn, *args))
 
     def status(self) -> dict:
-        return {"open": len([c for c in self.connections if c.session is not None]),
+        return {"open": len(self.connections),
                 "opened": self.sessions_opened, "closed": self.sessions_closed,
                 "buffers_released": self.buffers_released}
 
@@ -143,8 +150,8 @@ class Viewer:
             if not ws.closed:
                 await conn.error(str(exc), "open")
         finally:
-            await conn.close()
             self.connections.discard(conn)
+            await asyncio.shield(conn.close())
         return ws
 
     async def _shutdown(self, app):
