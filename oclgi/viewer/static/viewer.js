@@ -110,7 +110,7 @@ function showError(text) {
 
 async function main() {
   const canvas = $("view");
-  const gl = canvas.getContext("webgl2", {antialias: true, preserveDrawingBuffer: true});
+  const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: true});
   if (!gl) { showError("this browser has no WebGL2"); return; }
   const scene = await (await fetch("scene.json")).json();
   const meshBuffer = await (await fetch("mesh.bin")).arrayBuffer();
@@ -154,6 +154,8 @@ async function main() {
   buffer(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
   gl.bindVertexArray(null);
   let colourDirty = true;
+  let redraw = true; // something shown changed: the next display frame draws (an idle page costs nothing)
+  const changed = () => { redraw = true; };
 
   // camera: orbit about a target
   const [lo, hi] = scene.bounds;
@@ -168,6 +170,7 @@ async function main() {
     camera.yaw = Math.atan2(d[0], d[2]);
     camera.pitch = Math.asin(d[1] / camera.distance);
     camera.fov = cam0.fov * Math.PI / 180;
+    redraw = true;
   }
   home();
   function frame() { // eye, forward, right, up (right/up at the image plane's half-extents)
@@ -217,6 +220,7 @@ async function main() {
   let exposure = 1;
   function setExposure(stops) {
     exposure = Math.pow(2, stops);
+    redraw = true;
     $("exposure").value = stops;
     $("exposure-value").textContent = `${stops >= 0 ? "+" : ""}${Number(stops).toFixed(1)} EV`;
   }
@@ -286,7 +290,7 @@ async function main() {
   let syncs = 0;
   const plot = [];
   const drawnTimes = [];
-  let lastMoveSent = 0;
+  let lastMoveSent = 0, statsDirty = false, statsShown = 0;
   function send(msg) { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); }
   function applyFrame(buf) {
     const view = new DataView(buf);
@@ -304,6 +308,7 @@ async function main() {
     state.seq = seq;
     state.frames++;
     state.frameAt = performance.now();
+    state.moveToFrame = lastMoveSent ? state.frameAt - lastMoveSent : null;
     colourDirty = true;
     send({type: "ack", seq});
     if (state.frames === 1) autoExposure();
@@ -311,7 +316,7 @@ async function main() {
   function describe(msg) {
     for (const name in msg.poses) {
       state.serverPoses[name] = msg.poses[name];
-      if (!drag || drag.name !== name) if (!pendingMoves.has(name)) state.poses[name] = msg.poses[name].slice();
+      if ((!drag || drag.name !== name) && !pendingMoves.has(name)) { state.poses[name] = msg.poses[name].slice(); redraw = true; }
     }
     const method = $("method");
     if (method.options.length !== msg.methods.length) {
@@ -337,7 +342,7 @@ async function main() {
     const now = performance.now();
     while (drawnTimes.length && drawnTimes[0] < now - 1000) drawnTimes.shift();
     rows.push(["updates/s (drawn)", drawnTimes.length.toString()]);
-    if (msg.kind === "move") rows.push(["move to frame (ms)", (now - lastMoveSent).toFixed(0)]);
+    if (msg.kind === "move" && state.moveToFrame != null) rows.push(["move to frame (ms)", state.moveToFrame.toFixed(0)]);
     $("stats").innerHTML = rows.map(([a, b]) => `<tr><td>${a}</td><td>${b}</td></tr>`).join("");
   }
   function drawPlot() {
@@ -373,7 +378,8 @@ async function main() {
       state.lastUpdate = msg;
       describe(msg);
       plot.push({t: performance.now(), ms: 1e3 * (msg.seconds.server || msg.seconds.total)});
-      showStats(msg);
+      statsDirty = true;
+      if (msg.kind === "move") moveInFlight = false;
       $("error").textContent = "";
     } else if (msg.type === "synced") {
       describe(msg);
@@ -382,7 +388,11 @@ async function main() {
       if (resolve) resolve(msg);
     } else if (msg.type === "error") {
       showError(msg.message);
-      if (msg.request === "move") for (const name in state.serverPoses) if (!drag) state.poses[name] = state.serverPoses[name].slice();
+      moveInFlight = false;
+      if (msg.request === "move" && !drag) {
+        for (const name in state.serverPoses) state.poses[name] = state.serverPoses[name].slice();
+        redraw = true;
+      }
     }
   };
   ws.onclose = () => { $("status").textContent = "the server closed the connection"; };
@@ -400,17 +410,35 @@ async function main() {
 
   // mouse and keys: orbit, pan, zoom; pick and drag a movable object on its support plane
   let drag = null;
-  function queueMove(name, matrix) { state.poses[name] = matrix; pendingMoves.set(name, matrix); }
+  // A move goes out at once when the server has answered the last one, else
+  // it waits (replacing any older one) for that answer: the page keeps at
+  // most one move in flight, the server coalesces whatever queues up there.
+  let moveInFlight = false;
+  function flushMoves() {
+    if (!pendingMoves.size || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
+    for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+    pendingMoves.clear();
+    moveInFlight = true;
+    lastMoveSent = performance.now();
+  }
+  function queueMove(name, matrix) {
+    state.poses[name] = matrix;
+    pendingMoves.set(name, matrix);
+    changed();
+    flushMoves();
+  }
   function planeHit(r, y) {
     if (Math.abs(r.dir[1]) < 1e-9) return null;
     const t = (y - r.origin[1]) / r.dir[1];
     return t > 0 ? add(r.origin, scale(r.dir, t)) : null;
   }
   canvas.addEventListener("contextmenu", e => e.preventDefault());
+  window.addEventListener("resize", changed);
   canvas.addEventListener("pointerdown", e => {
     canvas.setPointerCapture(e.pointerId);
     const x = e.offsetX, y = e.offsetY;
     const hitObject = e.button === 0 && !e.shiftKey ? pick(x, y) : 0;
+    changed(); // the selection's highlight, and the picking pass drew into another target
     if (hitObject > 0) {
       selected = hitObject;
       const i = hitObject - 1, name = objects[i].name;
@@ -435,6 +463,7 @@ async function main() {
     }
     const dx = x - drag.x, dy = y - drag.y;
     drag.x = x; drag.y = y;
+    changed();
     if (drag.kind === "orbit") {
       camera.yaw -= dx * 0.008;
       camera.pitch = Math.max(-1.5, Math.min(1.5, camera.pitch + dy * 0.008));
@@ -447,12 +476,13 @@ async function main() {
   canvas.addEventListener("wheel", e => {
     e.preventDefault();
     camera.distance *= Math.exp(e.deltaY * 0.001);
+    changed();
   }, {passive: false});
   window.addEventListener("keydown", e => {
     if (!selected || e.target.tagName === "INPUT") return;
     const i = selected - 1, name = objects[i].name, m = state.poses[name];
     const step = 0.01 * scene.diagonal;
-    if (e.key === "Escape") { selected = 0; return; }
+    if (e.key === "Escape") { selected = 0; changed(); return; }
     let t = null;
     if (e.key === "r" || e.key === "R" || e.key === "PageUp") t = translation(0, step, 0);
     else if (e.key === "f" || e.key === "F" || e.key === "PageDown") t = translation(0, -step, 0);
@@ -465,20 +495,27 @@ async function main() {
 
   function tick() {
     if (colourDirty) {
+      redraw = true;
       gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
       gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
       colourDirty = false;
       if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
     }
-    draw(false);
-    state.draws++;
-    state.drawnAt = performance.now();
-    if (pendingMoves.size && ws.readyState === WebSocket.OPEN) {
-      for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
-      pendingMoves.clear();
-      lastMoveSent = performance.now();
+    if (redraw) {
+      draw(false);
+      redraw = false;
+      state.draws++;
+      state.drawnAt = performance.now();
     }
-    drawPlot();
+    const now = performance.now();
+    if (moveInFlight && now - lastMoveSent > 2000) moveInFlight = false; // an answer lost: never stall a drag
+    flushMoves();
+    if (statsDirty && now - statsShown > 250) { // text and plot a few times a second, not every frame
+      showStats(state.lastUpdate);
+      drawPlot();
+      statsDirty = false;
+      statsShown = now;
+    }
     requestAnimationFrame(tick);
   }
   requestAnimationFrame(tick);
@@ -487,7 +524,7 @@ async function main() {
   state.api = {
     project, pick, objectBox, home,
     camera: () => ({...camera}),
-    orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; },
+    orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
     move: queueMove,
     sync() { // answered once the server has done everything sent before it
       for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
@@ -496,6 +533,16 @@ async function main() {
       return new Promise(resolve => { waiting.set(id, resolve); send({type: "sync", id}); });
     },
     send,
+    drawMs(n = 5) { // the page's cost of one frame: upload the colours and draw, finished
+      const t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
+        gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+        draw(false);
+        gl.finish();
+      }
+      return (performance.now() - t0) / n;
+    },
   };
 }
 
