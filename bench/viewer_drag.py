@@ -142,6 +142,7 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
         hello, seq, cont = asyncio.run(drive())
     finally:
         stop(box, thread)
+    static = static_points_cost(viewer, path_r, moves)
     ms = np.array([r["ms"] for r in seq])
     stages = {}
     for r in seq:
@@ -159,7 +160,32 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
         "stage_ms_median": med,
         "client_ms_median": float(np.median(ms - np.array([1e3 * r["s"]["server"] for r in seq]))),
         "continuous": cont, "continuous_per_s": cont["drawn"] / cont["seconds"],
+        "without_dynamic_ms": static,
     }
+
+
+def static_points_cost(viewer, path_r: float, moves: int) -> dict:
+    """The same moves in the API, with and without the bunny's vertices (the
+    dynamic points): median ms of session.move, the points' share."""
+    from oclgi.incremental.open_session import open_session
+
+    points = viewer.points
+    on_bunny = np.zeros(len(points), bool)
+    for name in viewer.movable:
+        a, b = viewer.engine.scene.object_ranges()[viewer.engine.scene.object_id(name)]
+        on_bunny |= (points.tri >= a) & (points.tri < b)
+    out = {}
+    for label, pts in (("all", points), ("static only", points.subset(np.nonzero(~on_bunny)[0]))):
+        r = viewer.run
+        with open_session(viewer.engine, pts, method=r.method, photons=r.photons, radius=r.radius) as s:
+            t = []
+            for i in range(1, moves + 1):
+                a = 2 * np.pi * i / moves
+                m = np.eye(4)
+                m[0, 3], m[2, 3] = path_r * (np.cos(a) - 1), path_r * np.sin(a)
+                t.append(s.move("bunny", m).seconds["total"])
+        out[label] = 1e3 * float(np.median(t[2:]))
+    return out
 
 
 def markdown(rows: list[dict], machine: str) -> str:
@@ -178,6 +204,11 @@ def markdown(rows: list[dict], machine: str) -> str:
                    f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
                    + " | ".join(f"{s.get(k, float('nan')):.1f}" for k in stages)
                    + f" | {r['user_ms_median']:.1f} | **{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |")
+    out += ["", "The dynamic points' cost: the same moves through the API (session.move, median ms), over every "
+            "vertex and over the static vertices only:", "", "| scene | all vertices | static only |", "|---|---:|---:|"]
+    for r in rows:
+        w = r["without_dynamic_ms"]
+        out.append(f"| {r['scene']} + bunny | {w['all']:.1f} | {w['static only']:.1f} |")
     return "\n".join(out) + "\n"
 
 

@@ -18,21 +18,13 @@ import numpy as np
 import pytest
 
 from browser import Browser, chromium_path
-from viewer_client import reference_colours
-
-PHOTONS = 20_000
-EDGE = 0.3
+from viewer_client import EDGE, PHOTONS, open_viewer, reference_colours
 
 
 @pytest.fixture(scope="module")
 def viewer(scenes_dir):
     """The same scene, tessellation and run as the server's: the API's side."""
-    import oclgi
-    from oclgi.scene.tessellate import tessellate
-    from oclgi.viewer.server import Viewer
-
-    scene = oclgi.load_file(scenes_dir / "cornell_bunny.toml")
-    v = Viewer(oclgi.Engine(scene), tessellate(scene, EDGE), photons=PHOTONS)
+    v = open_viewer(scenes_dir / "cornell_bunny.toml")
     yield v
     v.executor.shutdown(wait=True)
 
@@ -85,9 +77,9 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             # drag the bunny with the mouse, from its middle to the right across the floor
             box = await tab.eval("oclgiState.api.objectBox(0)")
             start = await tab.eval(f"oclgiState.api.project({json.dumps(box['centre'])})")
-            assert await tab.eval(f"oclgiState.api.pick({start[0]}, {start[1]})") == 1, "the bunny is not under the mouse"
-            target = [box["centre"][0] + 0.8, box["lo"][1], box["centre"][2] - 0.3]
-            goal = [target[0], box["centre"][1], target[2]]
+            picked = await tab.eval(f"oclgiState.api.pick({start[0]}, {start[1]})")
+            assert picked == 1, "the bunny is not under the mouse"
+            goal = [box["centre"][0] + 0.8, box["centre"][1], box["centre"][2] - 0.3]
             end = await tab.eval(f"oclgiState.api.project({json.dumps(goal)})")
             await drag(tab, start, end)
             synced = await tab.eval("oclgiState.api.sync()")

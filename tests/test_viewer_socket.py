@@ -10,27 +10,20 @@ import numpy as np
 import pytest
 
 from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import PageModel, expected_radiance, receive_until, reference_colours, sync
-
-PHOTONS = 20_000
-EDGE = 0.3
+from viewer_client import (PHOTONS, PageModel, expected_radiance, open_viewer, receive_until, reference_colours,
+                           sync)
 
 
 @pytest.fixture(scope="module")
 def viewer(scenes_dir):
-    import oclgi
-    from oclgi.scene.tessellate import tessellate
-    from oclgi.viewer.server import Viewer
-
-    scene = oclgi.load_file(scenes_dir / "cornell_bunny.toml")
-    v = Viewer(oclgi.Engine(scene), tessellate(scene, EDGE), photons=PHOTONS)
+    v = open_viewer(scenes_dir / "cornell_bunny.toml")
     yield v
     v.executor.shutdown(wait=True)
 
 
 @pytest.fixture(scope="module")
 def home(viewer):
-    """Colours of a fresh session at the loaded pose."""
+    """The API's colours at the loaded pose."""
     return reference_colours(viewer, {})
 
 

@@ -11,6 +11,20 @@ import struct
 import numpy as np
 
 
+PHOTONS = 20_000  # the tests' runs: small, the bunny still casting a shadow
+EDGE = 0.3
+
+
+def open_viewer(scene_path, photons: int = PHOTONS, edge: float = EDGE):
+    """The server's shared part (engine, tessellation, run) over a scene file."""
+    import oclgi
+    from oclgi.scene.tessellate import tessellate
+    from oclgi.viewer.server import Viewer
+
+    scene = oclgi.load_file(scene_path)
+    return Viewer(oclgi.Engine(scene), tessellate(scene, edge), photons=photons)
+
+
 class PageModel:
     """What a page holds: the colours, applied frame by frame."""
 
