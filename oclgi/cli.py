@@ -266,6 +266,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--edge", type=_positive_float,
                    help="longest edge of the tessellated triangles whose vertices carry the light "
                         "(default: the disc radius)")
+    v.add_argument("--all-vertices", action="store_true",
+                   help="query every vertex of a movable object (default: one per edge-sized cell of its mesh, "
+                        "each vertex showing its cell's value: a fine mesh's vertices are most of an update)")
     v.add_argument("--method", type=_param(params.method, "--method"), choices=METHODS,
                    help="estimator of each page's session (default: the scene's, else detp_disc_index)")
     v.add_argument("--photons", type=_param(params.photons, "--photons"),

@@ -56,8 +56,9 @@ def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
         ws, page, hello = await connect(client, viewer)
         assert hello["photons"] == PHOTONS and hello["method"] == "detp_disc_index"
         assert np.array_equal(page.colours, home)
-        np.testing.assert_allclose(page.colours, expected_radiance(viewer.engine.scene, viewer.tess,
-                                                                   _irradiance_of(viewer, {})), rtol=2e-6, atol=1e-7)
+        e = _irradiance_of(viewer)[viewer.value_of]  # each vertex shows its query point's value
+        np.testing.assert_allclose(page.colours, expected_radiance(viewer.engine.scene, viewer.tess, e),
+                                   rtol=2e-6, atol=1e-7)
         for m in (bunny_at(0.3, 0.0), bunny_at(0.6, -0.2, 0.5)):
             await move(ws, m)
             upd = await receive_until(ws, page, lambda m: m["type"] == "update")
@@ -73,7 +74,7 @@ def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
     run(test, viewer)
 
 
-def _irradiance_of(viewer, poses):
+def _irradiance_of(viewer):
     from oclgi.incremental.open_session import open_session
 
     engine = viewer.engine.posed()
@@ -212,3 +213,24 @@ def test_frame_encoder_sends_only_changes():
     assert len(f) == 16 + 12 * 100  # most changed: the whole array
     page.apply(f)
     assert np.array_equal(page.colours, c) and page.seq == 3
+
+
+def test_movable_objects_are_queried_once_per_edge_sized_cell(viewer):
+    from oclgi.viewer.mesh_payload import vertex_objects
+    from oclgi.viewer.object_points import object_points
+
+    tess, scene = viewer.tess, viewer.engine.scene
+    objects, _ = vertex_objects(scene, tess.vertex_tri)
+    material = np.asarray(scene.tri_material)[tess.vertex_tri]
+    queried, value_of = object_points(tess, objects, material)
+    rep = queried[value_of]  # the vertex whose value each vertex shows
+    static = objects == 0
+    assert np.array_equal(rep[static], np.nonzero(static)[0]), "a static vertex shows another's value"
+    moving = ~static
+    assert 0 < len(np.unique(rep[moving])) < moving.sum() / 5, "the bunny's vertices were not thinned"
+    assert (objects[rep] == objects).all() and (material[rep] == material).all()
+    assert (np.linalg.norm(tess.vertices[rep] - tess.vertices, axis=1) <= np.sqrt(3) * tess.edge).all()
+    assert ((tess.normals[rep] * tess.normals).sum(axis=1)[moving] >= 0).all(), "a value crossed to the other side"
+    q, v = object_points(tess, objects, material, all_vertices=True)
+    assert np.array_equal(q, np.arange(len(tess.vertices))) and np.array_equal(v, q)
+    assert len(viewer.points) == len(queried)

@@ -81,7 +81,6 @@ def reference_colours(viewer, poses: dict, **run) -> np.ndarray:
     each object moved there once; the viewer's run parameters unless
     ``run`` overrides them."""
     from oclgi.incremental.open_session import open_session
-    from oclgi.viewer.vertex_colours import radiance
 
     r = viewer.run
     args = dict(method=r.method, photons=r.photons, radius=r.radius)
@@ -90,4 +89,4 @@ def reference_colours(viewer, poses: dict, **run) -> np.ndarray:
         for name, m in poses.items():
             if not np.array_equal(np.reshape(m, (4, 4)), viewer.movable[name].loaded):
                 s.move(name, np.array(m, np.float64).reshape(4, 4))
-        return radiance(s.irradiance(), viewer.terms)
+        return viewer.colours(s.irradiance())

@@ -24,9 +24,10 @@ def view(args) -> None:
     engine = Engine(scene, device=args.device, local_size=args.local_size, progress=False)
     run = engine.run_params(args.method, args.photons, args.radius)
     tess = tessellate(scene, args.edge if args.edge is not None else run.radius)
-    viewer = Viewer(engine, tess, args.method, args.photons, args.radius)
+    viewer = Viewer(engine, tess, args.method, args.photons, args.radius, args.all_vertices)
     if not args.quiet:
         print(f"oclgi view: {scene.name}: {len(tess.vertices):,} vertices (edge {tess.edge:.3g}), "
+              f"{len(viewer.points):,} query points, "
               f"{run.photons:,} photons per page, {run.method}; ready in {time.perf_counter() - t0:.1f}s",
               file=sys.stderr)
 

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import OclgiError
 from .messages import BadMessage, Request, parse
-from .vertex_colours import FrameEncoder, radiance
+from .vertex_colours import FrameEncoder
 
 MAX_MESSAGES_PER_SECOND = 240  # a drag sends one a display frame (60 to 144 a second)
 MAX_IN_FLIGHT = 2  # frames sent and not yet acknowledged before an overtaken one is skipped
@@ -58,7 +58,7 @@ class Connection:
     # -- device work (in the viewer's worker thread) ----------------------------------------
     def _colours(self) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
-        colours = radiance(self.session.irradiance(), self.viewer.terms)
+        colours = self.viewer.colours(self.session.irradiance())
         return colours, time.perf_counter() - t0
 
     def _open(self):

@@ -25,6 +25,8 @@ import concurrent.futures
 import functools
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import OclgiError
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -37,10 +39,11 @@ class Viewer:
     """What every page shares: the engine, the tessellation, the device's
     worker thread; and the count of sessions for ``/status.json``."""
 
-    def __init__(self, engine, tess, method=None, photons=None, radius=None):
+    def __init__(self, engine, tess, method=None, photons=None, radius=None, all_vertices: bool = False):
         from ..estimators import ESTIMATORS
         from .mesh_payload import description, mesh_bytes, vertex_objects
         from .messages import Movable
+        from .object_points import object_points
         from .vertex_colours import vertex_terms
 
         self.engine, self.tess = engine, tess
@@ -49,9 +52,11 @@ class Viewer:
         if self.run.method != "photon_map" and not ESTIMATORS[self.run.method].incremental:
             raise OclgiError(f"method {self.run.method!r} has no incremental update; the viewer takes "
                              f"{', '.join(self.methods_for(None))} or photon_map")
-        self.points = tess.points()
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
+        queried, self.value_of = object_points(tess, objects, np.asarray(scene.tri_material)[tess.vertex_tri],
+                                               all_vertices)
+        self.points = tess.points().subset(queried)  # each session's query points
         self.movable = {}  # name -> messages.Movable
         lo, hi = scene.bounds()
         for rank, obj in enumerate(movable):
@@ -60,12 +65,18 @@ class Viewer:
             self.movable[name] = Movable(engine.pose_matrix(name), (v.min(axis=0) + v.max(axis=0)) / 2,
                                          lo - scene.diagonal, hi + scene.diagonal)
         self.mesh = mesh_bytes(tess, objects)
-        self.description = description(engine, tess, movable)
+        self.description = dict(description(engine, tess, movable), points=len(self.points))
         self.diagonal = scene.diagonal
         self.executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="oclgi-device")
         self.connections: set = set()
         self.sessions_opened = self.sessions_closed = self.buffers_released = 0
         self.numbered = 0
+
+    def colours(self, irradiance) -> np.ndarray:
+        """Every vertex's radiance from the irradiance at the query points."""
+        from .vertex_colours import radiance
+
+        return radiance(np.asarray(irradiance)[self.value_of], self.terms)
 
     def methods_for(self, session) -> tuple:
         """The estimators a session can switch to without re-tracing."""

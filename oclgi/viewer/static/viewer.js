@@ -370,7 +370,8 @@ async function main() {
       state.hello = msg;
       state.connection = msg.connection;
       describe(msg);
-      $("status").textContent = `${scene.vertices.toLocaleString()} vertices, ${msg.photons.toLocaleString()} photons ` +
+      $("status").textContent = `${scene.vertices.toLocaleString()} vertices (${scene.points.toLocaleString()} ` +
+        `queried), ${msg.photons.toLocaleString()} photons ` +
         `(${msg.segments.toLocaleString()} segments), session ${msg.connection}`;
       state.ready = true;
     } else if (msg.type === "update") {
