@@ -8,7 +8,7 @@
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
                       [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
-    oclgi view SCENE [--host H] [--port P] [--edge E] [--photons N] [--method M] [--radius D]
+    oclgi view SCENE [--host H] [--port P] [--edge E] [--all-vertices] [--photons N] [--method M] [--radius D]
     oclgi info
 
 Errors in the input (missing or malformed files, bad numbers, no emitter, no
