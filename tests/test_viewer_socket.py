@@ -51,6 +51,13 @@ async def move(ws, matrix, name="bunny"):
     await ws.send_str(json.dumps({"type": "move", "object": name, "matrix": matrix}))
 
 
+async def moves_exactly(ws, page, viewer, matrix, ident=1):
+    """Move the bunny; the page's colours then equal the API's at the pose."""
+    await move(ws, matrix)
+    done = await sync(ws, page, ident)
+    assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+
+
 def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
     async def test(client):
         ws, page, hello = await connect(client, viewer)
@@ -125,10 +132,7 @@ def test_bad_input_is_refused_and_the_session_stays_exact(viewer):
         assert after["poses"] == before["poses"] and after["seq"] == before["seq"]
         assert after["photons"] == PHOTONS and after["radius"] == before["radius"]
         assert np.array_equal(page.colours, colours)
-        # still exact, and still moving
-        await move(ws, bunny_at(0.5, 0.2))
-        done = await sync(ws, page, 3)
-        assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+        await moves_exactly(ws, page, viewer, bunny_at(0.5, 0.2), 3)  # still exact, and still moving
         await ws.close()
     run(test, viewer)
 
@@ -173,10 +177,7 @@ def test_two_sockets_have_independent_sessions_and_a_closed_one_is_freed(viewer,
         assert status["open"] == 1 and status["closed"] == status0["closed"] + 1
         assert status["buffers_released"] > status0["buffers_released"]
         assert sum(s.closed for s in sessions) == 1, "exactly the closed socket's session is closed"
-        # the other socket's session goes on
-        await move(a, bunny_at(0.2, 0.3))
-        done = await sync(a, page_a)
-        assert np.array_equal(page_a.colours, reference_colours(viewer, done["poses"]))
+        await moves_exactly(a, page_a, viewer, bunny_at(0.2, 0.3))  # the other socket's session goes on
         await a.close()
     run(test, viewer)
 
