@@ -12,15 +12,15 @@ SCENE  ?= scenes/cornell_box.toml
 CASES  ?= 2000
 SEED   ?= 0
 
-.PHONY: render test bench fuzz setup opencl warm clean
+.PHONY: render test bench fuzz setup opencl browser warm clean
 
 render: setup $(VENV)/.warm
 	$(VENV)/bin/oclgi render $(SCENE) -o out/$(basename $(notdir $(SCENE))).exr
 
-test: setup
+test: setup browser
 	$(PY) -m pytest -q
 
-bench: setup $(VENV)/.bench
+bench: setup browser $(VENV)/.bench
 	$(PY) -m pytest bench -q --benchmark-json=bench/results/latest.json
 
 # Generated inputs for every format and command, judged case by case: the
@@ -54,6 +54,11 @@ $(VENV)/.warm: $(VENV)/.installed $(wildcard kernels/*.cl kernels/*.h) | opencl
 # its PoCL 3.0 fails on AVX-512 CPUs with "unknown target CPU 'generic'").
 opencl: $(VENV)/.installed
 	@sh tools/ensure-opencl.sh $(PY)
+
+# Debian's chromium for the viewer's end-to-end test (headless, over the
+# DevTools protocol; Playwright's own browsers are not downloaded).
+browser:
+	@sh tools/ensure-chromium.sh
 
 clean:
 	rm -rf $(VENV) out build *.egg-info

@@ -9,6 +9,7 @@
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
                       [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
+    oclgi view SCENE [--host H] [--port P] [--edge E] [--all-vertices] [--photons N] [--method M] [--radius D]
     oclgi info
 
 Errors in the input (missing or malformed files, bad numbers, no emitter, no
@@ -272,6 +273,29 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--exposure", type=_positive_float, default=1.0,
                    help="multiplier of the colours shown (COLOR_0, _COLOR_SRGB); the float values are kept as "
                         "they are in _IRRADIANCE or _RADIANCE")
+
+    v = sub.add_parser("view", help="the scene in the browser: orbit, drag objects, watch the light follow "
+                       "(a local web server; prints its URL)")
+    v.add_argument("scene", type=Path, help="scene file (TOML)")
+    v.add_argument("--host", default="127.0.0.1",
+                   help="address to listen on (default 127.0.0.1: this machine only; any other address, such as "
+                        "0.0.0.0, lets other machines run work on this one's device)")
+    v.add_argument("--port", type=_port, default=8765, help="TCP port (default 8765; 0: any free one)")
+    v.add_argument("--edge", type=_positive_float,
+                   help="longest edge of the tessellated triangles whose vertices carry the light "
+                        "(default: the disc radius)")
+    v.add_argument("--all-vertices", action="store_true",
+                   help="query every vertex of a movable object (default: one per edge-sized cell of its mesh, "
+                        "each vertex showing its cell's value: a fine mesh's vertices are most of an update)")
+    v.add_argument("--method", type=_param(params.method, "--method"), choices=METHODS,
+                   help="estimator of each page's session (default: the scene's, else detp_disc_index)")
+    v.add_argument("--photons", type=_param(params.photons, "--photons"),
+                   help="photon paths per page (default: the scene's)")
+    v.add_argument("--radius", type=_param(params.radius, "--radius"),
+                   help="DETP disc radius (default: the scene's, else 1%% of its diagonal)")
+    v.add_argument("--device", help="OpenCL device, 'P:D' or a name substring (see `oclgi info`)")
+    v.add_argument("--local-size", type=_positive_int, help="work-group size (results do not depend on it)")
+    v.add_argument("--quiet", action="store_true", help="print only the URL")
 
     sub.add_parser("info", help="list OpenCL devices")
     w = sub.add_parser("warm", help="compile every kernel into PoCL's cache, so that later runs start at once "
@@ -583,6 +607,19 @@ def cmd_warm(args):
               f"in {done['seconds']:.1f}s", file=sys.stderr)
 
 
+def _port(text):
+    value = _integer(text)
+    if value is None or not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number from 0 to 65535, got {text!r}")
+    return value
+
+
+def cmd_view(args):
+    from .viewer.command import view
+
+    view(args)
+
+
 def cmd_info(_args):
     from .cl.device import describe_devices, list_devices, no_device_message
 
@@ -627,7 +664,8 @@ def _run(argv) -> int:
             if args.command == "animate":
                 _world(args, args.command)  # refused under MPI, before any work
             {"render": cmd_render, "irradiance": cmd_irradiance, "animate": cmd_animate,
-             "study": cmd_study, "info": cmd_info, "warm": cmd_warm, "bake": cmd_bake}[args.command](args)
+             "study": cmd_study, "view": cmd_view, "info": cmd_info, "warm": cmd_warm,
+             "bake": cmd_bake}[args.command](args)
     except OclgiError as exc:
         if not _other_rank():
             print(f"oclgi: error: {_one_line(exc)}", file=sys.stderr)

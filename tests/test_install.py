@@ -105,3 +105,14 @@ def test_installed_command_line(installed, tmp_path):
     res = _run_installed(installed, tmp_path, args=[sys.executable, "-m", "oclgi", "render", "missing.toml"])
     assert res.returncode == 2
     assert res.stderr.strip() == "oclgi: error: scene file not found: missing.toml"
+
+
+def test_installed_package_ships_the_viewer_page(installed):
+    """``oclgi view``'s page (index.html, its script and style) is package data."""
+    static = ROOT / "oclgi" / "viewer" / "static"
+    wanted = sorted(p.name for p in static.iterdir())
+    assert {"index.html", "viewer.js", "viewer.css"} <= set(wanted)
+    shipped = installed / "oclgi" / "viewer" / "static"
+    assert sorted(p.name for p in shipped.iterdir()) == wanted
+    for name in wanted:
+        assert (shipped / name).read_bytes() == (static / name).read_bytes(), name

@@ -1,0 +1,242 @@
+"""The viewer's update rate as a user sees it: a scripted drag through the browser.
+
+``oclgi view``'s server (in this process) and its page in headless
+Chromium (tests/browser.py); the page itself moves the bunny (f = 0.1, as
+bench/update_study.py's interactive benchmark) round a circle on the floor,
+through the same path a mouse drag takes (``oclgiState.api.move``: the pose
+queued, sent at the next display frame, coalesced by the server), and
+records per update:
+
+- **sequential**: move, then wait until the frame of that move is drawn;
+  the time from the move to its draw is what the user waits (server update
+  + read-back + transfer + decode + upload + draw, in display frames), its
+  inverse the updates per second;
+- **continuous**: a new pose every display frame for some seconds, as a
+  drag does; the frames drawn per second (the server coalesces the poses
+  that arrive while it computes).
+
+With the server's per-stage split (``UpdateStats.seconds``: points, find,
+subtract, re-trace, add; read: irradiance read back and radiance) and the
+dynamic points (the bunny's vertices, recomputed each move from the whole
+store). ``python bench/viewer_drag.py [--scenes cornell,sponza] [--moves N]
+[--segments 1e6] [--quick]``; writes bench/results/viewer_drag.md and .json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+import oclgi
+from oclgi.scene.tessellate import tessellate
+from oclgi.viewer.server import Viewer
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tests"))
+from browser import Browser  # noqa: E402
+from update_study import SCENES, photons_for, scaled_pose  # noqa: E402
+
+RESULTS = HERE / "results"
+RADIUS = {"cornell": 0.03, "sponza": 0.3}  # the disc radius of bench/update_study.py's interactive rate
+EDGE = {"cornell": 0.06, "sponza": 0.6}  # two disc radii between vertices
+
+SEQUENTIAL = """(async () => {
+  const S = oclgiState, out = [], R = %(r)r, N = %(n)d;
+  const next = () => new Promise(r => requestAnimationFrame(r));
+  for (let i = 1; i <= N; i++) {
+    const a = 2 * Math.PI * i / N;
+    const m = [1, 0, 0, R * (Math.cos(a) - 1), 0, 1, 0, 0, 0, 0, 1, R * Math.sin(a), 0, 0, 0, 1];
+    const seq = S.seq, t0 = performance.now();
+    S.api.move("bunny", m);
+    while (!(S.seq > seq && S.drawnSeq === S.seq)) await next();
+    const u = S.lastUpdate;
+    out.push({ms: performance.now() - t0, frame_ms: S.frameAt - t0, s: u.seconds, paths: u.paths, points: u.points,
+              n_rec: u.segments_removed, n_r: u.segments});
+  }
+  return out;
+})()"""
+
+CONTINUOUS = """(async () => {
+  const S = oclgiState, R = %(r)r, T = %(t)r * 1000;
+  const next = () => new Promise(r => requestAnimationFrame(r));
+  const t0 = performance.now();
+  let drawn = 0, last = S.drawnSeq, displayFrames = 0;
+  while (performance.now() - t0 < T) {
+    const a = 2 * Math.PI * (performance.now() - t0) / T;
+    S.api.move("bunny", [1, 0, 0, R * (Math.cos(a) - 1), 0, 1, 0, 0, 0, 0, 1, R * Math.sin(a), 0, 0, 0, 1]);
+    await next();
+    displayFrames++;
+    if (S.drawnSeq !== last) { drawn++; last = S.drawnSeq; }
+  }
+  const synced = await S.api.sync();
+  return {seconds: (performance.now() - t0) / 1000, drawn, displayFrames, updates: synced.updates,
+          coalesced: synced.coalesced};
+})()"""
+
+
+def scene_with_bunny(name: str, f: float = 0.1):
+    """The benchmark scene with the bunny scaled to f and standing on the floor (baked into the scene, so
+    that the tessellation has it there)."""
+    data, base, path_r = SCENES[name]
+    data = json.loads(json.dumps(data))
+    scene = oclgi.load_dict(data, base_dir=oclgi.scene_path("."))
+    m = scaled_pose(scene, "bunny", f, base)
+    bunny = next(mesh for mesh in data["mesh"] if mesh.get("name") == "bunny")
+    bunny["transform"] = {"scale": float(m[0, 0]), "translate": m[:3, 3].tolist()}
+    return oclgi.load_dict(data, base_dir=oclgi.scene_path(".")), path_r
+
+
+def serve_in_thread(viewer):
+    box = {}
+    ready = threading.Event()
+
+    def run():
+        loop = asyncio.new_event_loop()
+        box["loop"] = loop
+        box["task"] = loop.create_task(viewer.serve("127.0.0.1", 0, lambda url: (box.update(url=url), ready.set())))
+        try:
+            loop.run_until_complete(box["task"])
+        except asyncio.CancelledError:
+            pass
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    if not ready.wait(120):
+        raise RuntimeError("the server did not start")
+    return box, thread
+
+
+def stop(box, thread):
+    box["loop"].call_soon_threadsafe(box["task"].cancel)
+    thread.join(30)
+
+
+def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> dict:
+    scene, path_r = scene_with_bunny(name)
+    engine = oclgi.Engine(scene, progress=False)
+    photons = photons_for(engine, segments)
+    t0 = time.perf_counter()
+    tess = tessellate(scene, EDGE[name])
+    tess_s = time.perf_counter() - t0
+    viewer = Viewer(engine, tess, "detp_disc_index", photons, RADIUS[name])
+    box, thread = serve_in_thread(viewer)
+    try:
+        async def drive():
+            async with Browser() as browser:
+                tab = await browser.open(box["url"])
+                await tab.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0", timeout=600)
+                hello = await tab.eval("oclgiState.hello")
+                await tab.eval(SEQUENTIAL % {"r": path_r, "n": 4})  # warm: kernels of the first moves
+                seq = await tab.eval(SEQUENTIAL % {"r": path_r, "n": moves})
+                cont = await tab.eval(CONTINUOUS % {"r": path_r, "t": drag_seconds})
+                return hello, seq, cont
+        hello, seq, cont = asyncio.run(drive())
+    finally:
+        stop(box, thread)
+    static = static_points_cost(viewer, path_r, moves)
+    ms = np.array([r["ms"] for r in seq])
+    stages = {}
+    for r in seq:
+        for k, v in r["s"].items():
+            stages.setdefault(k, []).append(1e3 * v)
+    med = {k: float(np.median(v)) for k, v in stages.items()}
+    return {
+        "scene": name, "photons": photons, "segments": hello["segments"], "vertices": len(tess.vertices),
+        "dynamic_points": int(np.median([r["points"] for r in seq])), "edge": EDGE[name], "radius": RADIUS[name],
+        "tessellate_s": tess_s, "setup_s": hello["setup_seconds"], "moves": moves,
+        "paths_median": float(np.median([r["paths"] for r in seq])),
+        "n_rec_median": float(np.median([r["n_rec"] for r in seq])),
+        "user_ms_median": float(np.median(ms)), "user_ms_p90": float(np.percentile(ms, 90)),
+        "updates_per_s": 1e3 / float(np.median(ms)),
+        "stage_ms_median": med,
+        "client_ms_median": float(np.median(ms - np.array([1e3 * r["s"]["server"] for r in seq]))),
+        # move queued -> its frame applied, less the server's time: sending, the socket both ways, decoding
+        "transfer_ms_median": float(np.median([r["frame_ms"] - 1e3 * r["s"]["server"] for r in seq])),
+        # frame applied -> drawn: waiting for the display frame, upload and draw
+        "draw_ms_median": float(np.median([r["ms"] - r["frame_ms"] for r in seq])),
+        "continuous": cont, "continuous_per_s": cont["drawn"] / cont["seconds"],
+        "without_dynamic_ms": static,
+    }
+
+
+def static_points_cost(viewer, path_r: float, moves: int) -> dict:
+    """The same moves in the API, with and without the bunny's vertices (the
+    dynamic points): median ms of session.move, the points' share."""
+    from oclgi.incremental.open_session import open_session
+
+    points = viewer.points
+    on_bunny = np.zeros(len(points), bool)
+    for name in viewer.movable:
+        a, b = viewer.engine.scene.object_ranges()[viewer.engine.scene.object_id(name)]
+        on_bunny |= (points.tri >= a) & (points.tri < b)
+    out = {}
+    for label, pts in (("all", points), ("static only", points.subset(np.nonzero(~on_bunny)[0]))):
+        r = viewer.run
+        with open_session(viewer.engine, pts, method=r.method, photons=r.photons, radius=r.radius) as s:
+            t = []
+            for i in range(1, moves + 1):
+                a = 2 * np.pi * i / moves
+                m = np.eye(4)
+                m[0, 3], m[2, 3] = path_r * (np.cos(a) - 1), path_r * np.sin(a)
+                t.append(s.move("bunny", m).seconds["total"])
+        out[label] = 1e3 * float(np.median(t[2:]))
+    return out
+
+
+def markdown(rows: list[dict], machine: str) -> str:
+    stages = ["points", "find", "subtract", "retrace", "add", "total", "read", "server"]
+    out = ["# Viewer: a scripted drag through the browser", "", machine, "",
+           "Per update, median ms: the server's stages (`UpdateStats.seconds`; read: irradiance read back "
+           "and radiance), its whole time (server), and what the user waits from the move to its frame drawn "
+           "(user: + transfer: the move sent, the frame back and decoded; + draw: the wait for the display frame, "
+           "upload and draw). Updates/s: 1 / user (one move at a time) "
+           "and frames drawn per second during a continuous drag (a pose every display frame, coalesced).", "",
+           "| scene | vertices / dynamic | photons / segments | paths re-traced | "
+           + " | ".join(stages) + " | transfer | draw | user | updates/s | drag frames/s |",
+           "|---|---:|---:|---:|" + "---:|" * len(stages) + "---:|---:|---:|---:|---:|"]
+    for r in rows:
+        s = r["stage_ms_median"]
+        out.append(f"| {r['scene']} + bunny | {r['vertices']:,} / {r['dynamic_points']:,} | "
+                   f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
+                   + " | ".join(f"{s.get(k, float('nan')):.1f}" for k in stages)
+                   + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | **{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |")
+    out += ["", "The dynamic points' cost: the same moves through the API (session.move, median ms), over the "
+            "viewer's query points and over the static vertices only:", "", "| scene | query points | static only |", "|---|---:|---:|"]
+    for r in rows:
+        w = r["without_dynamic_ms"]
+        out.append(f"| {r['scene']} + bunny | {w['all']:.1f} | {w['static only']:.1f} |")
+    return "\n".join(out) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="cornell,sponza")
+    ap.add_argument("--moves", type=int, default=60)
+    ap.add_argument("--segments", type=float, default=1e6)
+    ap.add_argument("--drag-seconds", type=float, default=5.0)
+    ap.add_argument("--quick", action="store_true", help="10^5 segments, 10 moves")
+    args = ap.parse_args()
+    if args.quick:
+        args.segments, args.moves, args.drag_seconds = 1e5, 10, 2.0
+    rows = [bench_scene(name, args.moves, args.segments, args.drag_seconds) for name in args.scenes.split(",")]
+    from oclgi.cl.device import describe_devices
+
+    machine = f"Device: {describe_devices().splitlines()[0].strip()}; load average {os.getloadavg()[0]:.2f}."
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "viewer_drag.json").write_text(json.dumps({"machine": machine, "rows": rows}, indent=1))
+    md = markdown(rows, machine)
+    (RESULTS / "viewer_drag.md").write_text(md)
+    print(md)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""``oclgi view``: interactive global illumination in the browser (oclgi/viewer/server.py)."""

@@ -1,0 +1,150 @@
+"""The viewer's socket protocol: what a page may ask, checked before anything runs.
+
+Every message from the page is a JSON object with a ``type``:
+
+==============  =====================================================  ==================
+``type``        fields                                                 what it does
+==============  =====================================================  ==================
+``move``        ``object`` (a movable object's name), ``matrix``       places the object
+                (16 numbers, row-major world-from-object)
+``estimator``   ``method`` and/or ``radius`` (DETP disc radius),       re-sums the paths
+                ``k`` (Photon Maps' neighbours)
+``photons``     ``count``                                              traces or drops the
+                                                                       difference
+``ack``         ``seq`` (the colour frame the page has applied)        lets the next one go
+``sync``        ``id`` (any number)                                    answered ``synced``
+                                                                       once all before it
+                                                                       is done and sent
+==============  =====================================================  ==================
+
+A move must keep the object rigid: its matrix is the object's loaded
+transform composed with a rotation and a translation (scaling or shearing
+it would change its surface, which the page's mesh and the stored paths'
+object are not). Anything else (not JSON, too long, a field of the wrong
+type, a number out of range, NaN) is refused with one line, sent back as an
+``error`` message; the session is not touched.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import OclgiError
+
+MAX_MESSAGE_BYTES = 16_384  # a move is about 400 bytes; anything longer is refused unread
+MAX_PHOTONS = 4_000_000  # per tab: photons x max_depth x 48 bytes stay on the device
+MAX_K = 1000  # Photon Maps' neighbours
+RIGID_TOLERANCE = 1e-4  # of the rotation's columns: orthonormal to float32-ish rounding of a page's matrix
+
+
+class BadMessage(OclgiError):
+    """A refused message: its text goes back to the page."""
+
+
+@dataclass(frozen=True)
+class Request:
+    kind: str  # "move", "estimator", "photons", "ack", "sync"
+    fields: dict
+
+
+def _number(msg: dict, key: str, kind: str):
+    v = msg.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise BadMessage(f"{kind}: {key!r} must be a finite number, got {v!r}")
+    return v
+
+
+def _integer(msg: dict, key: str, kind: str, lo: int, hi: int) -> int:
+    v = _number(msg, key, kind)
+    if v != int(v) or not lo <= v <= hi:
+        raise BadMessage(f"{kind}: {key!r} must be a whole number from {lo:,} to {hi:,}, got {v!r}")
+    return int(v)
+
+
+@dataclass(frozen=True)
+class Movable:
+    """What a move of one object is checked against."""
+
+    loaded: np.ndarray  # its world-from-object matrix when the tessellation was made
+    centre: np.ndarray  # the centre of its box then
+    lo: np.ndarray  # where its centre may go: the scene's box grown by its diagonal
+    hi: np.ndarray
+
+
+def rigid_matrix(values, obj: Movable, name: str) -> np.ndarray:
+    """The 4x4 matrix of 16 row-major numbers, checked to be the object's
+    loaded transform moved rigidly, and to keep it near the scene."""
+    if not isinstance(values, list) or len(values) != 16 or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise BadMessage(f"move: 'matrix' must be a list of 16 numbers (row-major 4x4), got {_short(values)}")
+    m = np.array(values, np.float64).reshape(4, 4)
+    if not np.isfinite(m).all():
+        raise BadMessage(f"move: the matrix of {name!r} has a NaN or infinite entry")
+    if not np.allclose(m[3], [0, 0, 0, 1], atol=0, rtol=0):
+        raise BadMessage(f"move: the matrix of {name!r} is not affine (its last row must be 0 0 0 1)")
+    rel = m @ np.linalg.inv(obj.loaded)
+    r = rel[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=RIGID_TOLERANCE) or np.linalg.det(r) <= 0:
+        raise BadMessage(f"move: the matrix of {name!r} is not a rotation and translation of the object as "
+                         "loaded (it scales, shears or mirrors it)")
+    c = r @ obj.centre + rel[:3, 3]
+    if not ((c >= obj.lo).all() and (c <= obj.hi).all()):
+        raise BadMessage(f"move: the matrix takes {name!r} to {np.round(c, 3).tolist()}, beyond the scene's box "
+                         "grown by its diagonal")
+    return m
+
+
+def _short(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def parse(text, movable: dict, methods: tuple, diagonal: float) -> Request:
+    """The request in ``text`` (a str from the socket), or BadMessage.
+    ``movable``: name -> Movable; ``methods``: the
+    estimators this session can switch to; ``diagonal``: the scene's (the
+    largest disc radius)."""
+    if not isinstance(text, str):
+        raise BadMessage("messages must be JSON text, not binary")
+    if len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
+        raise BadMessage(f"message too long ({len(text):,} characters; at most {MAX_MESSAGE_BYTES:,} bytes)")
+    try:
+        msg = json.loads(text)
+    except (ValueError, RecursionError):
+        raise BadMessage("message is not valid JSON") from None
+    if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
+        raise BadMessage('a message must be a JSON object with a "type"')
+    kind = msg["type"]
+    if kind == "move":
+        name = msg.get("object")
+        if not isinstance(name, str) or name not in movable:
+            raise BadMessage(f"move: no movable object {_short(name)}; the movable ones are "
+                             f"{', '.join(map(repr, movable)) or 'none'}")
+        return Request("move", {"object": name, "matrix": rigid_matrix(msg.get("matrix"), movable[name], name)})
+    if kind == "estimator":
+        out = {}
+        if "method" in msg:
+            if msg["method"] not in methods:
+                raise BadMessage(f"estimator: method must be one of {', '.join(methods)}, got {_short(msg['method'])}")
+            out["method"] = msg["method"]
+        if "radius" in msg:
+            r = _number(msg, "radius", kind)
+            if not 0 < r <= diagonal:
+                raise BadMessage(f"estimator: radius must be in (0, {diagonal:.4g}] (the scene's diagonal), got {r!r}")
+            out["radius"] = float(r)
+        if "k" in msg:
+            out["k"] = _integer(msg, "k", kind, 2, MAX_K)
+        if not out:
+            raise BadMessage("estimator: give method, radius or k")
+        return Request("estimator", out)
+    if kind == "photons":
+        return Request("photons", {"count": _integer(msg, "count", kind, 1, MAX_PHOTONS)})
+    if kind == "ack":
+        return Request("ack", {"seq": _integer(msg, "seq", kind, 0, 2**32 - 1)})
+    if kind == "sync":
+        return Request("sync", {"id": _number(msg, "id", kind)})
+    raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync)")

@@ -1,0 +1,550 @@
+// oclgi view: the tessellated scene drawn with WebGL2, coloured by the
+// session's per-vertex radiance (linear; exposure and sRGB applied here).
+// The server sends the mesh once and then only changed colours; the page
+// moves a dragged object's vertices itself (a model matrix per movable
+// object), so orbiting and dragging run at display rate whatever the
+// server is doing, and the light follows when its update arrives.
+"use strict";
+
+const MAX_OBJECTS = 16; // model matrices in the shader: the static scene and up to 15 movable objects
+const PLOT_SECONDS = 10;
+
+// -- 4x4 matrices: row-major arrays of 16 (as the server writes them) ------
+function mul(a, b) {
+  const r = new Array(16).fill(0);
+  for (let i = 0; i < 4; i++)
+    for (let j = 0; j < 4; j++)
+      for (let k = 0; k < 4; k++) r[4 * i + j] += a[4 * i + k] * b[4 * k + j];
+  return r;
+}
+function translation(x, y, z) { return [1, 0, 0, x, 0, 1, 0, y, 0, 0, 1, z, 0, 0, 0, 1]; }
+function rotationY(a) {
+  const c = Math.cos(a), s = Math.sin(a);
+  return [c, 0, s, 0, 0, 1, 0, 0, -s, 0, c, 0, 0, 0, 0, 1];
+}
+function inverseAffine(m) { // the inverse of an affine matrix (last row 0 0 0 1)
+  const [a, b, c, d, e, f, g, h, i] = [m[0], m[1], m[2], m[4], m[5], m[6], m[8], m[9], m[10]];
+  const A = e * i - f * h, B = -(d * i - f * g), C = d * h - e * g;
+  const det = a * A + b * B + c * C;
+  const inv = [A, -(b * i - c * h), b * f - c * e,
+               B, a * i - c * g, -(a * f - c * d),
+               C, -(a * h - b * g), a * e - b * d].map(x => x / det);
+  const t = [m[3], m[7], m[11]];
+  const r = new Array(16).fill(0);
+  for (let row = 0; row < 3; row++) {
+    for (let col = 0; col < 3; col++) r[4 * row + col] = inv[3 * row + col];
+    r[4 * row + 3] = -(inv[3 * row] * t[0] + inv[3 * row + 1] * t[1] + inv[3 * row + 2] * t[2]);
+  }
+  r[15] = 1;
+  return r;
+}
+function apply(m, p) {
+  return [m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3],
+          m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+          m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]];
+}
+function columnMajor(m) { // for uniformMatrix4fv
+  const r = new Float32Array(16);
+  for (let i = 0; i < 4; i++) for (let j = 0; j < 4; j++) r[4 * j + i] = m[4 * i + j];
+  return r;
+}
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+const scale = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const normalize = a => scale(a, 1 / Math.hypot(a[0], a[1], a[2]));
+
+// -- shaders --------------------------------------------------------------
+const VERTEX = `#version 300 es
+layout(location = 0) in vec3 position;
+layout(location = 1) in vec3 radiance;
+layout(location = 2) in uint object;
+uniform mat4 viewProjection;
+uniform mat4 model[${MAX_OBJECTS}];
+uniform float exposure;
+out vec3 colour;
+flat out uint objectId;
+void main() {
+  gl_Position = viewProjection * model[min(object, ${MAX_OBJECTS - 1}u)] * vec4(position, 1.0);
+  colour = radiance * exposure;
+  objectId = object;
+}`;
+const FRAGMENT = `#version 300 es
+precision highp float;
+in vec3 colour;
+flat in uint objectId;
+uniform int picking;
+uniform int selected;
+out vec4 fragment;
+vec3 srgb(vec3 c) {
+  c = clamp(c, 0.0, 1.0);
+  return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+void main() {
+  if (picking == 1) { fragment = vec4(float(objectId) / 255.0, 0.0, 0.0, 1.0); return; }
+  vec3 c = srgb(colour);
+  if (selected > 0 && int(objectId) == selected) c = mix(c, vec3(1.0, 0.7, 0.2), 0.2);
+  fragment = vec4(c, 1.0);
+}`;
+
+function compile(gl, type, source) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, source);
+  gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+  return s;
+}
+
+// -- the page -------------------------------------------------------------
+const $ = id => document.getElementById(id);
+const state = window.oclgiState = { // what a test or a benchmark reads (and drives through .api)
+  ready: false, seq: -1, frames: 0, updates: 0, draws: 0, drawnSeq: -1, errors: [], log: [],
+  colours: null, poses: {}, serverPoses: {}, lastUpdate: null, hello: null, connection: null,
+};
+
+function showError(text) {
+  $("error").textContent = text;
+  state.errors.push(text);
+}
+
+async function main() {
+  const canvas = $("view");
+  const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: true});
+  if (!gl) { showError("this browser has no WebGL2"); return; }
+  const scene = await (await fetch("scene.json")).json();
+  const meshBuffer = await (await fetch("mesh.bin")).arrayBuffer();
+  const header = new DataView(meshBuffer);
+  const V = header.getUint32(4, true), F = header.getUint32(8, true);
+  const positions = new Float32Array(meshBuffer, 16, 3 * V);
+  const objectOf = new Uint32Array(meshBuffer, 16 + 12 * V, V);
+  const faces = new Uint32Array(meshBuffer, 16 + 16 * V, 3 * F);
+  const colours = state.colours = new Float32Array(3 * V);
+  $("scene-name").textContent = scene.name;
+  const objects = scene.objects; // movable: object i is id i + 1 in objectOf
+  const loadedInverse = objects.map(o => inverseAffine(o.matrix));
+  for (const o of objects) state.poses[o.name] = o.matrix.slice();
+
+  // geometry
+  const program = gl.createProgram();
+  gl.attachShader(program, compile(gl, gl.VERTEX_SHADER, VERTEX));
+  gl.attachShader(program, compile(gl, gl.FRAGMENT_SHADER, FRAGMENT));
+  gl.linkProgram(program);
+  if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(program));
+  const u = name => gl.getUniformLocation(program, name);
+  const uniforms = {viewProjection: u("viewProjection"), model: u("model"), exposure: u("exposure"),
+                    picking: u("picking"), selected: u("selected")};
+  const vao = gl.createVertexArray();
+  gl.bindVertexArray(vao);
+  const buffer = (target, data, usage) => {
+    const b = gl.createBuffer();
+    gl.bindBuffer(target, b);
+    gl.bufferData(target, data, usage);
+    return b;
+  };
+  buffer(gl.ARRAY_BUFFER, positions, gl.STATIC_DRAW);
+  gl.enableVertexAttribArray(0);
+  gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+  const colourBuffer = buffer(gl.ARRAY_BUFFER, colours, gl.DYNAMIC_DRAW);
+  gl.enableVertexAttribArray(1);
+  gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 0, 0);
+  buffer(gl.ARRAY_BUFFER, objectOf, gl.STATIC_DRAW);
+  gl.enableVertexAttribArray(2);
+  gl.vertexAttribIPointer(2, 1, gl.UNSIGNED_INT, 0, 0);
+  buffer(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
+  gl.bindVertexArray(null);
+  let colourDirty = true;
+  let redraw = true; // something shown changed: the next display frame draws (an idle page costs nothing)
+  const changed = () => { redraw = true; };
+
+  // camera: orbit about a target
+  const [lo, hi] = scene.bounds;
+  const cam0 = scene.camera || {position: [hi[0] * 2, (lo[1] + hi[1]) / 2, hi[2] * 2],
+                                look_at: [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2],
+                                fov: 45};
+  const camera = {};
+  function home() {
+    const d = sub(cam0.position, cam0.look_at);
+    camera.target = cam0.look_at.slice();
+    camera.distance = Math.hypot(d[0], d[1], d[2]);
+    camera.yaw = Math.atan2(d[0], d[2]);
+    camera.pitch = Math.asin(d[1] / camera.distance);
+    camera.fov = cam0.fov * Math.PI / 180;
+    redraw = true;
+  }
+  home();
+  function frame() { // eye, forward, right, up (right/up at the image plane's half-extents)
+    const cp = Math.cos(camera.pitch);
+    const eye = add(camera.target, scale([cp * Math.sin(camera.yaw), Math.sin(camera.pitch),
+                                          cp * Math.cos(camera.yaw)], camera.distance));
+    const forward = normalize(sub(camera.target, eye));
+    const right = normalize(cross(forward, [0, 1, 0]));
+    const up = cross(right, forward);
+    const halfH = Math.tan(camera.fov / 2), halfW = halfH * canvas.width / canvas.height;
+    return {eye, forward, right: scale(right, halfW), up: scale(up, halfH), rightUnit: right, upUnit: up};
+  }
+  function viewProjection() {
+    const f = frame();
+    const near = Math.max(camera.distance * 1e-3, scene.diagonal * 1e-5), far = camera.distance + 2 * scene.diagonal;
+    const r = f.rightUnit, up = f.upUnit, b = scale(f.forward, -1);
+    const view = [r[0], r[1], r[2], -dot(r, f.eye), up[0], up[1], up[2], -dot(up, f.eye),
+                  b[0], b[1], b[2], -dot(b, f.eye), 0, 0, 0, 1];
+    const t = 1 / Math.tan(camera.fov / 2), aspect = canvas.width / canvas.height;
+    const proj = [t / aspect, 0, 0, 0, 0, t, 0, 0, 0, 0, (far + near) / (near - far), 2 * far * near / (near - far),
+                  0, 0, -1, 0];
+    return mul(proj, view);
+  }
+  function ray(x, y) { // canvas pixels -> (origin, direction)
+    const f = frame();
+    const nx = 2 * x / canvas.clientWidth - 1, ny = 1 - 2 * y / canvas.clientHeight;
+    return {origin: f.eye, dir: normalize(add(f.forward, add(scale(f.right, nx), scale(f.up, ny))))};
+  }
+  function project(p) { // world point -> canvas pixels (CSS)
+    const m = viewProjection();
+    const c = [0, 1, 2, 3].map(i => m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] + m[4 * i + 3]);
+    return [(c[0] / c[3] + 1) / 2 * canvas.clientWidth, (1 - c[1] / c[3]) / 2 * canvas.clientHeight];
+  }
+  function relative(i) { return mul(state.poses[objects[i].name], loadedInverse[i]); }
+  function objectBox(i) { // world box of movable object i at the pose shown
+    const m = relative(i);
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let v = 0; v < V; v++) {
+      if (objectOf[v] !== i + 1) continue;
+      const p = apply(m, [positions[3 * v], positions[3 * v + 1], positions[3 * v + 2]]);
+      for (let a = 0; a < 3; a++) { lo[a] = Math.min(lo[a], p[a]); hi[a] = Math.max(hi[a], p[a]); }
+    }
+    return {lo, hi, centre: scale(add(lo, hi), 0.5)};
+  }
+
+  // exposure
+  let exposure = 1;
+  function setExposure(stops) {
+    exposure = Math.pow(2, stops);
+    redraw = true;
+    $("exposure").value = stops;
+    $("exposure-value").textContent = `${stops >= 0 ? "+" : ""}${Number(stops).toFixed(1)} EV`;
+  }
+  function autoExposure() { // the vertices' log-average luminance to middle grey
+    let sum = 0, n = 0;
+    for (let v = 0; v < V; v++) {
+      const y = 0.2126 * colours[3 * v] + 0.7152 * colours[3 * v + 1] + 0.0722 * colours[3 * v + 2];
+      if (y > 0) { sum += Math.log(y); n++; }
+    }
+    setExposure(n ? Math.round(10 * Math.log2(0.18 / Math.exp(sum / n))) / 10 : 0);
+  }
+  $("exposure").oninput = e => setExposure(Number(e.target.value));
+  $("auto-exposure").onclick = autoExposure;
+  $("home").onclick = home;
+
+  // drawing: at display rate, whatever the socket is doing
+  const modelData = new Float32Array(16 * MAX_OBJECTS);
+  let selected = 0;
+  function draw(picking) {
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    gl.viewport(0, 0, canvas.width, canvas.height);
+    gl.enable(gl.DEPTH_TEST);
+    gl.clearColor(0, 0, 0, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    gl.useProgram(program);
+    modelData.set(columnMajor(translation(0, 0, 0)), 0);
+    for (let i = 0; i < objects.length && i + 1 < MAX_OBJECTS; i++) modelData.set(columnMajor(relative(i)), 16 * (i + 1));
+    gl.uniformMatrix4fv(uniforms.model, false, modelData);
+    gl.uniformMatrix4fv(uniforms.viewProjection, false, columnMajor(viewProjection()));
+    gl.uniform1f(uniforms.exposure, exposure);
+    gl.uniform1i(uniforms.picking, picking ? 1 : 0);
+    gl.uniform1i(uniforms.selected, selected);
+    gl.bindVertexArray(vao);
+    gl.drawElements(gl.TRIANGLES, 3 * F, gl.UNSIGNED_INT, 0);
+    gl.bindVertexArray(null);
+  }
+  let pickTarget = null;
+  function pick(x, y) { // the movable object under canvas pixel (x, y): 1 + its index, or 0
+    const w = canvas.width, h = canvas.height;
+    if (!pickTarget || pickTarget.w !== w || pickTarget.h !== h) {
+      const fb = gl.createFramebuffer(), colour = gl.createRenderbuffer(), depth = gl.createRenderbuffer();
+      gl.bindRenderbuffer(gl.RENDERBUFFER, colour);
+      gl.renderbufferStorage(gl.RENDERBUFFER, gl.RGBA8, w, h);
+      gl.bindRenderbuffer(gl.RENDERBUFFER, depth);
+      gl.renderbufferStorage(gl.RENDERBUFFER, gl.DEPTH_COMPONENT24, w, h);
+      gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+      gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.RENDERBUFFER, colour);
+      gl.framebufferRenderbuffer(gl.FRAMEBUFFER, gl.DEPTH_ATTACHMENT, gl.RENDERBUFFER, depth);
+      pickTarget = {fb, w, h};
+    }
+    gl.bindFramebuffer(gl.FRAMEBUFFER, pickTarget.fb);
+    draw(true);
+    const px = new Uint8Array(4);
+    const sx = Math.floor(x * w / canvas.clientWidth), sy = Math.floor(h - 1 - y * h / canvas.clientHeight);
+    gl.readPixels(sx, sy, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    gl.bindFramebuffer(gl.FRAMEBUFFER, null);
+    return px[0] <= objects.length ? px[0] : 0;
+  }
+
+  // the socket
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/socket`);
+  ws.binaryType = "arraybuffer";
+  state.ws = ws;
+  const pendingMoves = new Map(); // object name -> matrix: sent once a display frame, the latest only
+  const waiting = new Map(); // sync id -> resolve
+  let syncs = 0;
+  const plot = [];
+  const drawnTimes = [];
+  let lastMoveSent = 0, statsDirty = false, statsShown = 0;
+  function send(msg) { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); }
+  function applyFrame(buf) {
+    const view = new DataView(buf);
+    if (buf.byteLength < 16 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
+    const seq = view.getUint32(4, true), mode = view.getUint32(8, true), count = view.getUint32(12, true);
+    if (mode === 0) {
+      colours.set(new Float32Array(buf, 16, 3 * V));
+    } else {
+      const index = new Uint32Array(buf, 16, count), values = new Float32Array(buf, 16 + 4 * count, 3 * count);
+      for (let i = 0; i < count; i++) {
+        const v = 3 * index[i];
+        colours[v] = values[3 * i]; colours[v + 1] = values[3 * i + 1]; colours[v + 2] = values[3 * i + 2];
+      }
+    }
+    state.seq = seq;
+    state.frames++;
+    state.frameAt = performance.now();
+    state.moveToFrame = lastMoveSent ? state.frameAt - lastMoveSent : null;
+    colourDirty = true;
+    send({type: "ack", seq});
+    if (state.frames === 1) autoExposure();
+  }
+  function describe(msg) {
+    for (const name in msg.poses) {
+      state.serverPoses[name] = msg.poses[name];
+      if ((!drag || drag.name !== name) && !pendingMoves.has(name)) { state.poses[name] = msg.poses[name].slice(); redraw = true; }
+    }
+    const method = $("method");
+    if (method.options.length !== msg.methods.length) {
+      method.innerHTML = "";
+      for (const m of msg.methods) method.add(new Option(m, m));
+    }
+    if (document.activeElement !== method) method.value = msg.method;
+    for (const [id, value] of [["radius", msg.radius], ["photons", msg.photons], ["k", msg.k]]) {
+      if (document.activeElement !== $(id)) { $(id).value = value == null ? "" : value; $(id).disabled = value == null; }
+    }
+    state.session = {photons: msg.photons, segments: msg.segments, method: msg.method, radius: msg.radius, k: msg.k};
+  }
+  function showStats(msg) {
+    const s = msg.seconds || {};
+    const rows = [];
+    for (const k of ["points", "find", "subtract", "retrace", "add", "total", "read", "server"])
+      if (k in s) rows.push([`${k} (ms)`, (1e3 * s[k]).toFixed(1)]);
+    if (msg.kind === "move") {
+      rows.push(["paths re-traced", `${msg.paths.toLocaleString()} / ${msg.photons.toLocaleString()}`]);
+      rows.push(["n_Rec / n_R", `${(msg.segments_removed).toLocaleString()} / ${msg.segments.toLocaleString()}`]);
+      rows.push(["dynamic points", msg.points.toLocaleString()]);
+    }
+    const now = performance.now();
+    while (drawnTimes.length && drawnTimes[0] < now - 1000) drawnTimes.shift();
+    rows.push(["updates/s (drawn)", drawnTimes.length.toString()]);
+    if (msg.kind === "move" && state.moveToFrame != null) rows.push(["move to frame (ms)", state.moveToFrame.toFixed(0)]);
+    $("stats").innerHTML = rows.map(([a, b]) => `<tr><td>${a}</td><td>${b}</td></tr>`).join("");
+  }
+  function drawPlot() {
+    const c = $("plot"), g = c.getContext("2d"), now = performance.now();
+    while (plot.length && plot[0].t < now - PLOT_SECONDS * 1000) plot.shift();
+    g.clearRect(0, 0, c.width, c.height);
+    const top = Math.max(50, ...plot.map(p => p.ms));
+    g.strokeStyle = "#444";
+    g.beginPath(); g.moveTo(0, c.height - 33 / top * c.height); g.lineTo(c.width, c.height - 33 / top * c.height); g.stroke();
+    g.fillStyle = "#8cf";
+    for (const p of plot) {
+      const x = c.width * (1 - (now - p.t) / (PLOT_SECONDS * 1000));
+      const h = p.ms / top * c.height;
+      g.fillRect(x, c.height - h, 2, h);
+    }
+    g.fillStyle = "#999";
+    g.fillText(`${top.toFixed(0)} ms`, 2, 10);
+    g.fillText("33 ms", c.width - 34, c.height - 33 / top * c.height - 2);
+  }
+  ws.onmessage = e => {
+    if (typeof e.data !== "string") { applyFrame(e.data); return; }
+    const msg = JSON.parse(e.data);
+    state.log.push(msg.type);
+    if (msg.type === "hello") {
+      state.hello = msg;
+      state.connection = msg.connection;
+      describe(msg);
+      $("status").textContent = `${scene.vertices.toLocaleString()} vertices (${scene.points.toLocaleString()} ` +
+        `queried), ${msg.photons.toLocaleString()} photons ` +
+        `(${msg.segments.toLocaleString()} segments), session ${msg.connection}`;
+      state.ready = true;
+    } else if (msg.type === "update") {
+      state.updates++;
+      state.lastUpdate = msg;
+      describe(msg);
+      plot.push({t: performance.now(), ms: 1e3 * (msg.seconds.server || msg.seconds.total)});
+      statsDirty = true;
+      if (msg.kind === "move") moveInFlight = false;
+      $("error").textContent = "";
+    } else if (msg.type === "synced") {
+      describe(msg);
+      const resolve = waiting.get(msg.id);
+      waiting.delete(msg.id);
+      if (resolve) resolve(msg);
+    } else if (msg.type === "error") {
+      showError(msg.message);
+      moveInFlight = false;
+      if (msg.request === "move" && !drag) {
+        for (const name in state.serverPoses) state.poses[name] = state.serverPoses[name].slice();
+        redraw = true;
+      }
+    }
+  };
+  ws.onclose = () => { $("status").textContent = "the server closed the connection"; };
+
+  $("apply").onclick = () => {
+    const msg = {type: "estimator"};
+    const method = $("method").value, radius = Number($("radius").value), k = Number($("k").value);
+    if (state.session && method !== state.session.method) msg.method = method;
+    if (!$("radius").disabled && radius !== state.session.radius) msg.radius = radius;
+    if (!$("k").disabled && k !== state.session.k) msg.k = k;
+    if (Object.keys(msg).length > 1) send(msg);
+    const photons = Number($("photons").value);
+    if (state.session && photons !== state.session.photons) send({type: "photons", count: photons});
+  };
+
+  // mouse and keys: orbit, pan, zoom; pick and drag a movable object on its support plane
+  let drag = null;
+  // A move goes out at once when the server has answered the last one, else
+  // it waits (replacing any older one) for that answer: the page keeps at
+  // most one move in flight, the server coalesces whatever queues up there.
+  let moveInFlight = false;
+  function flushMoves() {
+    if (!pendingMoves.size || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
+    for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+    pendingMoves.clear();
+    moveInFlight = true;
+    lastMoveSent = performance.now();
+  }
+  function queueMove(name, matrix) {
+    state.poses[name] = matrix;
+    pendingMoves.set(name, matrix);
+    changed();
+    flushMoves();
+  }
+  function planeHit(r, y) {
+    if (Math.abs(r.dir[1]) < 1e-9) return null;
+    const t = (y - r.origin[1]) / r.dir[1];
+    return t > 0 ? add(r.origin, scale(r.dir, t)) : null;
+  }
+  canvas.addEventListener("contextmenu", e => e.preventDefault());
+  window.addEventListener("resize", changed);
+  canvas.addEventListener("pointerdown", e => {
+    canvas.setPointerCapture(e.pointerId);
+    const x = e.offsetX, y = e.offsetY;
+    const hitObject = e.button === 0 && !e.shiftKey ? pick(x, y) : 0;
+    changed(); // the selection's highlight, and the picking pass drew into another target
+    if (hitObject > 0) {
+      selected = hitObject;
+      const i = hitObject - 1, name = objects[i].name;
+      const base = objectBox(i).lo[1]; // the horizontal plane through its base
+      const start = planeHit(ray(x, y), base);
+      drag = start ? {kind: "object", name, base, start, matrix: state.poses[name].slice()} : null;
+    } else {
+      if (e.button === 0 && !e.shiftKey) selected = 0;
+      drag = {kind: e.button === 2 || e.shiftKey ? "pan" : "orbit", x, y};
+    }
+  });
+  canvas.addEventListener("pointermove", e => {
+    if (!drag) return;
+    const x = e.offsetX, y = e.offsetY;
+    if (drag.kind === "object") {
+      const p = planeHit(ray(x, y), drag.base);
+      if (p) {
+        const d = sub(p, drag.start);
+        queueMove(drag.name, mul(translation(d[0], 0, d[2]), drag.matrix));
+      }
+      return;
+    }
+    const dx = x - drag.x, dy = y - drag.y;
+    drag.x = x; drag.y = y;
+    changed();
+    if (drag.kind === "orbit") {
+      camera.yaw -= dx * 0.008;
+      camera.pitch = Math.max(-1.5, Math.min(1.5, camera.pitch + dy * 0.008));
+    } else {
+      const f = frame(), s = 2 * camera.distance * Math.tan(camera.fov / 2) / canvas.clientHeight;
+      camera.target = add(camera.target, add(scale(f.rightUnit, -dx * s), scale(f.upUnit, dy * s)));
+    }
+  });
+  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("wheel", e => {
+    e.preventDefault();
+    camera.distance *= Math.exp(e.deltaY * 0.001);
+    changed();
+  }, {passive: false});
+  window.addEventListener("keydown", e => {
+    if (!selected || e.target.tagName === "INPUT") return;
+    const i = selected - 1, name = objects[i].name, m = state.poses[name];
+    const step = 0.01 * scene.diagonal;
+    if (e.key === "Escape") { selected = 0; changed(); return; }
+    let t = null;
+    if (e.key === "r" || e.key === "R" || e.key === "PageUp") t = translation(0, step, 0);
+    else if (e.key === "f" || e.key === "F" || e.key === "PageDown") t = translation(0, -step, 0);
+    else if (e.key === "q" || e.key === "Q" || e.key === "e" || e.key === "E") {
+      const c = objectBox(i).centre, a = (e.key.toLowerCase() === "q" ? 1 : -1) * Math.PI / 18;
+      t = mul(translation(c[0], 0, c[2]), mul(rotationY(a), translation(-c[0], 0, -c[2])));
+    }
+    if (t) queueMove(name, mul(t, m));
+  });
+
+  function tick() {
+    if (colourDirty) {
+      redraw = true;
+      gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
+      gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+      colourDirty = false;
+      if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
+    }
+    if (redraw) {
+      draw(false);
+      redraw = false;
+      state.draws++;
+      state.drawnAt = performance.now();
+    }
+    const now = performance.now();
+    if (moveInFlight && now - lastMoveSent > 2000) moveInFlight = false; // an answer lost: never stall a drag
+    flushMoves();
+    if (statsDirty && now - statsShown > 250) { // text and plot a few times a second, not every frame
+      showStats(state.lastUpdate);
+      drawPlot();
+      statsDirty = false;
+      statsShown = now;
+    }
+    requestAnimationFrame(tick);
+  }
+  requestAnimationFrame(tick);
+
+  // for tests and benchmarks: the same paths the mouse takes, and a sync
+  state.api = {
+    project, pick, objectBox, home,
+    camera: () => ({...camera}),
+    orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
+    move: queueMove,
+    sync() { // answered once the server has done everything sent before it
+      for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+      pendingMoves.clear();
+      const id = ++syncs;
+      return new Promise(resolve => { waiting.set(id, resolve); send({type: "sync", id}); });
+    },
+    send,
+    drawMs(n = 5) { // the page's cost of one frame: upload the colours and draw, finished
+      const t0 = performance.now();
+      for (let i = 0; i < n; i++) {
+        gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
+        gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+        draw(false);
+        gl.finish();
+      }
+      return (performance.now() - t0) / n;
+    },
+  };
+}
+
+main().catch(err => showError(String(err && err.message || err)));

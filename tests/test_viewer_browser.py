@@ -1,0 +1,130 @@
+"""``oclgi view`` end to end in headless Chromium (Debian's chromium,
+tools/ensure-chromium.sh; driven over the DevTools protocol, tests/browser.py):
+the page loads, the bunny is dragged across the Cornell box floor with the
+mouse, the colours the page draws change where the light changed and equal
+the API's at that pose; orbiting redraws without a server update; a second
+tab has its own session and closing it frees that session; Ctrl-C stops the
+server. Screenshots are kept in the test's tmp dir."""
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import urllib.request
+
+import numpy as np
+import pytest
+
+from browser import Browser, chromium_path
+from viewer_client import EDGE, PHOTONS, open_viewer, reference_colours
+
+
+@pytest.fixture(scope="module")
+def viewer(scenes_dir):
+    """The same scene, tessellation and run as the server's: the API's side."""
+    v = open_viewer(scenes_dir / "cornell_bunny.toml")
+    yield v
+    v.executor.shutdown(wait=True)
+
+
+@pytest.fixture
+def server(scenes_dir):
+    proc = subprocess.Popen([sys.executable, "-m", "oclgi", "view", str(scenes_dir / "cornell_bunny.toml"),
+                             "--port", "0", "--photons", str(PHOTONS), "--edge", str(EDGE), "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    url = proc.stdout.readline().strip()
+    assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
+    yield proc, url
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def status(url) -> dict:
+    with urllib.request.urlopen(url + "status.json", timeout=10) as r:
+        return json.load(r)
+
+
+async def colours(tab) -> np.ndarray:
+    return np.array(await tab.eval("Array.from(oclgiState.colours)"), np.float32).reshape(-1, 3)
+
+
+async def drag(tab, start, end, steps=12):
+    await tab.mouse("mousePressed", *start)
+    for i in range(1, steps + 1):
+        t = i / steps
+        await tab.mouse("mouseMoved", start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1]))
+        await asyncio.sleep(0.03)
+    await tab.mouse("mouseReleased", *end)
+
+
+def test_view_in_headless_chromium(viewer, server, tmp_path):
+    assert chromium_path(), "chromium is missing: tools/ensure-chromium.sh (make test runs it) installs it"
+    proc, url = server
+    home = reference_colours(viewer, {})
+    static = viewer.tess.vertex_tri < viewer.engine.scene.object_ranges()[0][1]
+
+    async def main():
+        async with Browser() as browser:
+            tab = await browser.open(url)
+            await tab.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0 && oclgiState.draws > 1")
+            shown = await colours(tab)
+            assert np.array_equal(shown, home), "the first frame is not the API's solution"
+            await tab.screenshot(tmp_path / "loaded.png")
+
+            # drag the bunny with the mouse, from its middle to the right across the floor
+            box = await tab.eval("oclgiState.api.objectBox(0)")
+            start = await tab.eval(f"oclgiState.api.project({json.dumps(box['centre'])})")
+            picked = await tab.eval(f"oclgiState.api.pick({start[0]}, {start[1]})")
+            assert picked == 1, "the bunny is not under the mouse"
+            goal = [box["centre"][0] + 0.8, box["centre"][1], box["centre"][2] - 0.3]
+            end = await tab.eval(f"oclgiState.api.project({json.dumps(goal)})")
+            await drag(tab, start, end)
+            synced = await tab.eval("oclgiState.api.sync()")
+            await tab.wait(f"oclgiState.drawnSeq === {synced['seq']}")
+            pose = np.array(synced["poses"]["bunny"]).reshape(4, 4)
+            assert pose[0, 3] > 0.5 and abs(pose[1, 3]) < 1e-6, f"the bunny did not slide along the floor: {pose}"
+            moved = await colours(tab)
+            api = reference_colours(viewer, synced["poses"])
+            assert np.array_equal(moved, api), "the page's colours are not the API's at the dragged pose"
+            changed, light_changed = (moved != shown).any(axis=1), (api != home).any(axis=1)
+            assert np.array_equal(changed, light_changed)
+            assert changed[static].sum() > 50, "the floor's light did not follow the bunny"
+            await tab.screenshot(tmp_path / "dragged.png")
+
+            # orbit: the view changes, the server computes nothing
+            updates = await tab.eval("oclgiState.updates")
+            before = (tmp_path / "dragged.png").read_bytes()
+            await drag(tab, (60, 60), (130, 80))
+            await tab.wait("oclgiState.draws > 0")
+            await asyncio.sleep(0.3)
+            await tab.screenshot(tmp_path / "orbited.png")
+            assert (tmp_path / "orbited.png").read_bytes() != before, "orbiting did not change the view"
+            assert await tab.eval("oclgiState.updates") == updates
+            again = await tab.eval("oclgiState.api.sync()")
+            assert again["updates"] == synced["updates"], "orbiting made the server update"
+
+            # a second tab: a session of its own, at the pose as loaded; closing it frees it
+            tab2 = await browser.open(url)
+            await tab2.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0")
+            assert status(url)["open"] == 2
+            assert np.array_equal(await colours(tab2), home)
+            assert np.array_equal(await colours(tab), moved)
+            released = status(url)["buffers_released"]
+            await tab2.close()
+            for _ in range(200):
+                s = status(url)
+                if s["closed"] == 1:
+                    break
+                await asyncio.sleep(0.05)
+            assert s["open"] == 1 and s["closed"] == 1 and s["buffers_released"] > released
+            assert (await tab.eval("oclgiState.api.sync()"))["poses"] == synced["poses"]
+            assert not await tab.eval("oclgiState.errors.length")
+
+    asyncio.run(main())
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=30) == 130
+    err = proc.stderr.read()
+    assert err.strip().splitlines()[-1] == "oclgi: interrupted" and "Traceback" not in err, err

@@ -1,0 +1,237 @@
+"""The viewer's socket (oclgi/viewer/): frames equal to a fresh session at
+the same pose, bad input refused with the session intact and exact, moves
+coalesced, sockets independent, a closed socket's session freed."""
+
+import asyncio
+import json
+import math
+
+import numpy as np
+import pytest
+
+from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
+from viewer_client import (PHOTONS, PageModel, expected_radiance, open_viewer, receive_until, reference_colours,
+                           sync)
+
+
+@pytest.fixture(scope="module")
+def viewer(scenes_dir):
+    v = open_viewer(scenes_dir / "cornell_bunny.toml")
+    yield v
+    v.executor.shutdown(wait=True)
+
+
+@pytest.fixture(scope="module")
+def home(viewer):
+    """The API's colours at the loaded pose."""
+    return reference_colours(viewer, {})
+
+
+def run(test, viewer):
+    async def main():
+        async with TestClient(TestServer(viewer.app())) as client:
+            await test(client)
+    asyncio.run(main())
+
+
+async def connect(client, viewer):
+    ws = await client.ws_connect("/socket")
+    page = PageModel(len(viewer.tess.vertices))
+    hello = await receive_until(ws, page, lambda m: m["type"] == "hello")
+    page.apply(await ws.receive_bytes(timeout=120))  # the first frame: every colour
+    return ws, page, hello
+
+
+def bunny_at(dx, dz, angle=0.0):
+    c, s = math.cos(angle), math.sin(angle)
+    return [c, 0, s, dx, 0, 1, 0, 0, -s, 0, c, dz, 0, 0, 0, 1]
+
+
+async def move(ws, matrix, name="bunny"):
+    await ws.send_str(json.dumps({"type": "move", "object": name, "matrix": matrix}))
+
+
+async def moves_exactly(ws, page, viewer, matrix, ident=1):
+    """Move the bunny; the page's colours then equal the API's at the pose."""
+    await move(ws, matrix)
+    done = await sync(ws, page, ident)
+    assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+
+
+def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
+    async def test(client):
+        ws, page, hello = await connect(client, viewer)
+        assert hello["photons"] == PHOTONS and hello["method"] == "detp_disc_index"
+        assert np.array_equal(page.colours, home)
+        e = _irradiance_of(viewer)[viewer.value_of]  # each vertex shows its query point's value
+        np.testing.assert_allclose(page.colours, expected_radiance(viewer.engine.scene, viewer.tess, e),
+                                   rtol=2e-6, atol=1e-7)
+        for m in (bunny_at(0.3, 0.0), bunny_at(0.6, -0.2, 0.5)):
+            await move(ws, m)
+            upd = await receive_until(ws, page, lambda m: m["type"] == "update")
+            assert upd["paths"] > 0 and {"find", "retrace", "total", "read"} <= set(upd["seconds"])
+        synced = await sync(ws, page)
+        assert np.allclose(synced["poses"]["bunny"], bunny_at(0.6, -0.2, 0.5), atol=1e-6)  # float32 records
+        ref = reference_colours(viewer, synced["poses"])
+        assert np.array_equal(page.colours, ref), "the page's colours are not a fresh session's at the pose"
+        static = viewer.tess.vertex_tri < viewer.engine.scene.object_ranges()[0][1]
+        changed = (ref != home).any(axis=1)
+        assert changed[static].sum() > 20, "the floor's light did not follow the bunny"
+        await ws.close()
+    run(test, viewer)
+
+
+def _irradiance_of(viewer):
+    from oclgi.incremental.open_session import open_session
+
+    engine = viewer.engine.posed()
+    r = viewer.run
+    with open_session(engine, viewer.points, method=r.method, photons=r.photons, radius=r.radius) as s:
+        return s.irradiance()
+
+
+BAD = [
+    ({"type": "move", "object": "teapot", "matrix": bunny_at(0, 0)}, "no movable object"),
+    ({"type": "move", "object": "bunny", "matrix": [float("nan")] + bunny_at(0, 0)[1:]}, "finite"),
+    ({"type": "move", "object": "bunny", "matrix": [2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1]}, "rotation"),
+    ({"type": "move", "object": "bunny", "matrix": [1, 0.3, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]}, "rotation"),
+    ({"type": "move", "object": "bunny", "matrix": [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]}, "mirror"),
+    ({"type": "move", "object": "bunny", "matrix": bunny_at(0, 0)[:12]}, "16 numbers"),
+    ({"type": "move", "object": "bunny", "matrix": bunny_at(3e9, 0)}, "beyond"),
+    ({"type": "photons", "count": 0}, "whole number"),
+    ({"type": "photons", "count": 10**12}, "whole number"),
+    ({"type": "photons", "count": 1.5}, "whole number"),
+    ({"type": "estimator", "radius": -0.1}, "radius"),
+    ({"type": "estimator", "radius": 1e9}, "radius"),
+    ({"type": "estimator", "radius": float("nan")}, "finite"),
+    ({"type": "estimator", "method": "photon_map"}, "one of"),
+    ({"type": "estimator", "k": 8}, "Photon Map"),
+    ({"type": "estimator"}, "give"),
+    ({"type": "teleport"}, "unknown message type"),
+    ({"no": "type"}, "type"),
+    ([1, 2, 3], "JSON object"),
+]
+
+
+def test_bad_input_is_refused_and_the_session_stays_exact(viewer):
+    async def test(client):
+        ws, page, _ = await connect(client, viewer)
+        await move(ws, bunny_at(0.3, 0.1))
+        before = await sync(ws, page)
+        colours = page.colours.copy()
+        texts = [json.dumps(m) for m, _ in BAD] + ["{not json", "x" * 100_000, json.dumps({"type": "sync"})]
+        words = [w for _, w in BAD] + ["not valid JSON", "too long", "finite number"]
+        for text, word in zip(texts, words):
+            await ws.send_str(text)
+            err = await receive_until(ws, page, lambda m: m["type"] in ("error", "update"))
+            assert err["type"] == "error" and word in err["message"], (text[:80], err)
+        await ws.send_bytes(b"\x00" * 64)
+        err = await receive_until(ws, page, lambda m: m["type"] == "error")
+        assert "binary" in err["message"]
+        after = await sync(ws, page, 2)
+        assert after["poses"] == before["poses"] and after["seq"] == before["seq"]
+        assert after["photons"] == PHOTONS and after["radius"] == before["radius"]
+        assert np.array_equal(page.colours, colours)
+        await moves_exactly(ws, page, viewer, bunny_at(0.5, 0.2), 3)  # still exact, and still moving
+        await ws.close()
+    run(test, viewer)
+
+
+def test_a_flood_of_moves_is_coalesced_refused_past_the_limit_and_ends_exact(viewer):
+    from oclgi.viewer.connection import MAX_MESSAGES_PER_SECOND
+
+    async def test(client):
+        ws, page, _ = await connect(client, viewer)
+        n = 3 * MAX_MESSAGES_PER_SECOND
+        for i in range(n):
+            await move(ws, bunny_at(0.5 * i / n, 0.0))
+        done = await sync(ws, page)
+        errors = [m for m in page.messages if m["type"] == "error"]
+        assert len(errors) >= 1 and "too many requests" in errors[0]["message"]
+        assert done["coalesced"] > 0 and done["updates"] < MAX_MESSAGES_PER_SECOND, done
+        # the last move computed was one of the drag's, and the page equals a fresh session there
+        assert any(np.allclose(done["poses"]["bunny"], bunny_at(0.5 * i / n, 0.0), atol=1e-6) for i in range(n))
+        assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+        await ws.close()
+    run(test, viewer)
+
+
+def test_two_sockets_have_independent_sessions_and_a_closed_one_is_freed(viewer, home):
+    async def test(client):
+        status0 = await (await client.get("/status.json")).json()
+        a, page_a, _ = await connect(client, viewer)
+        b, page_b, _ = await connect(client, viewer)
+        assert (await (await client.get("/status.json")).json())["open"] == 2
+        await move(a, bunny_at(0.6, 0.0))
+        await sync(a, page_a)
+        synced_b = await sync(b, page_b)
+        assert synced_b["poses"]["bunny"] == bunny_at(0, 0) and np.array_equal(page_b.colours, home)
+        assert not np.array_equal(page_a.colours, home)
+        sessions = [c.session for c in viewer.connections]
+        await b.close()
+        for _ in range(200):
+            status = await (await client.get("/status.json")).json()
+            if status["closed"] > status0["closed"]:
+                break
+            await asyncio.sleep(0.05)
+        assert status["open"] == 1 and status["closed"] == status0["closed"] + 1
+        assert status["buffers_released"] > status0["buffers_released"]
+        assert sum(s.closed for s in sessions) == 1, "exactly the closed socket's session is closed"
+        await moves_exactly(a, page_a, viewer, bunny_at(0.2, 0.3))  # the other socket's session goes on
+        await a.close()
+    run(test, viewer)
+
+
+def test_estimator_and_photons_from_the_page_equal_a_fresh_session(viewer):
+    async def test(client):
+        ws, page, _ = await connect(client, viewer)
+        await move(ws, bunny_at(0.4, 0.0))
+        await ws.send_str(json.dumps({"type": "estimator", "radius": 0.1, "method": "detp"}))
+        await ws.send_str(json.dumps({"type": "photons", "count": 12_000}))
+        done = await sync(ws, page)
+        assert done["method"] == "detp" and done["radius"] == 0.1 and done["photons"] == 12_000
+        ref = reference_colours(viewer, done["poses"], method="detp", radius=0.1, photons=12_000)
+        assert np.array_equal(page.colours, ref)
+        await ws.close()
+    run(test, viewer)
+
+
+def test_frame_encoder_sends_only_changes():
+    from oclgi.viewer.vertex_colours import FrameEncoder
+
+    rng = np.random.default_rng(3)
+    enc, page = FrameEncoder(100), PageModel(100)
+    c = rng.random((100, 3), dtype=np.float32)
+    page.apply(enc.frame(c, 0))
+    assert np.array_equal(page.colours, c)
+    assert enc.frame(c, 1) is None
+    c[[3, 50, 99], 1] += 1
+    f = enc.frame(c, 2)
+    assert len(f) == 16 + 16 * 3
+    page.apply(f)
+    c[:60] *= 2
+    f = enc.frame(c, 3)
+    assert len(f) == 16 + 12 * 100  # most changed: the whole array
+    page.apply(f)
+    assert np.array_equal(page.colours, c) and page.seq == 3
+
+
+def test_movable_objects_are_queried_once_per_edge_sized_cell(viewer):
+    from oclgi.viewer.mesh_payload import vertex_objects
+    from oclgi.viewer.object_points import object_points
+
+    tess, scene = viewer.tess, viewer.engine.scene
+    objects, _ = vertex_objects(scene, tess.vertex_tri)
+    material = np.asarray(scene.tri_material)[tess.vertex_tri]
+    queried, value_of = object_points(tess, objects, material)
+    rep = queried[value_of]  # the vertex whose value each vertex shows
+    static = objects == 0
+    assert np.array_equal(rep[static], np.nonzero(static)[0]), "a static vertex shows another's value"
+    moving = ~static
+    assert 0 < len(np.unique(rep[moving])) < moving.sum() / 5, "the bunny's vertices were not thinned"
+    assert (objects[rep] == objects).all() and (material[rep] == material).all()
+    assert (np.linalg.norm(tess.vertices[rep] - tess.vertices, axis=1) <= np.sqrt(3) * tess.edge).all()
+    assert ((tess.normals[rep] * tess.normals).sum(axis=1)[moving] >= 0).all(), "a value crossed to the other side"
+    q, v = object_points(tess, objects, material, all_vertices=True)
+    assert np.array_equal(q, np.arange(len(tess.vertices))) and np.array_equal(v, q)
+    assert len(viewer.points) == len(queried)
