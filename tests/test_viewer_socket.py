@@ -158,7 +158,12 @@ def test_a_flood_of_moves_is_coalesced_refused_past_the_limit_and_ends_exact(vie
 
 def test_two_sockets_have_independent_sessions_and_a_closed_one_is_freed(viewer, home):
     async def test(client):
+        for _ in range(400):  # the earlier tests' sockets closed: their sessions too (closed asynchronously)
+            if not viewer.connections and viewer.sessions_closed == viewer.sessions_opened:
+                break
+            await asyncio.sleep(0.05)
         status0 = await (await client.get("/status.json")).json()
+        assert status0["open"] == 0 and status0["closed"] == status0["opened"]
         a, page_a, _ = await connect(client, viewer)
         b, page_b, _ = await connect(client, viewer)
         assert (await (await client.get("/status.json")).json())["open"] == 2
