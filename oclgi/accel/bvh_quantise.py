@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl.layout import WIDE, BvhNode8Q
+from ..cl.layout import BvhNode8Q
 
 Q_MAX = 255
 # Steps below this would be float32 denormals (flushed to zero on the
@@ -52,7 +52,7 @@ def quantise(wide: np.ndarray) -> np.ndarray:
         extent = top.astype(np.float64) - base  # exact: float32 differences fit float64
         # the least power of two with 255 steps covering the extent
         _, exp = np.frexp(extent / Q_MAX)  # extent / 255 = m 2^exp, 0.5 <= m < 1
-        exp = np.maximum(np.where(extent > 0, exp, MIN_STEP_EXP), MIN_STEP_EXP)
+        exp = np.where(extent > 0, exp, MIN_STEP_EXP)
         exp = np.where(Q_MAX * np.ldexp(1.0, exp - 1) >= extent, exp - 1, exp)  # m == 0.5 exactly
         exp = np.maximum(exp, MIN_STEP_EXP)
         step = np.ldexp(np.float32(1.0), exp).astype(np.float32)
