@@ -1,8 +1,10 @@
 """BVH build time for a million triangles (``oclgi.accel.bvh_build.build_bvh``),
 for both builders: the Morton LBVH (the overlap trees') and the binned SAH
 (the scene's and the movable objects' trees); and the time to collapse the
-SAH tree into the scene's 8-wide nodes (``oclgi.accel.bvh_wide.collapse``),
-which a scene compile adds to the SAH build.
+SAH tree into the scene's 8-wide nodes (``oclgi.accel.bvh_wide.collapse``)
+and the leaves into blocks of 4 triangles (``bvh_leaf_blocks.leaf_blocks``;
+``bvh_quantise.quantise`` for the quantised layouts), which a scene compile
+adds to the SAH build.
 
 The build runs on the host in vectorised numpy each time a scene is compiled,
 so it is the start-up cost of every run; the target is at most 1 s for 10^6
@@ -26,7 +28,10 @@ import numpy as np
 import pytest
 
 from oclgi.accel.bvh_build import BUILDERS, build_bvh
+from oclgi.accel.bvh_leaf_blocks import leaf_blocks
+from oclgi.accel.bvh_quantise import quantise
 from oclgi.accel.bvh_wide import collapse
+from oclgi.cl.layout import Tri
 from oclgi.scene.compiled import BVH_STACK_SIZE
 
 TRIANGLES = 1_000_000
@@ -96,5 +101,31 @@ def test_wide_collapse(benchmark, scale, cores_used):
     info = benchmark.extra_info
     info.update(triangles=n, binary_nodes=len(bvh.nodes), wide_nodes=len(wide.nodes), wide_depth=wide.depth,
                 binary_depth=bvh.depth, stack_need=wide.stack_need)
+    if benchmark.stats:
+        info["seconds"] = round(benchmark.stats.stats.median, 3)
+
+
+def test_wide_layouts(benchmark, scale, cores_used):
+    """The 8-wide nodes of the same triangles into the other wide layouts:
+    leaf blocks (the default scene tree's last step) and quantised boxes."""
+    n = scale(TRIANGLES)
+    tris = random_triangles(n, np.random.default_rng(3))
+    bvh = build_bvh(tris.min(axis=1), tris.max(axis=1), quality="sah")
+    wide = collapse(bvh.nodes)
+    records = np.zeros(n, dtype=Tri)
+    for k in range(3):
+        records[f"v{k}"] = tris[bvh.order, k]
+    records["id"] = bvh.order
+
+    benchmark.group = "bvh build"
+    with cores_used():
+        nodes, blocks = benchmark.pedantic(leaf_blocks, args=(wide.nodes, records), rounds=3, warmup_rounds=1)
+    t0 = time.perf_counter()
+    quantise(wide.nodes)
+    quantise_s = time.perf_counter() - t0
+
+    assert len(blocks) >= n / 4
+    info = benchmark.extra_info
+    info.update(triangles=n, wide_nodes=len(wide.nodes), leaf_blocks=len(blocks), quantise_s=round(quantise_s, 3))
     if benchmark.stats:
         info["seconds"] = round(benchmark.stats.stats.median, 3)

@@ -6,12 +6,17 @@
  *   - binary (Instance.root >= 0): oclgi_types.h BvhNode, children of an
  *     inner node adjacent at first and first + 1, leaves a run of triangles
  *     in BVH order;
- *   - wide (Instance.root < 0, the root node is ~root): BvhNode8, the same
- *     binary tree collapsed into nodes of up to 8 children
+ *   - wide (Instance.root < 0, the root node is ~root without its flag
+ *     bits): the same binary tree collapsed into nodes of up to 8 children
  *     (oclgi/accel/bvh_wide.py) whose boxes are slabbed all at once, one
  *     float8 op per plane (PoCL does not vectorise across work-items: the
- *     lanes are written out). The `nodes` buffer holds the layout the
- *     instances' roots say.
+ *     lanes are written out). Two flags in ~root say the rest: with
+ *     OCLGI_BVH_QUANTISED_ROOT the nodes are BvhNode8Q (child boxes in 8
+ *     bits on a grid per node, oclgi/accel/bvh_quantise.py), else
+ *     BvhNode8; with OCLGI_BVH_BLOCK_ROOT a leaf is TriBlock4 records after
+ *     the nodes in the same buffer (oclgi/accel/bvh_leaf_blocks.py), tested
+ *     4 triangles at a time (geometry.h tri4_intersect), else a run of Tri
+ *     records. The `nodes` buffer holds the layout the instances' roots say.
  * Top level: the instances, each a world-space box and a
  * transform; a ray is moved into an object's frame (the direction is not
  * renormalised, so distances t stay world distances) and traversed there.
@@ -156,7 +161,7 @@ inline int bvh2_traverse(__global const BvhNode *nodes, __global const Tri *tris
 #define BVH_MIN8(a, b) select((b), (a), (a) < (b))
 
 /* The 8 keys in descending order (bitonic network, 6 steps). */
-inline int8 bvh_sort8_desc(int8 k)
+HOT_INLINE int8 bvh_sort8_desc(int8 k)
 {
     BVH_SORT_STEP(k, 1, 0, 3, 2, 5, 4, 7, 6, 0, -1, -1, 0, 0, -1, -1, 0);
     BVH_SORT_STEP(k, 2, 3, 0, 1, 6, 7, 4, 5, 0, 0, -1, -1, -1, -1, 0, 0);
@@ -167,9 +172,45 @@ inline int8 bvh_sort8_desc(int8 k)
     return k;
 }
 
-/* One object's wide BVH from its root node. A node's 8 child boxes are
- * slabbed together with box_slab's arithmetic lane by lane (the same bits
- * as the binary walk's test of the same box). Each hit lane's key is its
+/* The entry and exit distances of a ray into 8 child boxes given by their
+ * planes, box_slab's arithmetic lane by lane. `finite`: every 1/d is
+ * finite, and the planes come as near (nx, ny, nz) and far (fx, fy, fz)
+ * for the ray's signs; then no slab product is NaN and (lo - o) * inv and
+ * (hi - o) * inv are ordered by the sign of inv alone (rounding is
+ * monotone), so plain max/min (one instruction each) give fmax/fmin's
+ * values. Otherwise the planes come as lo and hi (in the same arguments)
+ * and box_slab's own NaN-dropping form is used. */
+HOT_INLINE void bvh8_slab(int finite, float8 nx, float8 ny, float8 nz, float8 fx, float8 fy, float8 fz,
+                         float3 o, float3 inv, float tmax, float8 *enter, float8 *leave)
+{
+    float8 t0x = (nx - o.x) * inv.x, t1x = (fx - o.x) * inv.x;
+    float8 t0y = (ny - o.y) * inv.y, t1y = (fy - o.y) * inv.y;
+    float8 t0z = (nz - o.z) * inv.z, t1z = (fz - o.z) * inv.z;
+    if (finite) {
+        *enter = BVH_MAX8(BVH_MAX8(t0x, t0y), BVH_MAX8(t0z, (float8)(0.0f)));
+        *leave = BVH_MIN8(BVH_MIN8(t1x, t1y), BVH_MIN8(t1z, (float8)(tmax))) * 1.0000004f;
+    } else {
+        *enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), 0.0f));
+        *leave = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)), fmin(fmax(t0z, t1z), tmax)) * 1.0000004f;
+    }
+}
+
+/* A quantised plane: q * step is exact (8-bit q, power-of-two step), so the
+ * plane rounds once, outwards of the exact one by the host's choice of q
+ * (oclgi/accel/bvh_quantise.py); FP_CONTRACT is off (geometry.h), and a
+ * fused multiply-add would round the same exact product the same way. */
+HOT_INLINE float8 bvh8q_plane(uchar8 q, float base, float step)
+{
+    return base + convert_float8(q) * step;
+}
+
+/* One object's wide BVH from its root node, in either wide layout: BvhNode8
+ * (the child planes stored) or, with `quantised`, BvhNode8Q (decoded with
+ * bvh8q_plane: every decoded box holds the exact one, so the walk enters
+ * at least the nodes the exact boxes let it enter, and the nearest hit is
+ * the same). A node's 8 child boxes are slabbed together (bvh8_slab; in
+ * BvhNode8, with box_slab's arithmetic on the same planes as the binary
+ * walk, so the same bits). Each hit lane's key is its
  * entry distance with the lane number in the 3 low mantissa bits (entry
  * distances are >= 0, so the int order is the float order; misses are -1);
  * sorted in descending order, the keys' children and distances go to the
@@ -178,12 +219,13 @@ inline int8 bvh_sort8_desc(int8 k)
  * lane bits cleared: at most 7 ulps below the true entry, so culling on pop
  * never drops a node the exact distance would keep.
  *
- * An unused lane's box is lo = hi = +inf: along an axis with 1/d >= 0 its
- * entry is +inf, and with all three negative its exit is -inf; either way
- * it is a miss (the test below counts an entry of +inf as one, as the binary
- * walk's box_entry does). */
-inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tris, int root,
-                         float3 o, float3 d, int any_hit, Hit *hit)
+ * An unused lane of BvhNode8 has the box lo = hi = +inf: along an axis with
+ * 1/d >= 0 its entry is +inf, and with all three negative its exit is -inf;
+ * either way it is a miss (the test below counts an entry of +inf as one,
+ * as the binary walk's box_entry does). An unused lane of BvhNode8Q has
+ * child 0 and is masked out. */
+HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tris, int root, int quantised,
+                            int blocks, float3 o, float3 d, int any_hit, Hit *hit)
 {
     float3 inv = 1.0f / d;
     RayShear shear = ray_shear(d);
@@ -191,35 +233,37 @@ inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tri
     float stack_t[BVH_WIDE_STACK];
     int sp = 0;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    /* With every 1/d finite no slab product is NaN, and then (lo - o) * inv
-     * and (hi - o) * inv are ordered by the sign of inv alone (rounding is
-     * monotone): the near and far planes can be chosen once per ray (field
-     * indices of BvhNode8: lox..loz = 0..2, hix..hiz = 3..5), and plain
-     * max/min (one instruction each) give fmax/fmin's values. An axis with
-     * d = 0 (1/d infinite) takes box_slab's own NaN-dropping form. */
+    /* the near planes' field indices (lo x..z = 0..2, hi x..z = 3..5 in both
+     * layouts), chosen once per ray; an axis with d = 0 (1/d infinite)
+     * takes the general form */
     int finite = isfinite(inv.x) && isfinite(inv.y) && isfinite(inv.z);
     int3 near = (int3)(inv.x >= 0.0f ? 0 : 3, inv.y >= 0.0f ? 1 : 4, inv.z >= 0.0f ? 2 : 5);
+    if (!finite) near = (int3)(0, 1, 2);
     int ref = root;
     for (;;) {
         if (ref >= 0) {
-            __global const BvhNode8 *n = &nodes[ref];
-            BVH_COUNT(hit, nodes, 1);
             float8 enter, leave;
-            if (finite) {
-                __global const float8 *f = (__global const float8 *)n;
-                float8 tnx = (f[near.x] - o.x) * inv.x, tfx = (f[3 - near.x] - o.x) * inv.x;
-                float8 tny = (f[near.y] - o.y) * inv.y, tfy = (f[5 - near.y] - o.y) * inv.y;
-                float8 tnz = (f[near.z] - o.z) * inv.z, tfz = (f[7 - near.z] - o.z) * inv.z;
-                enter = BVH_MAX8(BVH_MAX8(tnx, tny), BVH_MAX8(tnz, (float8)(0.0f)));
-                leave = BVH_MIN8(BVH_MIN8(tfx, tfy), BVH_MIN8(tfz, (float8)(hit->t))) * 1.0000004f;
+            int8 child;
+            int8 used = (int8)(-1);
+            BVH_COUNT(hit, nodes, 1);
+            if (quantised) {
+                __global const BvhNode8Q *n = (__global const BvhNode8Q *)nodes + ref;
+                __global const uchar8 *q = &n->qlox;
+                float4 b = n->base, s = n->step;
+                bvh8_slab(finite, bvh8q_plane(q[near.x], b.x, s.x), bvh8q_plane(q[near.y], b.y, s.y),
+                          bvh8q_plane(q[near.z], b.z, s.z), bvh8q_plane(q[3 - near.x], b.x, s.x),
+                          bvh8q_plane(q[5 - near.y], b.y, s.y), bvh8q_plane(q[7 - near.z], b.z, s.z),
+                          o, inv, hit->t, &enter, &leave);
+                child = n->child;
+                used = child != 0;
             } else {
-                float8 t0x = (n->lox - o.x) * inv.x, t1x = (n->hix - o.x) * inv.x;
-                float8 t0y = (n->loy - o.y) * inv.y, t1y = (n->hiy - o.y) * inv.y;
-                float8 t0z = (n->loz - o.z) * inv.z, t1z = (n->hiz - o.z) * inv.z;
-                enter = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), 0.0f));
-                leave = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)), fmin(fmax(t0z, t1z), hit->t)) * 1.0000004f;
+                __global const BvhNode8 *n = (__global const BvhNode8 *)nodes + ref;
+                __global const float8 *f = &n->lox;
+                bvh8_slab(finite, f[near.x], f[near.y], f[near.z], f[3 - near.x], f[5 - near.y], f[7 - near.z],
+                          o, inv, hit->t, &enter, &leave);
+                child = n->child;
             }
-            int8 in = (enter <= leave) & (enter < INFINITY);
+            int8 in = (enter <= leave) & (enter < INFINITY) & used;
             /* -0.0f and +0.0f both become key 0 | lane */
             int8 key = select((int8)(-1), (as_int8(enter) & 0x7FFFFFF8) | lane, in);
             int4 c4 = in.lo + in.hi;
@@ -228,16 +272,31 @@ inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tri
             if (n_in == 1) { /* the one lane hit has the largest key */
                 int4 m4 = max(key.lo, key.hi);
                 int2 m2 = max(m4.lo, m4.hi);
-                ref = ((__global const int *)&n->child)[max(m2.x, m2.y) & 7];
+                ref = shuffle(child, (uint8)(max(m2.x, m2.y) & 7)).s0;
                 continue;
             }
             if (n_in > 1) {
                 key = bvh_sort8_desc(key);
-                vstore8(shuffle(n->child, as_uint8(key) & 7u), 0, stack + sp);
+                vstore8(shuffle(child, as_uint8(key) & 7u), 0, stack + sp);
                 vstore8(as_float8(key & ~7), 0, stack_t + sp);
                 sp += n_in - 1;
                 ref = stack[sp];
                 continue;
+            }
+        } else if (blocks) {
+            int run = ~ref, count = (run & 7) + 1;
+            BVH_COUNT(hit, tests, count);
+            __global const TriBlock4 *b = (__global const TriBlock4 *)((__global const char *)nodes +
+                                                                        ((size_t)(run >> 3) << 5));
+            for (int k = 0; k < count; k += 4, ++b) {
+                float t, u, v;
+                int lane = tri4_intersect(o, shear, &b->v0x, count - k, hit->t, &t, &u, &v);
+                if (lane >= 0) {
+                    int4 id = b->id;
+                    hit->t = t; hit->u = u; hit->v = v;
+                    hit->tri = lane == 0 ? id.x : (lane == 1 ? id.y : (lane == 2 ? id.z : id.w));
+                    if (any_hit) return hit->tri;
+                }
             }
         } else {
             int run = ~ref;
@@ -267,7 +326,11 @@ inline int bvh8_traverse(__global const BvhNode8 *nodes, __global const Tri *tri
 inline int bvh_traverse(__global const void *nodes, __global const Tri *tris, int root,
                         float3 o, float3 d, int any_hit, Hit *hit)
 {
-    if (root < 0) return bvh8_traverse((__global const BvhNode8 *)nodes, tris, ~root, o, d, any_hit, hit);
+    if (root < 0) {
+        int q = (~root & OCLGI_BVH_QUANTISED_ROOT) != 0, b = (~root & OCLGI_BVH_BLOCK_ROOT) != 0;
+        return bvh8_traverse(nodes, tris, ~root & ~(OCLGI_BVH_QUANTISED_ROOT | OCLGI_BVH_BLOCK_ROOT), q, b, o, d,
+                             any_hit, hit);
+    }
     return bvh2_traverse((__global const BvhNode *)nodes, tris, root, o, d, any_hit, hit);
 }
 

@@ -55,6 +55,42 @@ typedef struct {
     int8 child;
 } BvhNode8;
 
+/* BvhNode8 with quantised child boxes (bvh.h bvh8_traverse): 128 bytes, two
+ * cache lines, against BvhNode8's 224. child as in BvhNode8, but 0 for an
+ * unused lane (no node's child is node 0, a root). A child plane is base +
+ * q * step on its axis, q an 8-bit count and step a power of two (so the
+ * product is exact and the sum rounds once); the host rounds lower planes
+ * down and upper planes up, so every decoded box holds the exact one
+ * (oclgi/accel/bvh_quantise.py). base.w and step.w are unused. */
+typedef struct {
+    int8 child;
+    float4 base;
+    float4 step;
+    uchar8 qlox;
+    uchar8 qloy;
+    uchar8 qloz;
+    uchar8 qhix;
+    uchar8 qhiy;
+    uchar8 qhiz;
+    int4 pad;
+} BvhNode8Q;
+
+/* Up to 4 triangles of a wide leaf as SoA lanes (geometry.h
+ * tri4_intersect), stored after the wide nodes in the same buffer (bvh.h):
+ * vertex coordinates, then ids in scene order (-1: unused lane). 160 bytes. */
+typedef struct {
+    float4 v0x;
+    float4 v0y;
+    float4 v0z;
+    float4 v1x;
+    float4 v1y;
+    float4 v1z;
+    float4 v2x;
+    float4 v2y;
+    float4 v2z;
+    int4 id;
+} TriBlock4;
+
 typedef struct {
     float v0[3];
     int id;      /* triangle id in scene order */

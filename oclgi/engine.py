@@ -177,9 +177,11 @@ class Engine:
     default OCLGI_DEVICE / PYOPENCL_CTX / the PoCL CPU device.
     ``local_size``: work-group size of the kernels (None: the runtime's
     choice); results do not depend on it.
-    ``bvh``: the scene trees, "sah8" (the default: a binned SAH tree
-    collapsed into 8-wide nodes traversed with float8 slab tests; about a
-    third of the binary tree's node visits), "sah" (the binary SAH tree),
+    ``bvh``: the scene trees, "sah8b" (the default: a binned SAH tree
+    collapsed into 8-wide nodes traversed with float8 slab tests, about a
+    third of the binary tree's node visits, its leaves tested 4 triangles
+    at a time; "sah8" tests them one by one, "sah8q"/"sah8qb" quantise the
+    child boxes; oclgi/accel/bvh_build.py QUALITIES), "sah" (the binary SAH tree),
     "lbvh8" or "lbvh" (Morton order: a faster build, more nodes per ray);
     the hits are the same up to ties between equally near triangles.
     """

@@ -109,3 +109,4 @@ def test_wide_node_is_32_byte_aligned(probe_result):
     end = int(np.argmax(probed == -1))
     assert probed[end + 1] == 32
     assert layout.BvhNode8.itemsize % 32 == 0
+    assert probed[end + 2] == 32 and layout.BvhNode8Q.itemsize == 128  # two cache lines

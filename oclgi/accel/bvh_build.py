@@ -15,6 +15,8 @@ adjacent, nodes are numbered level by level, root 0.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .bvh_sah import build_sah
@@ -48,15 +50,26 @@ def bit_length(x: np.ndarray) -> np.ndarray:
 BUILDERS = ("lbvh", "sah")
 # The scene trees (oclgi/scene/compiled.py): a builder, and "8" for its tree
 # collapsed into 8-wide nodes (bvh_wide.py), which the scene's traversal
-# slabs 8 boxes at a time; without it the binary tree is traversed as built.
-QUALITIES = ("lbvh", "sah", "lbvh8", "sah8")
+# slabs 8 boxes at a time; then "q" for those nodes with quantised child
+# boxes (bvh_quantise.py: 128 bytes a node against 224) and "b" for leaves
+# as blocks of 4 triangles tested at once (bvh_leaf_blocks.py). Without
+# "8" the binary tree is traversed as built.
+QUALITIES = ("lbvh", "sah", "lbvh8", "sah8", "sah8q", "sah8b", "sah8qb")
 
 
-def scene_tree(quality: str) -> tuple[str, bool]:
-    """(builder, wide) of a scene tree name of QUALITIES."""
+class SceneTree(NamedTuple):
+    builder: str  # of BUILDERS
+    wide: bool  # 8-wide nodes
+    quantised: bool  # BvhNode8Q, else BvhNode8 (wide trees)
+    blocks: bool  # leaves as TriBlock4 records (wide trees)
+
+
+def scene_tree(quality: str) -> SceneTree:
+    """What a scene tree name of QUALITIES builds."""
     if quality not in QUALITIES:
         raise ValueError(f"BVH quality must be one of {QUALITIES}, got {quality!r}")
-    return quality.removesuffix("8"), quality.endswith("8")
+    builder, _, layout = quality.partition("8")
+    return SceneTree(builder, "8" in quality, "q" in layout, "b" in layout)
 
 
 def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh") -> BvhData:

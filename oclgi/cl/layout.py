@@ -27,6 +27,23 @@ WIDE = LANES  # one float8 per field
 BvhNode8 = np.dtype([("lox", f4, WIDE), ("loy", f4, WIDE), ("loz", f4, WIDE), ("hix", f4, WIDE), ("hiy", f4, WIDE),
                      ("hiz", f4, WIDE), ("child", i4, WIDE)])
 
+# The same node with its child boxes quantised, 128 bytes (two cache lines;
+# oclgi/accel/bvh_quantise.py writes it, kernels/bvh.h reads it): per lane
+# the child as in BvhNode8 (0 for an unused lane), then the node's grid,
+# base (xyz) and power-of-two step (xyz) per axis, and each child plane as
+# an 8-bit count of steps from the base, rounded outwards.
+u1 = np.uint8
+BvhNode8Q = np.dtype([("child", i4, WIDE), ("base", f4, 4), ("step", f4, 4), ("qlox", u1, WIDE), ("qloy", u1, WIDE),
+                      ("qloz", u1, WIDE), ("qhix", u1, WIDE), ("qhiy", u1, WIDE), ("qhiz", u1, WIDE),
+                      ("pad", i4, 4)])
+
+# A wide leaf's triangles for the 4-lane watertight test, 160 bytes
+# (oclgi/accel/bvh_leaf_blocks.py writes them after the wide nodes, in the
+# nodes' buffer; kernels/geometry.h tri4_intersect tests them): the
+# coordinates of v0, v1, v2 of up to 4 triangles as SoA lanes, and their
+# ids in scene order (-1 in unused lanes).
+TriBlock4 = np.dtype([(f"v{k}{a}", f4, 4) for k in range(3) for a in "xyz"] + [("id", i4, 4)])
+
 # Triangle in BVH order, 48 bytes: its three vertices (not edges, so that
 # triangles sharing an edge see bit-identical vertices and the watertight
 # test holds) and its id in scene order.
@@ -127,7 +144,8 @@ RayMapDisc = np.dtype(
 ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
-    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "Tri": Tri, "Instance": Instance, "Segment": Segment,
+    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "BvhNode8Q": BvhNode8Q, "TriBlock4": TriBlock4, "Tri": Tri,
+    "Instance": Instance, "Segment": Segment,
     "Material": Material, "Texture": Texture, "Background": Background, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }

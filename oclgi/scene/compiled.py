@@ -16,8 +16,10 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh, scene_tree
+from ..accel.bvh_leaf_blocks import leaf_blocks
+from ..accel.bvh_quantise import quantise
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
+from ..cl.constants import BVH_BLOCK_ROOT, BVH_QUANTISED_ROOT, BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
 from ..cl.layout import Emitter, Instance, Tri
 from ..errors import OclgiError
 from . import background, materials, shading_normals, textures
@@ -30,9 +32,10 @@ F32_MAX = float(np.finfo(np.float32).max)
 
 # The scene's and the movable objects' trees: built once per scene (a move
 # changes a transform only), traversed by every ray of every kernel. The
-# binned SAH tree collapsed into 8-wide nodes (oclgi/accel/bvh_build.py
-# QUALITIES has the others).
-BVH_QUALITY = "sah8"
+# binned SAH tree collapsed into 8-wide nodes, its leaves as blocks of 4
+# triangles (oclgi/accel/bvh_build.py QUALITIES has the others; measured
+# against each other in bench/README.md).
+BVH_QUALITY = "sah8b"
 
 
 def _buffer(ctx, array, flags=cl.mem_flags.READ_ONLY):
@@ -59,10 +62,14 @@ def _warn_escaping(scene: Scene) -> None:
 
 class CompiledScene:
     """``bvh_quality`` names the objects' trees (oclgi/accel/bvh_build.py
-    QUALITIES): "sah8" (the default) builds the binned SAH tree and collapses
+    QUALITIES): "sah8b" (the default) builds the binned SAH tree and collapses
     it into 8-wide nodes (BvhNode8, oclgi/accel/bvh_wide.py), which the
-    kernels traverse 8 child boxes at a time; "sah" traverses the binary SAH
-    tree itself (two boxes a node), "lbvh" and "lbvh8" the Morton tree.
+    kernels traverse 8 child boxes at a time, with its leaves as blocks of 4
+    triangles tested at once (TriBlock4, oclgi/accel/bvh_leaf_blocks.py);
+    "sah8" keeps the leaves as runs of triangles, "sah8q" and "sah8qb"
+    quantise the child boxes (BvhNode8Q, oclgi/accel/bvh_quantise.py); "sah"
+    traverses the binary SAH tree itself (two boxes a node), "lbvh" and
+    "lbvh8" the Morton tree.
     Every one gives the same hits up to which of two equally near triangles
     is found (the wide and binary layouts of one tree: the same bits but
     for such ties); ``n_nodes`` counts the traversed layout's nodes,
@@ -96,7 +103,7 @@ class CompiledScene:
 
         self._tables(scene)
 
-        self.nodes = _buffer(ctx, self._nodes)
+        self.nodes = _buffer(ctx, np.concatenate([self._nodes.view(np.uint8), self._leaf_blocks.view(np.uint8)]))
         self.tris = _buffer(ctx, self._tris)
         self.object_normals = _buffer(ctx, normals)
         # the pose as loaded (the engine's; sessions take copies: Engine.posed)
@@ -180,7 +187,8 @@ class CompiledScene:
         materials, the emitters and the ray offset. Equal fingerprints trace
         equal paths; a checkpoint records it (oclgi/checkpoint.py)."""
         h = hashlib.sha256()
-        for a in (self._nodes, self._tris, self.instances_host, self.materials_host, self.texels_host, self.uvmap_host,
+        for a in (self._nodes, self._leaf_blocks, self._tris, self.instances_host, self.materials_host,
+                  self.texels_host, self.uvmap_host,
                   self.colourmap_host,
                   self.emitters_host,
                   self.emitter_cdf_host, self.scene.tri_material.astype(np.int32),
@@ -199,7 +207,8 @@ class CompiledScene:
         """One BVH per object, in one node array and one triangle array; one
         Instance per object, placed where the scene file put it (identity).
         A wide tree's Instance root is ~(its root node) (kernels/bvh.h)."""
-        builder, wide = scene_tree(self.bvh_quality)
+        builder, wide, quantised, blocks = scene_tree(self.bvh_quality)
+        flags = (BVH_QUANTISED_ROOT if quantised else 0) | (BVH_BLOCK_ROOT if blocks else 0)
         ranges = self.scene.object_ranges()
         nodes_all, tris = [], np.zeros(len(v), dtype=Tri)
         records = np.zeros(len(ranges), dtype=Instance)
@@ -211,7 +220,7 @@ class CompiledScene:
             n_binary += len(bvh.nodes)
             if wide:
                 tree = collapse(bvh.nodes, node_offset=n_nodes, tri_offset=a)
-                nodes, root = tree.nodes, ~n_nodes
+                nodes, root = (quantise(tree.nodes) if quantised else tree.nodes), ~(n_nodes | flags)
                 stack_need = max(stack_need, tree.stack_need)
                 depth = max(depth, tree.depth)
             else:
@@ -232,14 +241,22 @@ class CompiledScene:
             n_nodes += len(nodes)
         if not wide and depth > BVH_STACK_SIZE:
             raise OclgiError(f"BVH depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
+        if wide and n_nodes >= BVH_BLOCK_ROOT:
+            raise OclgiError(f"the wide BVH addresses fewer than {BVH_BLOCK_ROOT} nodes")
         if wide and stack_need > WIDE_STACK:
             raise OclgiError(f"the wide BVH needs a traversal stack of {stack_need} entries, more than the "
                              f"kernels' {WIDE_STACK}")
         self.bvh_depth = depth  # levels of the traversed layout
         self.bvh_wide = wide
+        self.bvh_quantised = quantised
+        self.bvh_blocks = blocks
         self.bvh_stack_need = stack_need if wide else depth
         # the traversed layout's nodes: what the device reads and the fingerprint hashes
         self._nodes = np.concatenate(nodes_all)
+        # the leaves' triangle blocks, after the nodes in the nodes' buffer
+        self._leaf_blocks = np.zeros(0, np.uint8)
+        if blocks:
+            self._nodes, self._leaf_blocks = leaf_blocks(self._nodes, tris)
         self.n_nodes = len(self._nodes)
         self.n_binary_nodes = n_binary
         self._tris = tris
