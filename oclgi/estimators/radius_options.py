@@ -29,11 +29,7 @@ def check(radius_mode, adaptive_k, pilot_photons, radius_min) -> None:
     n = integral(pilot_photons)
     if isinstance(pilot_photons, bool) or n is None or not 1024 <= n <= 1 << 22:
         raise OclgiError(f"pilot_photons must be an integer in 1024..4194304, got {pilot_photons!r}")
-    try:
-        f = float(radius_min)
-    except (TypeError, ValueError):
-        f = math.nan
-    if isinstance(radius_min, bool) or not 0.0 < f <= 1.0:
+    if not 0.0 < _real(radius_min) <= 1.0:
         raise OclgiError(f"radius_min must be a number in (0, 1], got {radius_min!r}")
 
 
@@ -57,10 +53,17 @@ def consistent_span(consistent, span):
     """Surface-consistent counting's span in radii, or None when it is off; one error line for a bad value."""
     if not isinstance(consistent, (bool, np.bool_)):
         raise OclgiError(f"consistent must be true or false, got {consistent!r}")
-    try:
-        f = float(span)
-    except (TypeError, ValueError):
-        f = math.nan
-    if isinstance(span, bool) or not 0.0 < f <= 100.0:
+    f = _real(span)
+    if not 0.0 < f <= 100.0:
         raise OclgiError(f"consistent_span must be a number of radii in (0, 100], got {span!r}")
     return f if consistent else None
+
+
+def _real(value) -> float:
+    """``value`` as a float; NaN (refused by every range) for a bool or what is not a number."""
+    if isinstance(value, bool):
+        return math.nan
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
