@@ -6,7 +6,8 @@ Python blocks (```python) run in order, in one namespace. Shell blocks
 of this environment first on the PATH, except by this rule: a block whose
 commands are all ``make`` targets or install commands (``pip``,
 ``apt-get``) is not run, since those set up the machine and ``make test``
-runs this suite. A usage synopsis, with placeholders, is a ```text block
+runs this suite; nor is a block that starts a server (``oclgi view``, which
+serves until Ctrl-C: tests/test_viewer_cli.py runs it and stops it). A usage synopsis, with placeholders, is a ```text block
 and is not code. The README's commands are cheap enough to run as they
 stand (it says so where its counts are small).
 """
@@ -39,8 +40,12 @@ def _is_setup(block: str) -> bool:
     return all(w in SETUP or w.endswith("/pip") for w in words) or "python -m pip" in block
 
 
+def _is_server(block: str) -> bool:
+    return any(c.split()[:2] == ["oclgi", "view"] for c in _commands(block))
+
+
 def _shell_blocks():
-    return [b for b in SHELL.findall((ROOT / "README.md").read_text()) if not _is_setup(b)]
+    return [b for b in SHELL.findall((ROOT / "README.md").read_text()) if not (_is_setup(b) or _is_server(b))]
 
 
 def test_the_shell_blocks_are_run_or_set_up():
