@@ -31,9 +31,17 @@ def viewer(scenes_dir):
 
 @pytest.fixture
 def server(scenes_dir):
+    def as_a_terminal_job():
+        # Ctrl-C at its default, as a terminal gives it, whatever this test
+        # process inherited or earlier tests left (an ignored SIGINT is kept
+        # ignored by oclgi, as nohup asks: the server would never stop).
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
     proc = subprocess.Popen([sys.executable, "-m", "oclgi", "view", str(scenes_dir / "cornell_bunny.toml"),
                              "--port", "0", "--photons", str(PHOTONS), "--edge", str(EDGE), "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
+                            preexec_fn=as_a_terminal_job)
     url = proc.stdout.readline().strip()
     assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
     yield proc, url
