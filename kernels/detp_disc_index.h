@@ -44,17 +44,22 @@
     } while (0)
 
 /* One segment (s, read from `slot`) against the tree, its fixed-point
- * power added to every disc it crosses (quantised once per segment, as
- * detp_plain does). */
+ * power added to every disc it crosses (quantised once per segment that
+ * crosses one, as detp_plain does). */
 inline void disc_index_segment(__global const BvhNode *nodes, __global const DiscBlock *discs,
                                __global const Segment *slot, const SegmentView *s, float ext,
                                __global long *acc, uint *visited, ulong *tests)
 {
     float3 o = s->o, w = s->w;
     float tmax = s->t_end + ext; /* exactly as detp_plain */
-    long3 q = segment_fixed_power(slot);
+    long3 q = 0;
+    int have_q = 0;
 #define DISC_INDEX_ADD(id)                               \
     do {                                                 \
+        if (!have_q) { /* once per segment that hits */  \
+            q = segment_fixed_power(slot);               \
+            have_q = 1;                                  \
+        }                                                \
         __global long *a_ = acc + 3 * (size_t)(id);      \
         atom_add(a_ + 0, q.x);                           \
         atom_add(a_ + 1, q.y);                           \

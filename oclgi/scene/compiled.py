@@ -276,6 +276,16 @@ class CompiledScene:
         """World normals, float4 per triangle (the pose's)."""
         return self.pose.tri_normals
 
+    def normals_kernel(self):
+        """The kernel that turns a moved object's normals (kernels/instances.cl),
+        made once: pyopencl creates a kernel object at every attribute access,
+        and every move of every session calls it."""
+        if getattr(self, "_normals_kernel", None) is None:
+            from ..cl.programs import programs
+
+            self._normals_kernel = programs(self.ctx).get("instances").instances_normals
+        return self._normals_kernel
+
     def at(self, pose: Pose) -> "CompiledScene":
         """This scene seen at ``pose``: every tree, triangle and table shared,
         the instances and world normals the pose's."""

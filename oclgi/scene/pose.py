@@ -20,7 +20,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..cl.layout import Instance
-from ..cl.programs import launch, programs
+from ..cl.programs import launch
 from ..errors import OclgiError
 from ..params import MAX_LENGTH
 
@@ -103,7 +103,7 @@ class Pose:
         place_record(self.instances_host[obj], compiled.object_boxes[obj], m, obj_desc.name)
         item = self.instances_host.dtype.itemsize
         cl.enqueue_copy(queue, self.instances, self.instances_host[obj:obj + 1], dst_offset=obj * item)
-        k = programs(compiled.ctx).get("instances").instances_normals
+        k = compiled.normals_kernel()
         launch(queue, k, int(self.instances_host[obj]["n_tris"]), compiled.object_normals, self.instances,
                obj, self.tri_normals)
 
