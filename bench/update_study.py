@@ -173,15 +173,17 @@ def circle(scene, f, base, path_r, frames, i):
     return scaled_pose(scene, "bunny", f, base, (path_r * (math.cos(a) - 1), 0.0, path_r * math.sin(a)))
 
 
-def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", segments=1e6):
+def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", segments=1e6, tree=None):
     """Updates per second: a camera session (10^5 pixels), 10^6 stored
-    segments, the bunny (f = 0.1) going round a circle; stages and memory."""
+    segments, the bunny (f = 0.1) going round a circle; stages and memory.
+    ``tree``: the disc index's tree (``wide`` or ``binary``; None: its default)."""
     side = 100 if quick else 316  # 10^5 query points
     engine, base, path_r = scene_engine(name, side)
     engine.move("bunny", circle(engine.scene, f, base, path_r, frames, 0))
     photons = photons_for(engine, segments / 10 if quick else segments)
+    options = {} if tree is None else {"tree": tree}
     session = oclgi.Session(engine, method=method, photons=photons, radius=0.03 if name == "cornell" else 0.3,
-                            dynamic=dynamic)
+                            dynamic=dynamic, **options)
     n_r = int(session.segments()[1].sum())
     rss, stages, totals, pts, paths = [], {}, [], [], []
     for i in range(1, frames + 1):
@@ -195,7 +197,7 @@ def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", s
             rss.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     med = float(np.median(totals))
     return {"scene": name, "f": f, "dynamic": dynamic, "n_R": n_r, "photons": photons, "points": side * side,
-            "frames": frames, "median_update_s": med, "updates_per_s": 1 / med,
+            "frames": frames, "tree": tree, "median_update_s": med, "updates_per_s": 1 / med,
             "dynamic_points_median": float(np.median(pts)), "paths_median": float(np.median(paths)),
             "stage_median_s": {k: float(np.median(v)) for k, v in stages.items()},
             "max_rss_mib_samples": rss, "setup_s": session.setup_seconds}
@@ -365,6 +367,8 @@ def main():
                          "keep their last results)")
     ap.add_argument("--frames", type=int, default=100, help="frames of the interactive benchmark")
     ap.add_argument("--scenes", default="cornell,sponza", help="scenes of the interactive benchmark")
+    ap.add_argument("--disc-tree", choices=("wide", "binary"), default=None,
+                    help="the disc index's tree in the interactive benchmark (default: the estimator's, wide)")
     args = ap.parse_args()
     parts = set(args.parts.split(","))
     rng = np.random.default_rng(7)
@@ -386,7 +390,7 @@ def main():
         res["rate_vs_segments"] = [interactive("cornell", args.method, args.quick, 30, segments=n)
                                    for n in (1.25e5, 2.5e5, 5e5, 1e6, 2e6)]
     if "interactive" in parts:
-        res["interactive"] = [interactive(name, args.method, args.quick, args.frames)
+        res["interactive"] = [interactive(name, args.method, args.quick, args.frames, tree=args.disc_tree)
                               for name in args.scenes.split(",")]
     RESULTS.mkdir(exist_ok=True)
     path.write_text(json.dumps(res, indent=1))

@@ -9,6 +9,7 @@
 #define OCLGI_CONSTANTS_H
 
 #if !defined(OCLGI_LANES) || !defined(OCLGI_BVH_STACK_SIZE) || !defined(OCLGI_BOX_BVH_STACK) ||        \
+    !defined(OCLGI_BOX_LEAF_BITS) || !defined(OCLGI_BOX_WIDE_STACK) ||                                 \
     !defined(OCLGI_POINT_BVH_STACK) || !defined(OCLGI_FIXED_BITS) || !defined(OCLGI_FRONT_COS_EPS) ||  \
     !defined(OCLGI_SC_MAX_LEVELS) || !defined(OCLGI_SC_MU) || !defined(OCLGI_RADIX_BITS) ||            \
     !defined(OCLGI_GRID_KEY_BITS) || !defined(OCLGI_GRID_EMPTY) || !defined(OCLGI_GRID_HASH_MUL) ||    \

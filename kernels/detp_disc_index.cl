@@ -28,7 +28,7 @@
 #include "detp_resolve.h"
 #include "detp_disc_index.h"
 
-__kernel void detp_disc_index(__global const BvhNode *nodes, __global const DiscBlock *discs,
+__kernel void detp_disc_index(__global const DiscNode *nodes, __global const DiscBlock *discs,
                               __global const Segment *segments, int n_paths, int max_depth,
                               int count_emitted, float ext,
                               __global long *acc, __global ulong *work)

@@ -22,7 +22,6 @@
 #include "oclgi_types.h"
 #include "segment.h"
 #include "detp.h"
-#include "box_bvh.h"
 #include "detp_disc_index.h"
 #include "light_reuse.h"
 
@@ -46,7 +45,7 @@
         }                                                                        \
     } while (0)
 
-__kernel void reweight_count(__global const BvhNode *nodes, __global const DiscBlock *discs,
+__kernel void reweight_count(__global const DiscNode *nodes, __global const DiscBlock *discs,
                              __global const Segment *store, int n_paths, int max_depth, float ext,
                              __global int *counts)
 {
@@ -59,7 +58,7 @@ __kernel void reweight_count(__global const BvhNode *nodes, __global const DiscB
     counts[i] = n;
 }
 
-__kernel void reweight_fill(__global const BvhNode *nodes, __global const DiscBlock *discs,
+__kernel void reweight_fill(__global const DiscNode *nodes, __global const DiscBlock *discs,
                             __global const Segment *store, int n_paths, int max_depth, float ext,
                             __global const long *offsets, __global int *pair_disc, __global int *pair_slot)
 {

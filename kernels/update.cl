@@ -107,7 +107,7 @@ __kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,
                                     int n_list, int max_depth, __global int *first,
-                                    __global const BvhNode *disc_nodes, __global const DiscBlock *discs,
+                                    __global const DiscNode *disc_nodes, __global const DiscBlock *discs,
                                     int count_emitted, float ext,
                                     __global long *acc, __global ulong *work)
 {

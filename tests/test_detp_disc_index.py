@@ -7,6 +7,11 @@ and work-group sizes, the fixed-point accumulators equal plain DETP's bit
 for bit. Adversarial segments (grazing, ending on a disc's plane, escaping,
 axis-aligned, on a rim) check that the box culling is conservative.
 
+The tree is 8-wide (kernels/box_wide.h) unless ``tree="binary"`` (the
+binary walk, kernels/box_bvh.h): both equal plain DETP, and the wide walk
+tests every disc the binary one tests (its leaf boxes are the same and its
+ancestors' boxes a subset) with fewer node visits.
+
 Cost (García 2006): with discs spread through the volume and not
 overlapping much, counted segment-disc tests per segment grow like
 cbrt(n_P).
@@ -42,6 +47,22 @@ def test_leaf_sizes(engines, points, plain, scene, leaf_size):
     assert est.work["u"] < est.stats.segments * len(points[scene]) / 10  # the index does cull
 
 
+@pytest.mark.parametrize("scene", ["cornell", "bunny"])
+def test_wide_and_binary_trees(engines, points, plain, scene):
+    e = engines[scene]
+    frac = RADIUS_FRACTIONS[1]
+    work = {}
+    for tree in ("binary", "wide"):
+        est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
+                           tree=tree, count_work=True)
+        check_same(plain(scene, frac, True), est, f"{scene} tree {tree}")
+        work[tree] = est.work
+    # every leaf the binary walk reaches, the wide one reaches (u counts the discs of the leaves reached)
+    assert work["wide"]["u"] >= work["binary"]["u"]
+    # one wide visit slabs 8 children, a binary one a single box
+    assert work["wide"]["nodes"] < work["binary"]["nodes"] / 2, work
+
+
 @pytest.mark.parametrize("local_size", [1, 7, 64])
 def test_work_group_sizes(engines, points, plain, local_size):
     e = oclgi.Engine(engines["cornell"].scene, local_size=local_size)
@@ -60,9 +81,10 @@ def test_adversarial_segments(engines, count_emitted):
     pts, d, batch = adversarial_batch(e, np.random.default_rng(7))
     ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
     assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
-    for leaf_size in (1, 8):
-        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size)
-        assert np.array_equal(got, ref), f"leaf_size {leaf_size}: {(got != ref).any(axis=1).sum()} discs differ"
+    for leaf_size, tree in ((1, "wide"), (8, "wide"), (1, "binary"), (8, "binary")):
+        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, tree=tree)
+        assert np.array_equal(got, ref), \
+            f"leaf_size {leaf_size}, {tree}: {(got != ref).any(axis=1).sum()} discs differ"
 
 
 def test_u_grows_like_cube_root_of_points(engines):
@@ -91,7 +113,8 @@ def test_u_grows_like_cube_root_of_points(engines):
     assert abs(slope - 1 / 3) <= 0.07, f"u / n_R = {np.round(per_segment, 1).tolist()}: exponent {slope:.3f}"
 
 
-@pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 2.5}, {"leaf_size": True}, {"piece": 0.1}])
+@pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 2.5}, {"leaf_size": True}, {"leaf_size": 257},
+                                 {"tree": "quad"}, {"piece": 0.1}])
 def test_bad_options(engines, points, bad):
     from oclgi.errors import OclgiError
 

@@ -159,6 +159,27 @@ def test_dynamic_points_by_every_variant(scenes_dir, rng, dynamic):
     np.testing.assert_array_equal(session.irradiance(), plain.irradiance)
 
 
+def test_binary_disc_tree_session(scenes_dir, rng):
+    """The disc index's binary tree (``tree="binary"``, for measuring the
+    wide one against it) in every walk of a camera session: the static
+    and dynamic estimators and the find pass that sums the dynamic points
+    (kernels/update.cl, built with the estimator's defines). Equal to plain
+    DETP after the moves."""
+    scene = _scene(scenes_dir)
+    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
+    engine = oclgi.Engine(scene)
+    session = oclgi.Session(engine, method="detp_disc_index", radius=0.05, photons=10_000, tree="binary")
+    assert session.estimator.tree == "binary"
+    dynamic_points = 0
+    for m in _moves(rng, 6):
+        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)
+        dynamic_points += session.move("bunny", m).points
+    assert dynamic_points > 20 and session.dyn_est is not None and session.dyn_est.tree == "binary"
+    at = session.engine
+    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
+    assert np.array_equal(session.accumulators(), plain.accumulators)
+
+
 def test_dynamic_must_be_a_detp_variant(engine):
     with pytest.raises(oclgi.OclgiError, match="dynamic points are recomputed by a DETP variant"):
         oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), dynamic="impact", photons=1000)

@@ -53,47 +53,58 @@ def _half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return e[:, 0] * e[:, 1] + e[:, 1] * e[:, 2] + e[:, 2] * e[:, 0]
 
 
+def wide_levels(nodes: np.ndarray, width: int = WIDE) -> list[np.ndarray]:
+    """The grouping of the binary tree ``nodes`` (root 0) into wide nodes,
+    level by level: per level an (m, WIDE) array of the binary nodes in each
+    wide node's lanes (-1: unused), the next level's wide nodes being the
+    inner lanes in row-major order. Any tree whose inner nodes have their
+    children at first and first + 1 (kernels/box_bvh.h's overlap trees too)."""
+    if not 2 <= width <= WIDE:
+        raise ValueError(f"a wide node has 2 to {WIDE} children, got {width}")
+    first = nodes["first"].astype(np.int64)
+    inner = nodes["count"] == 0
+    if not inner.any():  # a single leaf: one wide node with one lane
+        return [np.array([[0] + [-1] * (WIDE - 1)], np.int64)]
+    levels = []
+    area = _half_area(nodes["lo"], nodes["hi"])
+    roots = np.zeros(1, np.int64)  # binary inner nodes that become this level's wide nodes
+    while len(roots):
+        m = len(roots)
+        lanes = np.full((m, WIDE), -1, np.int64)
+        lanes[:, 0], lanes[:, 1] = first[roots], first[roots] + 1
+        used = np.full(m, 2, np.int64)
+        rows = np.arange(m)
+        for _ in range(width - 2):
+            valid = lanes >= 0
+            openable = valid & inner[np.where(valid, lanes, 0)]
+            score = np.where(openable, area[np.where(valid, lanes, 0)], -1.0)
+            pick = np.argmax(score, axis=1)  # the first of equal areas
+            grow = (used < width) & openable.any(axis=1)
+            if not grow.any():
+                break
+            r, k = rows[grow], pick[grow]
+            b = lanes[r, k]
+            lanes[r, k] = first[b]
+            lanes[r, used[r]] = first[b] + 1
+            used[r] += 1
+        levels.append(lanes)
+        valid = lanes >= 0
+        roots = lanes[valid & inner[np.where(valid, lanes, 0)]]  # row-major: the next level's order
+    return levels
+
+
 def collapse(nodes: np.ndarray, node_offset: int = 0, tri_offset: int = 0, width: int = WIDE) -> WideData:
     """Wide nodes of the binary tree ``nodes`` (``BvhNode`` records, root 0,
     leaves of at most 8 triangles); child indices get ``node_offset`` added
     and triangle runs ``tri_offset`` (the object's place in the scene's joint
     arrays). ``width`` (2 to WIDE) caps the children of a node: fewer lanes
     used, for measuring narrower trees in the same layout."""
-    if not 2 <= width <= WIDE:
-        raise ValueError(f"a wide node has 2 to {WIDE} children, got {width}")
     first = nodes["first"].astype(np.int64)
     count = nodes["count"].astype(np.int64)
     inner = count == 0
     if count.max() > MAX_LEAF:
         raise ValueError(f"a wide node's leaf holds at most {MAX_LEAF} triangles, got {int(count.max())}")
-    if not inner.any():  # a single leaf: one wide node with one lane
-        levels = [np.array([[0] + [-1] * (WIDE - 1)], np.int64)]
-    else:
-        levels = []
-        area = _half_area(nodes["lo"], nodes["hi"])
-        roots = np.zeros(1, np.int64)  # binary inner nodes that become this level's wide nodes
-        while len(roots):
-            m = len(roots)
-            lanes = np.full((m, WIDE), -1, np.int64)
-            lanes[:, 0], lanes[:, 1] = first[roots], first[roots] + 1
-            used = np.full(m, 2, np.int64)
-            rows = np.arange(m)
-            for _ in range(width - 2):
-                valid = lanes >= 0
-                openable = valid & inner[np.where(valid, lanes, 0)]
-                score = np.where(openable, area[np.where(valid, lanes, 0)], -1.0)
-                pick = np.argmax(score, axis=1)  # the first of equal areas
-                grow = (used < width) & openable.any(axis=1)
-                if not grow.any():
-                    break
-                r, k = rows[grow], pick[grow]
-                b = lanes[r, k]
-                lanes[r, k] = first[b]
-                lanes[r, used[r]] = first[b] + 1
-                used[r] += 1
-            levels.append(lanes)
-            valid = lanes >= 0
-            roots = lanes[valid & inner[np.where(valid, lanes, 0)]]  # row-major: the next level's order
+    levels = wide_levels(nodes, width)
 
     # Number the wide nodes level by level and fill the records.
     sizes = [len(x) for x in levels]

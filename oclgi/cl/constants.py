@@ -36,6 +36,15 @@ BVH_BLOCK_ROOT = 1 << 29
 # The overlap walks over the disc, piece and ball trees (kernels/box_bvh.h),
 # 30-bit codes: a node pushes at most its two children, so depth + 1 entries.
 BOX_BVH_STACK = 64
+# The same trees collapsed into 8-wide nodes (kernels/box_wide.h,
+# oclgi/accel/box_wide.py): a leaf lane holds ~(first << BOX_LEAF_BITS |
+# count - 1), so a leaf has at most 2^BOX_LEAF_BITS primitives. A visit
+# pops one entry and writes 8 (every child met is pushed, leaves too), and a
+# wide tree is no deeper than its binary one (each level goes down at least
+# one binary level), so 7 entries per binary level above the leaves and 8
+# for the last visit always suffice for a tree the binary walk accepts.
+BOX_LEAF_BITS = 8
+BOX_WIDE_STACK = 7 * (BOX_BVH_STACK - 1) + LANES
 # The k-nearest search's best-first descent (kernels/point_index.cl) over a
 # tree on 63-bit codes: 95 levels at most.
 POINT_BVH_STACK = 96
@@ -118,6 +127,8 @@ DEFINES = {
     "bvh_quantised_root": BVH_QUANTISED_ROOT,
     "bvh_block_root": BVH_BLOCK_ROOT,
     "box_bvh_stack": BOX_BVH_STACK,
+    "box_leaf_bits": BOX_LEAF_BITS,
+    "box_wide_stack": BOX_WIDE_STACK,
     "point_bvh_stack": POINT_BVH_STACK,
     "fixed_bits": FIXED_BITS,
     "front_cos_eps": f"{FRONT_COS_EPS!r}f",

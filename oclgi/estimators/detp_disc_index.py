@@ -20,8 +20,11 @@ Algorithm:
    the boxes; each leaf's discs are stored as blocks of 8 float8 lanes
    (``oclgi.cl.layout.DiscBlock``, kernels/detp_disc_index.cl), so a leaf is
    tested the way ``detp_plain`` tests 8 points.
-3. Per batch, one work-item per path walks the tree with each segment
-   (kernels/box_bvh.h), applies DETP_TEST (kernels/detp.h, the one
+3. The binary tree is collapsed into 8-wide nodes (oclgi/accel/box_wide.py:
+   the scene tree's grouping, 8 child boxes per node in float8 lanes).
+4. Per batch, one work-item per path walks the tree with each segment
+   (kernels/box_wide.h: one float8 slab test meets a node's 8 children,
+   and every child met is pushed), applies DETP_TEST (kernels/detp.h, the one
    definition shared with plain DETP) to the discs of each leaf met, and
    adds the segment's fixed-point power to every disc it crosses with 64-bit
    ``atom_add``. Sums are integers, so the result is identical to plain DETP
@@ -43,7 +46,10 @@ Parameters:
 ==============  =========  ====================================================
 option          default    meaning
 ==============  =========  ====================================================
-``leaf_size``   32         discs per BVH leaf (>= 1), tested 8 per float8 block
+``leaf_size``   32         discs per BVH leaf (1 to 256), tested 8 per float8 block
+``tree``        ``wide``   ``wide`` (8 children per node) or ``binary`` (the
+                           tree as built, kernels/box_bvh.h; kept to measure
+                           one against the other)
 ==============  =========  ====================================================
 
 plus the DETP parameters of :class:`oclgi.estimators.base.DetpEstimator`.
@@ -66,6 +72,7 @@ import time
 
 import numpy as np
 
+from ..accel.box_wide import MAX_LEAF, collapse_boxes
 from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
 from ..accel.bvh_build import build_bvh
 from ..cl.layout import DiscBlock
@@ -79,11 +86,17 @@ class DetpDiscIndex(DetpEstimator):
     fuses_with_find = True  # the find pass sums its discs (kernels/update.cl)
     radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
-    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, **kw):
+    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide", **kw):
         super().__init__(queue, compiled, points, radius, **kw)
-        if isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer)) or leaf_size < 1:
-            raise OclgiError(f"leaf_size must be a positive integer, got {leaf_size!r}")
+        if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
+                or not 1 <= leaf_size <= MAX_LEAF):
+            raise OclgiError(f"leaf_size must be an integer from 1 to {MAX_LEAF}, got {leaf_size!r}")
+        if tree not in ("wide", "binary"):
+            raise OclgiError(f"tree must be 'wide' or 'binary', got {tree!r}")
         self.leaf_size = int(leaf_size)
+        self.tree = tree
+        if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
+            self.defines = dict(self.defines, disc_tree_binary=1)
         self.k_walk = self.program("detp_disc_index").detp_disc_index
         self.build_index()
 
@@ -108,10 +121,13 @@ class DetpDiscIndex(DetpEstimator):
                 blocks[n][blk, lane] = nrm[o, c]
             blocks["r2"][blk, lane] = self.radius2[ids[o]]
             blocks["id"][blk, lane] = ids[o]
-            self.nodes = self.upload(nodes)
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
-            self.blocks = self.upload(blocks)
             self.depth = bvh.depth
+            if self.tree == "wide":
+                wide = collapse_boxes(nodes, "discs")
+                nodes, self.depth = wide.nodes, wide.depth
+            self.nodes = self.upload(nodes)
+            self.blocks = self.upload(blocks)
             self.n_nodes = len(nodes)
         self.build_seconds = time.perf_counter() - t0
 
