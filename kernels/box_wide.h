@@ -15,7 +15,7 @@
  *     BoxWideWalk walk;
  *     box_wide_start(&walk);
  *     int leaf;
- *     while ((leaf = box_wide_next_segment(&walk, nodes, o, inv, tmax)) < 0) { ~leaf ... }
+ *     while ((leaf = box_wide_next_segment(&walk, nodes, o, inv, 0.0f, tmax)) < 0) { ~leaf ... }
  *     WORK_NODE(walk.visited);
  *
  * `visited` counts wide nodes whose 8 child boxes were tested (the root
@@ -49,21 +49,23 @@ inline void box_wide_start(BoxWideWalk *walk)
 }
 
 /* box_slab (box.h) on the node's 8 child boxes at once: lane k is -1 when
- * the segment o + t w, 0 <= t <= tmax, meets child k's box. */
-inline int8 box8_meets_segment(__global const BvhNode8 *n, float3 o, float3 inv, float tmax)
+ * the segment o + t w, tmin <= t <= tmax, meets child k's box. With tmin =
+ * 0 the operations are box_slab's; a tmin > 0 only raises the entry (the
+ * part of a segment a query can skip, detp_disc_index.h). */
+inline int8 box8_meets_segment(__global const BvhNode8 *n, float3 o, float3 inv, float tmin, float tmax)
 {
     float8 t0x = (n->lox - o.x) * inv.x, t1x = (n->hix - o.x) * inv.x;
     float8 t0y = (n->loy - o.y) * inv.y, t1y = (n->hiy - o.y) * inv.y;
     float8 t0z = (n->loz - o.z) * inv.z, t1z = (n->hiz - o.z) * inv.z;
-    float8 e = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(0.0f)));
+    float8 e = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(tmin)));
     float8 leave = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)), fmin(fmax(t0z, t1z), (float8)(tmax))) * 1.0000004f;
     return e <= leave;
 }
 
-/* The next leaf the segment meets, as its lane value ~(first << BITS |
- * count - 1) (< 0); 0 when done. */
+/* The next leaf the segment (tmin <= t <= tmax) meets, as its lane value
+ * ~(first << BITS | count - 1) (< 0); 0 when done. */
 inline int box_wide_next_segment(BoxWideWalk *walk, __global const BvhNode8 *nodes, float3 o, float3 inv,
-                                 float tmax)
+                                 float tmin, float tmax)
 {
     while (walk->sp > 0) {
         int c = walk->stack[--walk->sp];
@@ -71,7 +73,7 @@ inline int box_wide_next_segment(BoxWideWalk *walk, __global const BvhNode8 *nod
         __global const BvhNode8 *n = &nodes[c];
         walk->visited++;
         int8 child = n->child;
-        int8 hit = box8_meets_segment(n, o, inv, tmax) & (child != 0);
+        int8 hit = box8_meets_segment(n, o, inv, tmin, tmax) & (child != 0);
         if (!any(hit)) continue;
         int ch[OCLGI_LANES], h[OCLGI_LANES];
         vstore8(child, 0, ch);

@@ -5,7 +5,7 @@
  *                  path's end (segment.h): reading only the stored
  *                  segments, not every slot, halves the cost of a pass over
  *                  a session's whole store. Each segment walks a BVH over the discs' boxes
- *                  (box_bvh.h); in every leaf it meets, it is tested against
+ *                  (box_wide.h); in every leaf it meets, it is tested against
  *                  the leaf's discs 8 at a time (float8 lanes, as detp_plain)
  *                  with DETP_TEST (detp.h), and its fixed-point power is
  *                  added to each disc it crosses with 64-bit atom_add:
@@ -20,6 +20,10 @@
  * its first block and `count` its number of real discs.
  *
  * count_emitted = 0 skips segments leaving the light (bounce 0), as detp.cl.
+ *
+ * detp_disc_index_change  (below) a move's subtraction and addition in one
+ *                  pass, the common part of each suffix's first segment
+ *                  skipped.
  */
 #include "oclgi_types.h"
 #include "segment.h"
@@ -38,15 +42,49 @@ __kernel void detp_disc_index(__global const DiscNode *nodes, __global const Dis
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
-    __global const Segment *path = segments + (size_t)p * max_depth;
-    for (int b = segment_first(count_emitted); b < max_depth; ++b) {
-        SegmentView s;
-        if (!segment_read(path + b, &s)) {
-            if (segment_is_hole(path + b)) continue;
-            break; /* the path's end */
+    disc_index_path(nodes, discs, segments + (size_t)p * max_depth, segment_first(count_emitted), max_depth, ext,
+                    acc, &visited, &tests);
+    WORK_U(tests);
+    WORK_NODE(visited);
+    WORK_FLUSH(work);
+}
+
+/* Both halves of a move's update at once, after the re-trace: one
+ * work-item per re-traced path k, with its old suffix (gathered before the
+ * re-trace, power times -1, kernels/update.cl update_gather) and its new
+ * one (the store's path paths[k] from starts[k] on). Each segment of either
+ * is summed as detp_disc_index sums it, but the suffixes' first segments:
+ * a re-trace starts from the same state (photon_trace.cl photon_retrace),
+ * so they share origin, direction and power and differ in length only;
+ * when the bits say so, disc_index_shared_first adds just their
+ * difference. The sums equal a subtraction pass plus an addition pass bit
+ * for bit (tests/test_session.py compares the two). */
+__kernel void detp_disc_index_change(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                                     __global const Segment *old_suffixes, __global const Segment *store,
+                                     __global const int *paths, __global const int *starts, int n_list,
+                                     int max_depth, int count_emitted, float ext,
+                                     __global long *acc, __global ulong *work)
+{
+    int k = get_global_id(0);
+    if (k >= n_list) return;
+    WORK_DECL;
+    uint visited = 0;
+    ulong tests = 0;
+    __global const Segment *old = old_suffixes + (size_t)k * max_depth;
+    __global const Segment *cur = store + (size_t)paths[k] * max_depth;
+    int b0 = starts[k];
+    int from = max(b0, segment_first(count_emitted));
+    SegmentView so, sn;
+    if (from == b0 && segment_read(old + b0, &so) && segment_read(cur + b0, &sn) &&
+        all(as_uint3(so.o) == as_uint3(sn.o)) && all(as_uint3(so.w) == as_uint3(sn.w))) {
+        long3 q_old = segment_fixed_power(old + b0), q_new = segment_fixed_power(cur + b0);
+        if (all(q_old == -q_new)) {
+            disc_index_shared_first(nodes, discs, &so, &sn, q_old, q_new, ext, acc, &visited, &tests);
+            from = b0 + 1;
         }
-        disc_index_segment(nodes, discs, path + b, &s, ext, acc, &visited, &tests);
     }
+    disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
+    disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

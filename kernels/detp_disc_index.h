@@ -21,10 +21,12 @@ typedef BvhNode DiscNode;
 typedef BoxBvhWalk DiscWalk;
 #define disc_walk_start box_bvh_start
 
-/* The next leaf the segment meets: 1 and its blocks' run, 0 when done. */
-inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmax,
-                          int *first, int *count)
+/* The next leaf the segment meets: 1 and its blocks' run, 0 when done.
+ * tmin is not used: the whole segment (a superset) is walked. */
+inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmin,
+                          float tmax, int *first, int *count)
 {
+    (void)tmin;
     int leaf = box_bvh_next_segment(walk, nodes, o, inv, tmax);
     if (leaf < 0) return 0;
     *first = nodes[leaf].first;
@@ -37,10 +39,10 @@ typedef BvhNode8 DiscNode;
 typedef BoxWideWalk DiscWalk;
 #define disc_walk_start box_wide_start
 
-inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmax,
-                          int *first, int *count)
+inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmin,
+                          float tmax, int *first, int *count)
 {
-    int leaf = ~box_wide_next_segment(walk, nodes, o, inv, tmax);
+    int leaf = ~box_wide_next_segment(walk, nodes, o, inv, tmin, tmax);
     if (leaf < 0) return 0; /* ~0: done */
     *first = leaf >> OCLGI_BOX_LEAF_BITS;
     *count = (leaf & ((1 << OCLGI_BOX_LEAF_BITS) - 1)) + 1;
@@ -54,29 +56,41 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
  * tree's order. `n_visited` and `n_tests` count nodes and disc tests. One walk
  * for every use (the sums here, light_reweight.cl's pair lists). */
 #define DISC_INDEX_WALK(nodes, discs, o, w, tmax, n_visited, n_tests, ON_HIT)                          \
+    DISC_INDEX_BLOCKS((nodes), (discs), (o), (w), 0.0f, (tmax), n_visited, n_tests,                       \
+                      int8 hit_;                                                                          \
+                      DETP_TEST(float8, hit_, b_->x, b_->y, b_->z, b_->nx, b_->ny, b_->nz, (o).x, (o).y,  \
+                                (o).z, (w).x, (w).y, (w).z, (tmax), b_->r2);                              \
+                      DISC_LANES(hit_, b_, ON_HIT);)
+
+/* The walk itself: BODY (the variadic arguments) runs once per DiscBlock
+ * `b_` of every leaf the part tmin <= t <= tmax of the segment meets
+ * (box_wide.h; the binary walk takes the whole segment, which holds it). */
+#define DISC_INDEX_BLOCKS(nodes, discs, o, w, tmin, tmax, n_visited, n_tests, ...)                     \
     do {                                                                                        \
         float3 inv_ = 1.0f / (w);                                                               \
         DiscWalk walk_;                                                                         \
         disc_walk_start(&walk_);                                                                \
         int first_, count_;                                                                     \
-        while (disc_walk_next(&walk_, (nodes), (o), inv_, (tmax), &first_, &count_)) {          \
+        while (disc_walk_next(&walk_, (nodes), (o), inv_, (tmin), (tmax), &first_, &count_)) {  \
             (n_tests) += (ulong)count_;                                                           \
             for (int blk_ = first_; blk_ < first_ + (count_ + OCLGI_LANES - 1) / OCLGI_LANES; ++blk_) { \
                 __global const DiscBlock *b_ = (discs) + blk_;                                  \
-                int8 hit_;                                                                      \
-                DETP_TEST(float8, hit_, b_->x, b_->y, b_->z, b_->nx, b_->ny, b_->nz, (o).x, (o).y, (o).z, \
-                          (w).x, (w).y, (w).z, (tmax), b_->r2);                                 \
-                if (!any(hit_)) continue;                                                       \
-                int ids_[OCLGI_LANES], h_[OCLGI_LANES];                                          \
-                vstore8(b_->id, 0, ids_);                                                       \
-                vstore8(hit_, 0, h_);                                                           \
-                for (int k_ = 0; k_ < OCLGI_LANES; ++k_) {                                      \
-                    if (!h_[k_]) continue;                                                      \
-                    ON_HIT(ids_[k_]);                                                           \
-                }                                                                               \
+                __VA_ARGS__                                                                     \
             }                                                                                   \
         }                                                                                       \
         (n_visited) += walk_.visited;                                                             \
+    } while (0)
+
+/* ON_HIT(id) for each lane of block b_ where hit (an int8) is set. */
+#define DISC_LANES(hit, b_, ON_HIT)                                                                \
+    do {                                                                                          \
+        if (any(hit)) {                                                                           \
+            int ids_[OCLGI_LANES], h_[OCLGI_LANES];                                               \
+            vstore8((b_)->id, 0, ids_);                                                           \
+            vstore8((hit), 0, h_);                                                                \
+            for (int k_ = 0; k_ < OCLGI_LANES; ++k_)                                              \
+                if (h_[k_]) ON_HIT(ids_[k_]);                                                     \
+        }                                                                                         \
     } while (0)
 
 /* One segment (s, read from `slot`) against the tree, its fixed-point
@@ -103,6 +117,69 @@ inline void disc_index_segment(__global const DiscNode *nodes, __global const Di
     } while (0)
     DISC_INDEX_WALK(nodes, discs, o, w, tmax, *visited, *tests, DISC_INDEX_ADD);
 #undef DISC_INDEX_ADD
+}
+
+/* An update's old and new first segment of a re-traced suffix (so, sn),
+ * which the caller found to share the origin and direction bit for bit,
+ * with fixed-point powers q_old = -q_new (the subtraction's and the
+ * addition's): only their lengths differ. Summing both would add q_old and
+ * q_new to each disc both cross, which cancels exactly (integers), and one
+ * of them to each disc only one crosses. The two DETP_TESTs differ in
+ * num >= tmax wn alone, which holds for the larger tmax whenever it holds
+ * for the smaller (wn < 0, rounding monotone), so a disc crossed by only
+ * one has num < tmax_lo wn: its crossing t* = num / wn lies beyond
+ * tmax_lo (1 - 2^-24), and, as for every accepted crossing (the pad
+ * argument, estimators/detp_disc_index.py), inside the disc's box. The
+ * walk takes t from tmax_lo (1 - 1e-4), far below any rounding of t*, to
+ * tmax_hi, tests both lengths on the discs met and adds the one of a disc
+ * crossed by one only: the sums of the full subtraction and addition, bit
+ * for bit, without walking the common part. */
+inline void disc_index_shared_first(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                                    const SegmentView *so, const SegmentView *sn, long3 q_old, long3 q_new,
+                                    float ext, __global long *acc, uint *visited, ulong *tests)
+{
+    float3 o = sn->o, w = sn->w;
+    float tmax_old = so->t_end + ext, tmax_new = sn->t_end + ext; /* exactly as the two walks */
+    float tmax_hi = fmax(tmax_old, tmax_new);
+    float tmin = fmin(tmax_old, tmax_new) * 0.9999f;
+#define DISC_INDEX_ONE(id)                                    \
+    do {                                                      \
+        long3 q_ = ho_[k_] ? q_old : q_new;                   \
+        __global long *a_ = acc + 3 * (size_t)(id);           \
+        atom_add(a_ + 0, q_.x);                               \
+        atom_add(a_ + 1, q_.y);                               \
+        atom_add(a_ + 2, q_.z);                               \
+    } while (0)
+    DISC_INDEX_BLOCKS(nodes, discs, o, w, tmin, tmax_hi, *visited, *tests,
+                      int8 hit_old_;
+                      int8 hit_new_;
+                      DETP_TEST(float8, hit_old_, b_->x, b_->y, b_->z, b_->nx, b_->ny, b_->nz, o.x, o.y, o.z,
+                                w.x, w.y, w.z, tmax_old, b_->r2);
+                      DETP_TEST(float8, hit_new_, b_->x, b_->y, b_->z, b_->nx, b_->ny, b_->nz, o.x, o.y, o.z,
+                                w.x, w.y, w.z, tmax_new, b_->r2);
+                      int8 one_ = hit_old_ ^ hit_new_;
+                      if (any(one_)) {
+                          int ho_[OCLGI_LANES];
+                          vstore8(hit_old_, 0, ho_);
+                          DISC_LANES(one_, b_, DISC_INDEX_ONE);
+                      });
+#undef DISC_INDEX_ONE
+}
+
+/* A path's segments from bounce `from` to its end (holes skipped) against
+ * the tree, as disc_index_segment. */
+inline void disc_index_path(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                            __global const Segment *path, int from, int max_depth, float ext,
+                            __global long *acc, uint *visited, ulong *tests)
+{
+    for (int b = from; b < max_depth; ++b) {
+        SegmentView s;
+        if (!segment_read(path + b, &s)) {
+            if (segment_is_hole(path + b)) continue;
+            break; /* the path's end */
+        }
+        disc_index_segment(nodes, discs, path + b, &s, ext, acc, visited, tests);
+    }
 }
 
 #endif

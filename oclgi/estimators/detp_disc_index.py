@@ -97,7 +97,8 @@ class DetpDiscIndex(DetpEstimator):
         self.tree = tree
         if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
             self.defines = dict(self.defines, disc_tree_binary=1)
-        self.k_walk = self.program("detp_disc_index").detp_disc_index
+        prog = self.program("detp_disc_index")
+        self.k_walk, self.k_change = prog.detp_disc_index, prog.detp_disc_index_change
         self.build_index()
 
     def build_index(self):
@@ -134,6 +135,30 @@ class DetpDiscIndex(DetpEstimator):
     def points_changed(self) -> None:
         """Points moved (a camera session's dynamic points): index them again."""
         self.build_index()
+
+    @property
+    def sums_changes(self) -> bool:
+        """Can ``accumulate_change`` stand for a move's two suffix passes?
+        Not with surface-consistent counting: its test has a second bound
+        that depends on the segment's length."""
+        return "consistent_span" not in self.defines
+
+    def accumulate_change(self, old, store, affected):
+        """A move's update after the re-trace (kernels/detp_disc_index.cl
+        detp_disc_index_change): the old suffixes ``old`` (the gathered
+        batch, power times -1) taken away and the new ones (``store``'s
+        paths ``affected``) added, the common part of each suffix's first
+        segment skipped; equal to ``accumulate(old)`` plus ``accumulate``
+        of the new suffixes bit for bit."""
+        if self.nodes is None or not len(affected):
+            return
+        launch(
+            self.queue, self.k_change, len(affected),
+            self.nodes, self.blocks, old.segments, store.segments, affected.paths_buf, affected.starts_buf,
+            len(affected), store.max_depth, self.count_emitted, self.ext,
+            self.acc, self.work_buf,
+            local_size=self.local_size,
+        )
 
     def accumulate(self, batch):
         if self.nodes is None:

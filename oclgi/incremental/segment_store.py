@@ -16,7 +16,11 @@ path-major, as one batch. After a movable object moves:
    old contributions away exactly (fixed-point sums);
 3. ``retrace(affected)`` re-traces the suffixes in place, with the same code
    and random numbers as a full trace;
-4. ``suffixes(affected, +1)`` gathers the new suffixes, to be added.
+4. ``suffixes(affected, +1)`` gathers the new suffixes, to be added; or a
+   disc-indexed estimator reads them from the store itself and sums the
+   old and new suffixes in one pass (``DetpDiscIndex.accumulate_change``:
+   a suffix's old and new first segments share origin, direction and
+   power, and the discs both cross cancel, so that part is skipped).
 
 Sessions (oclgi/incremental/session.py) drive these steps for their estimators.
 """

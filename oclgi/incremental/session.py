@@ -65,6 +65,11 @@ class Session(SessionBase):
     """
 
     fuse_find = True  # False: dynamic points summed over the new store in a pass of their own (benchmarks)
+    # True: disc-indexed estimators sum a move's old and new suffixes in one
+    # pass after the re-trace, skipping what the first segments share
+    # (DetpDiscIndex.accumulate_change); False: a subtraction pass, then an
+    # addition pass (the plain form, kept to test the other against).
+    sum_changes = True
 
     def __init__(self, engine, points=None, method=None, photons=None, radius=None, seed=None, max_depth=None,
                  extension=None, count_emitted=None, count_work=False, camera=None, dynamic=None, paths=None,
@@ -314,17 +319,25 @@ class Session(SessionBase):
         estimators = [self.estimator] + ([self.dyn_est] if fused else [])
         if len(affected):
             stats.segments_removed = self.store.suffix_segments(affected)
+            # One pass after the re-trace (then "subtract" is the gather alone)
+            # or a pass on each side of it.
+            change = self.sum_changes and all(getattr(est, "sums_changes", False) for est in estimators)
             old = self.store.suffixes(affected, -1.0)
-            for est in estimators:
-                est.accumulate(old)
+            if not change:
+                for est in estimators:
+                    est.accumulate(old)
             q.finish()  # honest per-stage times
             t3 = time.perf_counter()
             self.store.retrace(affected)
             q.finish()
             t4 = time.perf_counter()
-            new = self.store.suffixes(affected, 1.0)
-            for est in estimators:
-                est.accumulate(new)
+            if change:
+                for est in estimators:
+                    est.accumulate_change(old, self.store.batch, affected)
+            else:
+                new = self.store.suffixes(affected, 1.0)
+                for est in estimators:
+                    est.accumulate(new)
             q.finish()
             stats.segments_added = self.store.suffix_segments(affected)
             t5 = time.perf_counter()
