@@ -1,0 +1,137 @@
+"""Binned SAH BVH builder on the OpenCL device: ``bvh_sah.py``'s tree, bit for bit.
+
+The numpy builder (``bvh_sah.py``) is the specification and the tests'
+oracle; this one runs its per-primitive work in ``kernels/bvh_sah_build.cl``
+and keeps the per-node bookkeeping (node numbering, children, leaves) here,
+in the numpy builder's own words, so both emit the same ``BvhData``.
+
+The primitives live in one array in their final order from the start: a
+node's range [start, start + size) is where its primitives end up, so a
+level partitions each range in place (from one buffer into the other) and
+a leaf's rows are never touched again; no compaction, no gather. One
+work-item per node of the level walks its range sequentially (centroid
+bounds, bins, partition): the per-node boxes and counts stay private, so
+there are no atomics and nothing depends on the work-group size or on the
+order in which work-items run. The levels near the root have few nodes and
+so little parallelism; they are also few.
+
+The median fallback (nodes whose centroids coincide, and every node from
+``MEDIAN_DEPTH`` on) is rare and runs here, on the host, with
+``bvh_sah``'s own ``_halve``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from ..cl.programs import launch, programs
+from . import bvh_sah
+from .bvh_tree import BvhData, flatten
+
+# Below this many primitives the numpy builder is faster than the device
+# one's per-level launches and transfers (bench/README.md, BVH build).
+DEVICE_MIN_PRIMITIVES = 20_000
+
+
+def program(ctx: cl.Context):
+    return programs(ctx).get("bvh_sah_build", sah_bins=bvh_sah.BINS)
+
+
+def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> BvhData:
+    """``bvh_sah.build_sah(box_lo, box_hi, leaf_size)``, built on ``queue``'s device."""
+    box_lo = np.asarray(box_lo, dtype=np.float32)
+    box_hi = np.asarray(box_hi, dtype=np.float32)
+    n = len(box_lo)
+    if n == 0:
+        raise ValueError("cannot build a BVH over no primitives")
+    if n <= leaf_size:
+        return flatten([np.zeros(1, np.int64)], [np.full(1, n, np.int64)], np.arange(n, dtype=np.int64),
+                       box_lo, box_hi)
+    if n >= 2**31:
+        raise ValueError("the device SAH builder indexes fewer than 2^31 primitives")
+    ctx = queue.context
+    kernel = program(ctx).sah_split
+    rows = np.zeros((n, 8), np.float32)
+    rows[:, 0:3], rows[:, 4:7] = box_lo, box_hi
+    rows[:, 3] = np.arange(n, dtype=np.int32).view(np.float32)
+    mf = cl.mem_flags
+    src = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=rows)
+    dst = cl.Buffer(ctx, mf.READ_WRITE, rows.nbytes)
+    order_buf = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
+    max_nodes = n // (leaf_size + 1) + 1  # every node of a level holds more than leaf_size rows
+    nodes_buf = cl.Buffer(ctx, mf.READ_ONLY, 8 * max_nodes)
+    out_buf = cl.Buffer(ctx, mf.READ_WRITE, 4 * max_nodes)
+
+    sizes = np.array([n], np.int64)  # the level's nodes still to split: their sizes,
+    starts = np.zeros(1, np.int64)  # and their ranges' starts in the final order
+    first, count = [np.ones(1, np.int64)], [np.zeros(1, np.int64)]  # root: inner, children 1 and 2
+    next_id, level = 1, 0
+    while len(sizes):
+        m = len(sizes)
+        n_bins = int(min(bvh_sah.BINS, max(4, 1 << int(np.ceil(np.log2(int(sizes.sum()) / m))))))
+        if level >= bvh_sah.MEDIAN_DEPTH:
+            n_left = np.full(m, -1, np.int64)
+        else:
+            cl.enqueue_copy(queue, nodes_buf, np.stack([starts, sizes], axis=1).astype(np.int32))
+            launch(queue, kernel, m, src, dst, order_buf, nodes_buf, m, n_bins, leaf_size, out_buf)
+            out = np.empty(m, np.int32)
+            cl.enqueue_copy(queue, out, out_buf)
+            n_left = out.astype(np.int64)
+        halve = n_left < 0
+        if halve.any():
+            n_left[halve] = _halve_on_host(queue, src, dst, order_buf, starts[halve], sizes[halve], leaf_size)
+
+        # The next level: the children of these nodes, left then right (bvh_sah.build_sah).
+        child_size = np.stack([n_left, sizes - n_left], axis=1).ravel()
+        child_start = np.stack([starts, starts + n_left], axis=1).ravel()
+        leaf = child_size <= leaf_size
+        next_id += 2 * m
+        f = np.where(leaf, child_start, 0)
+        f[~leaf] = next_id + 2 * np.arange(int((~leaf).sum()))
+        first.append(f)
+        count.append(np.where(leaf, child_size, 0))
+        sizes, starts = child_size[~leaf], child_start[~leaf]
+        src, dst = dst, src
+        level += 1
+    order = np.empty(n, np.int32)
+    cl.enqueue_copy(queue, order, order_buf)
+    return flatten(first, count, order.astype(np.int64), box_lo, box_hi)
+
+
+def _halve_on_host(queue, src, dst, order_buf, starts, sizes, leaf_size) -> np.ndarray:
+    """Partition the given nodes' ranges of ``src`` into ``dst`` by
+    ``bvh_sah._halve`` (the first half along the longest centroid axis, in
+    centroid then position order), leaf children's ids into ``order``.
+    Returns the left children's sizes."""
+    n = _rows(src)
+    rows = np.empty((n, 8), np.float32)
+    out_rows = np.empty((n, 8), np.float32)
+    order = np.empty(n, np.int32)
+    cl.enqueue_copy(queue, rows, src)
+    cl.enqueue_copy(queue, out_rows, dst)
+    cl.enqueue_copy(queue, order, order_buf)
+    m = len(sizes)
+    seg = np.repeat(np.arange(m), sizes)
+    seg_first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    in_seg = np.arange(len(seg)) - seg_first[seg]
+    at = starts[seg] + in_seg  # the rows' places in the final order
+    r = rows[at]
+    cen = (0.5 * (r[:, 0:3].astype(np.float64) + r[:, 4:7])).astype(np.float32).T
+    ext = np.maximum.reduceat(cen, seg_first, axis=1) - np.minimum.reduceat(cen, seg_first, axis=1)
+    left = bvh_sah._halve(np.zeros(len(seg), bool), np.ones(m, bool), seg, sizes, cen, ext)
+    n_left = sizes // 2
+    rank_l = np.cumsum(left) - left
+    rank_l -= rank_l[seg_first[seg]]
+    new_at = starts[seg] + np.where(left, rank_l, n_left[seg] + in_seg - rank_l)
+    out_rows[new_at] = r
+    child_size = np.where(left, n_left[seg], sizes[seg] - n_left[seg])
+    done = child_size <= leaf_size
+    order[new_at[done]] = r[done, 3].view(np.int32)
+    cl.enqueue_copy(queue, dst, out_rows)
+    cl.enqueue_copy(queue, order_buf, order)
+    return n_left
+
+
+def _rows(buf: cl.Buffer) -> int:
+    return buf.size // 32
