@@ -11,6 +11,10 @@
  *              `order`, their final place. out[node] = the left child's
  *              size, or -1 where no bin boundary separates the centroids
  *              (the host halves those nodes, as bvh_sah.py does).
+ *              children[4 node ..]: the left child's box and centroid
+ *              bounds, then the right child's (float8: lo, hi): the boxes
+ *              of the next level's nodes, and the centroid bounds its
+ *              sah_split starts from (bounds[], lo > hi where unknown).
  *
  * The arithmetic is bvh_sah.py's, operation for operation, so that the
  * device tree equals the numpy builder's bit for bit: centroids
@@ -52,17 +56,22 @@ static inline float half_area(float4 lo, float4 hi) {
 }
 
 kernel void sah_split(global const float8 *src, global float8 *dst, global int *order, global const int2 *nodes,
-                      int n_nodes, int n_bins, int leaf_size, global int *out) {
+                      global const float8 *bounds, int n_nodes, int n_bins, int leaf_size, global int *out,
+                      global float8 *children) {
     int node = get_global_id(0);
     if (node >= n_nodes) return;
     int start = nodes[node].x, size = nodes[node].y, end = start + size;
 
-    float4 cmin = (float4)(INFINITY), cmax = (float4)(-INFINITY);
-    for (int j = start; j < end; j++) {
-        float8 r = src[j];
-        float4 c = centroid(r.lo, r.hi);
-        cmin = min(cmin, c);
-        cmax = max(cmax, c);
+    /* the centroid bounds, as the parent's partition found them (unknown,
+     * lo > hi, at the root and below host-halved nodes: found here) */
+    float4 cmin = bounds[node].lo, cmax = bounds[node].hi;
+    if (cmin.x > cmax.x) {
+        for (int j = start; j < end; j++) {
+            float8 r = src[j];
+            float4 c = centroid(r.lo, r.hi);
+            cmin = min(cmin, c);
+            cmax = max(cmax, c);
+        }
     }
     float4 ext = cmax - cmin;
     float4 scale;
@@ -136,19 +145,46 @@ kernel void sah_split(global const float8 *src, global float8 *dst, global int *
         return;
     }
 
+    /* the children's boxes: the unions of their bins */
     int n_left = 0;
-    for (int b = 0; b <= best_bin; b++) n_left += cnt[best_axis * n_bins + b];
+    float4 llo = (float4)(INFINITY), lhi = (float4)(-INFINITY), rlo = llo, rhi = lhi;
+    for (int b = 0; b < n_bins; b++) {
+        int i = best_axis * n_bins + b;
+        if (b <= best_bin) {
+            n_left += cnt[i];
+            llo = min(llo, blo[i]);
+            lhi = max(lhi, bhi[i]);
+        } else {
+            rlo = min(rlo, blo[i]);
+            rhi = max(rhi, bhi[i]);
+        }
+    }
     bool leaf_l = n_left <= leaf_size, leaf_r = size - n_left <= leaf_size;
     float c_min = cmin[best_axis], c_scale = scale[best_axis];
+    float4 lcmin = (float4)(INFINITY), lcmax = (float4)(-INFINITY), rcmin = lcmin, rcmax = lcmax;
     int l = start, r = start + n_left;
     for (int j = start; j < end; j++) {
         float8 row = src[j];
-        float d = centroid(row.lo, row.hi)[best_axis] - c_min;
+        float4 c = centroid(row.lo, row.hi);
+        float d = c[best_axis] - c_min;
         int b = min(convert_int_rtz(d * c_scale), n_bins - 1);
         bool left = b <= best_bin;
         int at = left ? l++ : r++;
         dst[at] = row;
         if (left ? leaf_l : leaf_r) order[at] = as_int(row.s3);
+        /* the children's centroid bounds, for their own level */
+        if (left) {
+            lcmin = min(lcmin, c);
+            lcmax = max(lcmax, c);
+        } else {
+            rcmin = min(rcmin, c);
+            rcmax = max(rcmax, c);
+        }
     }
     out[node] = n_left;
+    /* per child (left, right): box (lo, hi), then centroid bounds (lo, hi) */
+    children[4 * node + 0] = (float8)(llo, lhi);
+    children[4 * node + 1] = (float8)(lcmin, lcmax);
+    children[4 * node + 2] = (float8)(rlo, rhi);
+    children[4 * node + 3] = (float8)(rcmin, rcmax);
 }

@@ -27,6 +27,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from . import bvh_sah
+from ..cl.layout import BvhNode
 from .bvh_tree import BvhData, flatten
 
 # Below this many primitives the numpy builder is faster than the device
@@ -61,26 +62,36 @@ def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndar
     order_buf = cl.Buffer(ctx, mf.READ_WRITE, 4 * n)
     max_nodes = n // (leaf_size + 1) + 1  # every node of a level holds more than leaf_size rows
     nodes_buf = cl.Buffer(ctx, mf.READ_ONLY, 8 * max_nodes)
+    bounds_buf = cl.Buffer(ctx, mf.READ_ONLY, 32 * max_nodes)
     out_buf = cl.Buffer(ctx, mf.READ_WRITE, 4 * max_nodes)
+    children_buf = cl.Buffer(ctx, mf.READ_WRITE, 128 * max_nodes)
 
     sizes = np.array([n], np.int64)  # the level's nodes still to split: their sizes,
     starts = np.zeros(1, np.int64)  # and their ranges' starts in the final order
+    bounds = _unknown(1)  # and their centroid bounds (lo, hi), as their parents found them
     first, count = [np.ones(1, np.int64)], [np.zeros(1, np.int64)]  # root: inner, children 1 and 2
+    boxes = []  # per level after the root: its nodes' boxes (lo, hi; float8 rows)
     next_id, level = 1, 0
     while len(sizes):
         m = len(sizes)
         n_bins = int(min(bvh_sah.BINS, max(4, 1 << int(np.ceil(np.log2(int(sizes.sum()) / m))))))
         if level >= bvh_sah.MEDIAN_DEPTH:
             n_left = np.full(m, -1, np.int64)
+            children = np.empty((m, 4, 8), np.float32)
         else:
             cl.enqueue_copy(queue, nodes_buf, np.stack([starts, sizes], axis=1).astype(np.int32))
-            launch(queue, kernel, m, src, dst, order_buf, nodes_buf, m, n_bins, leaf_size, out_buf)
+            cl.enqueue_copy(queue, bounds_buf, bounds)
+            launch(queue, kernel, m, src, dst, order_buf, nodes_buf, bounds_buf, m, n_bins, leaf_size, out_buf,
+                   children_buf)
             out = np.empty(m, np.int32)
+            children = np.empty((m, 4, 8), np.float32)
             cl.enqueue_copy(queue, out, out_buf)
+            cl.enqueue_copy(queue, children, children_buf)
             n_left = out.astype(np.int64)
         halve = n_left < 0
         if halve.any():
-            n_left[halve] = _halve_on_host(queue, src, dst, order_buf, starts[halve], sizes[halve], leaf_size)
+            n_left[halve], children[halve] = _halve_on_host(queue, src, dst, order_buf, starts[halve],
+                                                            sizes[halve], leaf_size)
 
         # The next level: the children of these nodes, left then right (bvh_sah.build_sah).
         child_size = np.stack([n_left, sizes - n_left], axis=1).ravel()
@@ -91,19 +102,36 @@ def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndar
         f[~leaf] = next_id + 2 * np.arange(int((~leaf).sum()))
         first.append(f)
         count.append(np.where(leaf, child_size, 0))
+        boxes.append(children[:, 0::2].reshape(2 * m, 8))
         sizes, starts = child_size[~leaf], child_start[~leaf]
+        bounds = np.ascontiguousarray(children[:, 1::2].reshape(2 * m, 8)[~leaf])
         src, dst = dst, src
         level += 1
     order = np.empty(n, np.int32)
     cl.enqueue_copy(queue, order, order_buf)
-    return flatten(first, count, order.astype(np.int64), box_lo, box_hi)
+
+    box = np.concatenate([np.zeros((1, 8), np.float32)] + boxes)
+    box[0, 0:3] = np.minimum(box[1, 0:3], box[2, 0:3])  # the root: its children's union
+    box[0, 4:7] = np.maximum(box[1, 4:7], box[2, 4:7])
+    nodes = np.zeros(len(box), dtype=BvhNode)
+    nodes["lo"], nodes["hi"] = box[:, 0:3] + np.float32(0), box[:, 4:7] + np.float32(0)  # +0: flatten's zeros
+    nodes["first"], nodes["count"] = np.concatenate(first), np.concatenate(count)
+    return BvhData(nodes=nodes, order=order.astype(np.int64), depth=len(first))
 
 
-def _halve_on_host(queue, src, dst, order_buf, starts, sizes, leaf_size) -> np.ndarray:
+def _unknown(m: int) -> np.ndarray:
+    """Centroid bounds that sah_split finds itself (lo > hi)."""
+    b = np.empty((m, 8), np.float32)
+    b[:, :4], b[:, 4:] = np.inf, -np.inf
+    return b
+
+
+def _halve_on_host(queue, src, dst, order_buf, starts, sizes, leaf_size):
     """Partition the given nodes' ranges of ``src`` into ``dst`` by
     ``bvh_sah._halve`` (the first half along the longest centroid axis, in
     centroid then position order), leaf children's ids into ``order``.
-    Returns the left children's sizes."""
+    Returns the left children's sizes and the children's records as
+    sah_split writes them (box, then centroid bounds left unknown)."""
     n = _rows(src)
     rows = np.empty((n, 8), np.float32)
     out_rows = np.empty((n, 8), np.float32)
@@ -130,7 +158,14 @@ def _halve_on_host(queue, src, dst, order_buf, starts, sizes, leaf_size) -> np.n
     order[new_at[done]] = r[done, 3].view(np.int32)
     cl.enqueue_copy(queue, dst, out_rows)
     cl.enqueue_copy(queue, order_buf, order)
-    return n_left
+    # the children's boxes over their new ranges (left child first)
+    child_first = (np.stack([seg_first, seg_first + n_left], axis=1).ravel())
+    moved = out_rows[np.sort(new_at)]  # the nodes' ranges after the partition, node by node
+    children = np.empty((m, 4, 8), np.float32)
+    children[:, 1::2] = _unknown(2 * m).reshape(m, 2, 8)
+    children[:, 0::2, 0:4] = np.minimum.reduceat(moved[:, 0:4], child_first, axis=0).reshape(m, 2, 4)
+    children[:, 0::2, 4:8] = np.maximum.reduceat(moved[:, 4:8], child_first, axis=0).reshape(m, 2, 4)
+    return n_left, children
 
 
 def _rows(buf: cl.Buffer) -> int:
