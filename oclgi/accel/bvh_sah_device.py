@@ -39,8 +39,10 @@ def program(ctx: cl.Context):
     return programs(ctx).get("bvh_sah_build", sah_bins=bvh_sah.BINS)
 
 
-def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4) -> BvhData:
-    """``bvh_sah.build_sah(box_lo, box_hi, leaf_size)``, built on ``queue``'s device."""
+def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4,
+                     local_size: int | None = None) -> BvhData:
+    """``bvh_sah.build_sah(box_lo, box_hi, leaf_size)``, built on ``queue``'s
+    device (``local_size``: the work-group size, which changes nothing)."""
     box_lo = np.asarray(box_lo, dtype=np.float32)
     box_hi = np.asarray(box_hi, dtype=np.float32)
     n = len(box_lo)
@@ -82,7 +84,7 @@ def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndar
             cl.enqueue_copy(queue, nodes_buf, np.stack([starts, sizes], axis=1).astype(np.int32))
             cl.enqueue_copy(queue, bounds_buf, bounds)
             launch(queue, kernel, m, src, dst, order_buf, nodes_buf, bounds_buf, m, n_bins, leaf_size, out_buf,
-                   children_buf)
+                   children_buf, local_size=local_size)
             out = np.empty(m, np.int32)
             children = np.empty((m, 4, 8), np.float32)
             cl.enqueue_copy(queue, out, out_buf)

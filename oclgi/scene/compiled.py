@@ -214,9 +214,10 @@ class CompiledScene:
         records = np.zeros(len(ranges), dtype=Instance)
         self.object_boxes = []
         n_nodes, depth, n_binary, stack_need = 0, 0, 0, 0
+        queue = cl.CommandQueue(self.ctx)  # large SAH trees build on the device (oclgi/accel/bvh_sah_device.py)
         for k, (a, b) in enumerate(ranges):
             vk = v[a:b]
-            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=builder)
+            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=builder, queue=queue)
             n_binary += len(bvh.nodes)
             if wide:
                 tree = collapse(bvh.nodes, node_offset=n_nodes, tri_offset=a)
