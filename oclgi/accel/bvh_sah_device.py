@@ -30,9 +30,13 @@ from . import bvh_sah
 from ..cl.layout import BvhNode
 from .bvh_tree import BvhData, flatten
 
-# Below this many primitives the numpy builder is faster than the device
-# one's per-level launches and transfers (bench/README.md, BVH build).
-DEVICE_MIN_PRIMITIVES = 20_000
+# From this many primitives on, build_bvh(queue=...) builds SAH trees here.
+# The device build of the bunny (69k triangles) takes a fifth of the numpy
+# one's 0.1 s, but a process' first device build also loads the program
+# and its kernel (about 0.1 s from a warm PoCL cache, 0.5 s cold: `oclgi
+# warm` fills it): at this size a first build breaks even, and every later
+# one (other objects, other scenes) gains (bench/README.md, BVH build).
+DEVICE_MIN_PRIMITIVES = 50_000
 
 
 def program(ctx: cl.Context):
