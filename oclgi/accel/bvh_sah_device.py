@@ -1,7 +1,7 @@
 """Binned SAH BVH builder on the OpenCL device: ``bvh_sah.py``'s tree, bit for bit.
 
 The numpy builder (``bvh_sah.py``) is the specification and the tests'
-oracle; this one runs its per-primitive work in ``kernels/bvh_sah_build.cl``
+oracle; this one runs its per-primitive work in ``kernels/bvh_sah_device.cl``
 and keeps the per-node bookkeeping (node numbering, children, leaves) here,
 in the numpy builder's own words, so both emit the same ``BvhData``.
 
@@ -40,7 +40,7 @@ DEVICE_MIN_PRIMITIVES = 50_000
 
 
 def program(ctx: cl.Context):
-    return programs(ctx).get("bvh_sah_build", sah_bins=bvh_sah.BINS)
+    return programs(ctx).get("bvh_sah_device", sah_bins=bvh_sah.BINS)
 
 
 def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4,

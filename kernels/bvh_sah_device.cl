@@ -1,4 +1,4 @@
-/* bvh_sah_build.cl: one level of the binned SAH BVH build on the device
+/* bvh_sah_device.cl: one level of the binned SAH BVH build on the device
  * (the host loop and the tree layout: oclgi/accel/bvh_sah_device.py).
  *
  * Entry point (one work-item per node of the level):
