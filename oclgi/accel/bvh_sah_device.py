@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..cl.constants import SAH_BINS
 from ..cl.programs import launch, programs
 from . import bvh_sah
 from ..cl.layout import BvhNode
@@ -40,7 +41,7 @@ DEVICE_MIN_PRIMITIVES = 50_000
 
 
 def program(ctx: cl.Context):
-    return programs(ctx).get("bvh_sah_device", sah_bins=bvh_sah.BINS)
+    return programs(ctx).get("bvh_sah_device")
 
 
 def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4,
@@ -57,6 +58,8 @@ def build_sah_device(queue: cl.CommandQueue, box_lo: np.ndarray, box_hi: np.ndar
                        box_lo, box_hi)
     if n >= 2**31:
         raise ValueError("the device SAH builder indexes fewer than 2^31 primitives")
+    if bvh_sah.BINS > SAH_BINS:
+        raise ValueError(f"the device builder bins at most {SAH_BINS} ways (cl/constants.py SAH_BINS)")
     ctx = queue.context
     kernel = program(ctx).sah_split
     rows = np.zeros((n, 8), np.float32)
