@@ -10,7 +10,9 @@ What is built is found by running, not by a list kept in sync by hand:
 every command's code path runs once on a tiny view of the Cornell box with
 the bunny (each estimator, a render, a DETP session and a Photon Map session
 with one move each), which builds exactly the programs and defines real
-runs use. Then every built program is asked for its binaries, which makes
+runs use (the bunny's 69k triangles also build its SAH tree on the device,
+``accel/bvh_sah_device.py``, as every scene tree of 50,000 triangles or
+more). Then every built program is asked for its binaries, which makes
 PoCL compile each of its kernels, launched or not, into the cache. Launches
 compile the generic version of a kernel (any work-group and grid size,
 ``cl/device.py``), so a tiny run warms the kernels a large one launches.

@@ -68,6 +68,7 @@ __kernel void constants_probe(__global ulong *u, __global float *f)
     u[i++] = OCLGI_MATERIAL_VERTEX_COLOUR; u[i++] = OCLGI_EMITTER_IES; u[i++] = OCLGI_VIEW_SRGB;
     u[i++] = OCLGI_VIEW_AGX; u[i++] = OCLGI_VIEW_FILMIC; u[i++] = OCLGI_BVH_QUANTISED_ROOT;
     u[i++] = OCLGI_BVH_BLOCK_ROOT; u[i++] = OCLGI_BOX_LEAF_BITS; u[i++] = OCLGI_BOX_WIDE_STACK;
+    u[i++] = OCLGI_SAH_BINS;
     f[0] = OCLGI_FRONT_COS_EPS;
     f[1] = (float)OCLGI_SC_MU;
 }
@@ -78,7 +79,7 @@ INTEGERS = ("LANES", "BVH_STACK_SIZE", "BOX_BVH_STACK", "POINT_BVH_STACK", "FIXE
             "BSDF_DIFFUSE", "BSDF_PHONG", "BSDF_MIRROR", "BSDF_DIELECTRIC", "BSDF_CONDUCTOR", "BSDF_ROUGH_DIELECTRIC",
             "MATERIAL_TWOSIDED", "MATERIAL_DELTA", "CAMERA_MAX_DEPTH",
             "MATERIAL_VERTEX_COLOUR", "EMITTER_IES", "VIEW_SRGB", "VIEW_AGX", "VIEW_FILMIC", "BVH_QUANTISED_ROOT",
-            "BVH_BLOCK_ROOT", "BOX_LEAF_BITS", "BOX_WIDE_STACK")
+            "BVH_BLOCK_ROOT", "BOX_LEAF_BITS", "BOX_WIDE_STACK", "SAH_BINS")
 
 
 def test_kernels_see_the_host_values(cl_env):

@@ -36,3 +36,8 @@ def test_a_render_after_warm_compiles_nothing(tmp_path, scenes_dir):
                  "--method", "photon_map", "--local-size", "16", "-o", tmp_path / "p.exr")
     assert res.returncode == 0, res.stderr
     assert _entries(tmp_path / "cache") == warmed
+    # The bunny's scene tree is built on the device (oclgi/accel/bvh_sah_device.py): warmed too.
+    res = _oclgi(tmp_path, env, "render", scenes_dir / "cornell_bunny.toml", "--photons", "2000",
+                 "-o", tmp_path / "b.exr")
+    assert res.returncode == 0, res.stderr
+    assert _entries(tmp_path / "cache") == warmed

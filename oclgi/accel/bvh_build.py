@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .bvh_sah import build_sah
+from .bvh_sah_device import DEVICE_MIN_PRIMITIVES, build_sah_device
 from .bvh_tree import BvhData, flatten
 
 
@@ -72,12 +73,18 @@ def scene_tree(quality: str) -> SceneTree:
     return SceneTree(builder, "8" in quality, "q" in layout, "b" in layout)
 
 
-def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh") -> BvhData:
+def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh",
+              queue=None) -> BvhData:
     """A binary BVH over primitive boxes: ``quality="lbvh"`` splits on the
     30-bit Morton codes of their centres (fast; the overlap trees use it),
     ``"sah"`` by the binned surface area heuristic (``bvh_sah.py``; better
-    trees for ray traversal)."""
+    trees for ray traversal). Given an OpenCL ``queue``, a SAH tree over at
+    least ``DEVICE_MIN_PRIMITIVES`` boxes is built on its device
+    (``bvh_sah_device.py``: the same tree, bit for bit, faster); without
+    one, or below that size, by the numpy builder."""
     if quality == "sah":
+        if queue is not None and len(box_lo) >= DEVICE_MIN_PRIMITIVES:
+            return build_sah_device(queue, box_lo, box_hi, leaf_size)
         return build_sah(box_lo, box_hi, leaf_size)
     if quality != "lbvh":
         raise ValueError(f"BVH quality must be one of {BUILDERS}, got {quality!r}")

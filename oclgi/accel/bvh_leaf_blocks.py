@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl.layout import TriBlock4
+from ..cl.layout import Tri, TriBlock4
 
 LANES = 4
 UNIT = 32  # bytes: the granule of a block's offset
@@ -46,16 +46,21 @@ def leaf_blocks(nodes: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.nda
     codes[leaf] = ~((units << LEAF_BITS) | (count - 1))
     out["child"] = codes
 
-    blocks = np.zeros(int(n_blocks.sum()), dtype=TriBlock4)
-    blocks["id"] = -1
     # every triangle of every leaf: its block and lane
     k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)  # index within its leaf
     src = np.repeat(first, count) + k
     blk = np.repeat(block0, count) + k // LANES
     lane = k % LANES
-    t = tris[src]
-    for v in range(3):
-        for axis, name in enumerate("xyz"):
-            blocks[f"v{v}{name}"][blk, lane] = t[f"v{v}"][:, axis]
-    blocks["id"][blk, lane] = t["id"]
+    # As 32-bit words: whole Tri rows taken into (block, lane) places, then
+    # TriBlock4's fields copied out lane-major, one field at a time (field by
+    # field through structured views is ~2-3x slower).
+    words = tris.view(np.int32).reshape(len(tris), Tri.itemsize // 4)
+    fields = [Tri.fields[f"v{v}"][1] // 4 + axis for v in range(3) for axis in range(3)] + [Tri.fields["id"][1] // 4]
+    lanes = np.zeros((int(n_blocks.sum()), LANES, words.shape[1]), np.int32)
+    lanes[:, :, fields[-1]] = -1  # unused lanes: id -1
+    lanes.reshape(-1, words.shape[1])[blk * LANES + lane] = np.take(words, src, axis=0)
+    block_words = np.empty((len(lanes), len(fields), LANES), np.int32)
+    for i, f in enumerate(fields):
+        block_words[:, i] = lanes[:, :, f]
+    blocks = block_words.reshape(len(lanes), -1).view(TriBlock4)[:, 0]
     return out, blocks

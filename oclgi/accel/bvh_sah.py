@@ -28,10 +28,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cl.constants import BVH_STACK_SIZE
+from ..cl.constants import BVH_STACK_SIZE, SAH_BINS
 from .bvh_tree import BvhData, flatten
 
-BINS = 16
+BINS = SAH_BINS
 # From this depth on, nodes split at the median: a node of n primitives then
 # adds at most log2(n / leaf_size) levels, which keeps the deepest leaf
 # within the traversal stack for any n up to 2^31.

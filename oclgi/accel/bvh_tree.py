@@ -48,6 +48,8 @@ def flatten(first: list, count: list, order: np.ndarray, box_lo: np.ndarray, box
         hi[ids] = np.maximum(hi[c0], hi[c0 + 1])
 
     nodes = np.zeros(n_nodes, dtype=BvhNode)
-    nodes["lo"], nodes["hi"] = lo, hi
+    # + 0: a zero bound is +0.0 whichever of -0.0 and 0.0 the reductions met
+    # first, so that every builder's boxes are the same bytes (bvh_sah_device.py)
+    nodes["lo"], nodes["hi"] = lo + np.float32(0), hi + np.float32(0)
     nodes["first"], nodes["count"] = first_all, count_all
     return BvhData(nodes=nodes, order=order, depth=len(first))

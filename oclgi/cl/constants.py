@@ -48,6 +48,9 @@ BOX_WIDE_STACK = 7 * (BOX_BVH_STACK - 1) + LANES
 # The k-nearest search's best-first descent (kernels/point_index.cl) over a
 # tree on 63-bit codes: 95 levels at most.
 POINT_BVH_STACK = 96
+# The binned SAH builders' bins per axis (oclgi/accel/bvh_sah.py, and the
+# device one's private bin arrays in kernels/bvh_sah_device.cl).
+SAH_BINS = 16
 
 # Fixed-point sums: one photon's largest power is 2^24 units, whatever the
 # photon count (kernels/oclgi_types.h has the overflow bound): resolution
@@ -130,6 +133,7 @@ DEFINES = {
     "box_leaf_bits": BOX_LEAF_BITS,
     "box_wide_stack": BOX_WIDE_STACK,
     "point_bvh_stack": POINT_BVH_STACK,
+    "sah_bins": SAH_BINS,
     "fixed_bits": FIXED_BITS,
     "front_cos_eps": f"{FRONT_COS_EPS!r}f",
     "sc_max_levels": SC_MAX_LEVELS,

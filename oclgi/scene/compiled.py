@@ -210,13 +210,19 @@ class CompiledScene:
         builder, wide, quantised, blocks = scene_tree(self.bvh_quality)
         flags = (BVH_QUANTISED_ROOT if quantised else 0) | (BVH_BLOCK_ROOT if blocks else 0)
         ranges = self.scene.object_ranges()
-        nodes_all, tris = [], np.zeros(len(v), dtype=Tri)
+        # the Tri records as (triangle, vertex, xyz + a word): v0 id v1 pad v2 pad
+        nodes_all, tri_words = [], np.zeros((len(v), 3, 4), np.float32)
+        v32 = v.astype(np.float32)  # rounding is monotone: the boxes of v32 are v's boxes rounded
+        # the triangles' boxes: two element-wise ops each (min(axis=1) over 3 is ~3x slower)
+        tri_lo = np.minimum(np.minimum(v32[:, 0], v32[:, 1]), v32[:, 2])
+        tri_hi = np.maximum(np.maximum(v32[:, 0], v32[:, 1]), v32[:, 2])
         records = np.zeros(len(ranges), dtype=Instance)
         self.object_boxes = []
         n_nodes, depth, n_binary, stack_need = 0, 0, 0, 0
+        queue = cl.CommandQueue(self.ctx)  # large SAH trees build on the device (oclgi/accel/bvh_sah_device.py)
         for k, (a, b) in enumerate(ranges):
             vk = v[a:b]
-            bvh = build_bvh(vk.min(axis=1), vk.max(axis=1), quality=builder)
+            bvh = build_bvh(tri_lo[a:b], tri_hi[a:b], quality=builder, queue=queue)
             n_binary += len(bvh.nodes)
             if wide:
                 tree = collapse(bvh.nodes, node_offset=n_nodes, tri_offset=a)
@@ -230,15 +236,16 @@ class CompiledScene:
                 nodes["first"][~inner] += a  # triangle runs in the joint triangle array
                 root = n_nodes
                 depth = max(depth, bvh.depth)
-            vo = vk[bvh.order]
-            tris["v0"][a:b], tris["v1"][a:b], tris["v2"][a:b] = vo[:, 0], vo[:, 1], vo[:, 2]
-            tris["id"][a:b] = a + bvh.order
+            tri_words[a:b, :, :3] = np.take(v32[a:b], bvh.order, axis=0)
+            tri_words[a:b, 0, 3] = (a + bvh.order).astype(np.int32).view(np.float32)  # the id's bits
             inst = records[k]
             inst["root"], inst["first_tri"], inst["n_tris"] = root, a, b - a
-            self.object_boxes.append((vk.min(axis=(0, 1)), vk.max(axis=(0, 1))))
+            corners = vk.reshape(-1, 3)  # (a vertex per row: reducing one axis is faster than two)
+            self.object_boxes.append((corners.min(axis=0), corners.max(axis=0)))
             place_record(inst, self.object_boxes[k], np.eye(4), self.scene.objects[k].name)
             nodes_all.append(nodes)
             n_nodes += len(nodes)
+        tris = tri_words.reshape(len(v), -1).view(Tri)[:, 0]
         if not wide and depth > BVH_STACK_SIZE:
             raise OclgiError(f"BVH depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
         if wide and n_nodes >= BVH_BLOCK_ROOT:
