@@ -1,6 +1,9 @@
 // oclgi view: the tessellated scene drawn with WebGL2, coloured by the
 // session's per-vertex radiance (linear; exposure and sRGB applied here).
-// The server sends the mesh once and then only changed colours; the page
+// The server sends the mesh once and then only changed colours, as float16
+// at a power-of-two scale (oclgi/viewer/vertex_colours.py): the page keeps
+// the halves as sent, copies a frame's runs with typed-array sets, uploads
+// them as HALF_FLOAT and folds the scale into the exposure. The page
 // moves a dragged object's vertices itself (a model matrix per movable
 // object), so orbiting and dragging run at display rate whatever the
 // server is doing, and the light follows when its update arrives.
@@ -8,6 +11,14 @@
 
 const MAX_OBJECTS = 16; // model matrices in the shader: the static scene and up to 15 movable objects
 const PLOT_SECONDS = 10;
+const MAX_RANGE_UPLOADS = 64; // a frame's changed runs uploaded one by one up to this many, else the whole array
+
+function halfToFloat(h) { // an IEEE float16's bits -> its value
+  const e = (h >> 10) & 31, m = h & 1023, s = h & 0x8000 ? -1 : 1;
+  if (e === 0) return s * m * Math.pow(2, -24);
+  if (e === 31) return m ? NaN : s * Infinity;
+  return s * (1 + m / 1024) * Math.pow(2, e - 15);
+}
 
 // -- 4x4 matrices: row-major arrays of 16 (as the server writes them) ------
 function mul(a, b) {
@@ -119,7 +130,8 @@ async function main() {
   const positions = new Float32Array(meshBuffer, 16, 3 * V);
   const objectOf = new Uint32Array(meshBuffer, 16 + 12 * V, V);
   const faces = new Uint32Array(meshBuffer, 16 + 16 * V, 3 * F);
-  const colours = state.colours = new Float32Array(3 * V);
+  const colours = state.colours = new Uint16Array(3 * V); // float16 bits, times 2^state.scaleExponent
+  state.scaleExponent = 0;
   $("scene-name").textContent = scene.name;
   const objects = scene.objects; // movable: object i is id i + 1 in objectOf
   const loadedInverse = objects.map(o => inverseAffine(o.matrix));
@@ -147,13 +159,14 @@ async function main() {
   gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
   const colourBuffer = buffer(gl.ARRAY_BUFFER, colours, gl.DYNAMIC_DRAW);
   gl.enableVertexAttribArray(1);
-  gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 0, 0);
+  gl.vertexAttribPointer(1, 3, gl.HALF_FLOAT, false, 0, 0);
   buffer(gl.ARRAY_BUFFER, objectOf, gl.STATIC_DRAW);
   gl.enableVertexAttribArray(2);
   gl.vertexAttribIPointer(2, 1, gl.UNSIGNED_INT, 0, 0);
   buffer(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
   gl.bindVertexArray(null);
   let colourDirty = true;
+  let dirtyRanges = null; // [first, count] in vertices changed since the last upload; null: the whole array
   let redraw = true; // something shown changed: the next display frame draws (an idle page costs nothing)
   const changed = () => { redraw = true; };
 
@@ -227,7 +240,8 @@ async function main() {
   function autoExposure() { // the vertices' log-average luminance to middle grey
     let sum = 0, n = 0;
     for (let v = 0; v < V; v++) {
-      const y = 0.2126 * colours[3 * v] + 0.7152 * colours[3 * v + 1] + 0.0722 * colours[3 * v + 2];
+      const y = (0.2126 * halfToFloat(colours[3 * v]) + 0.7152 * halfToFloat(colours[3 * v + 1]) +
+                 0.0722 * halfToFloat(colours[3 * v + 2])) * Math.pow(2, state.scaleExponent);
       if (y > 0) { sum += Math.log(y); n++; }
     }
     setExposure(n ? Math.round(10 * Math.log2(0.18 / Math.exp(sum / n))) / 10 : 0);
@@ -251,7 +265,7 @@ async function main() {
     for (let i = 0; i < objects.length && i + 1 < MAX_OBJECTS; i++) modelData.set(columnMajor(relative(i)), 16 * (i + 1));
     gl.uniformMatrix4fv(uniforms.model, false, modelData);
     gl.uniformMatrix4fv(uniforms.viewProjection, false, columnMajor(viewProjection()));
-    gl.uniform1f(uniforms.exposure, exposure);
+    gl.uniform1f(uniforms.exposure, exposure * Math.pow(2, state.scaleExponent));
     gl.uniform1i(uniforms.picking, picking ? 1 : 0);
     gl.uniform1i(uniforms.selected, selected);
     gl.bindVertexArray(vao);
@@ -295,14 +309,32 @@ async function main() {
   function applyFrame(buf) {
     const view = new DataView(buf);
     if (buf.byteLength < 16 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
-    const seq = view.getUint32(4, true), mode = view.getUint32(8, true), count = view.getUint32(12, true);
+    const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
+    if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
     if (mode === 0) {
-      colours.set(new Float32Array(buf, 16, 3 * V));
+      colours.set(new Uint16Array(buf, 20, 3 * V));
+      dirtyRanges = null;
     } else {
-      const index = new Uint32Array(buf, 16, count), values = new Float32Array(buf, 16 + 4 * count, 3 * count);
-      for (let i = 0; i < count; i++) {
-        const v = 3 * index[i];
-        colours[v] = values[3 * i]; colours[v + 1] = values[3 * i + 1]; colours[v + 2] = values[3 * i + 2];
+      const R = view.getUint32(16, true), S = view.getUint32(20, true);
+      const start = new Uint32Array(buf, 24, R), length = new Uint32Array(buf, 24 + 4 * R, R);
+      const single = new Uint32Array(buf, 24 + 8 * R, S);
+      const values = new Uint16Array(buf, 24 + 8 * R + 4 * S);
+      let at = 0;
+      for (let r = 0; r < R; r++) { // a run: one typed-array copy
+        colours.set(values.subarray(3 * at, 3 * (at + length[r])), 3 * start[r]);
+        at += length[r];
+      }
+      for (let i = 0; i < S; i++) { // a vertex alone
+        const v = 3 * single[i], w = 3 * (at + i);
+        colours[v] = values[w]; colours[v + 1] = values[w + 1]; colours[v + 2] = values[w + 2];
+      }
+      if (dirtyRanges !== null || !colourDirty) {
+        if (!colourDirty) dirtyRanges = [];
+        if (dirtyRanges.length + R + S > MAX_RANGE_UPLOADS) dirtyRanges = null;
+        else {
+          for (let r = 0; r < R; r++) dirtyRanges.push([start[r], length[r]]);
+          for (let i = 0; i < S; i++) dirtyRanges.push([single[i], 1]);
+        }
       }
     }
     state.seq = seq;
@@ -498,8 +530,10 @@ async function main() {
     if (colourDirty) {
       redraw = true;
       gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+      if (dirtyRanges === null) gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+      else for (const [first, n] of dirtyRanges) gl.bufferSubData(gl.ARRAY_BUFFER, 6 * first, colours, 3 * first, 3 * n);
       colourDirty = false;
+      dirtyRanges = [];
       if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
     }
     if (redraw) {
