@@ -76,6 +76,21 @@ async def drag(tab, start, end, steps=12):
     await tab.mouse("mouseReleased", *end)
 
 
+def render_at(viewer, poses, request) -> np.ndarray:
+    """The API's render radiance at ``poses`` from the camera a page asks for."""
+    import oclgi
+
+    engine = viewer.engine.posed()
+    for name, m in poses.items():
+        engine.place(name, np.array(m).reshape(4, 4))
+    c = request["camera"]
+    cam = oclgi.Camera(position=tuple(c["position"]), look_at=tuple(c["look_at"]), up=tuple(c["up"]), fov=c["fov"],
+                       width=request["width"], height=request["height"])
+    r = viewer.run
+    return engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
+                         max_depth=r.max_depth).radiance
+
+
 def test_view_in_headless_chromium(viewer, server, tmp_path):
     assert chromium_path(), "chromium is missing: tools/ensure-chromium.sh (make test runs it) installs it"
     proc, url = server
@@ -139,6 +154,24 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
                 await asyncio.sleep(0.05)
             assert s["open"] == 1 and s["closed"] == 1 and s["buffers_released"] > released
             assert (await tab.eval("oclgiState.api.sync()"))["poses"] == synced["poses"]
+
+            # "render this view": the engine's image from the page's camera at the dragged pose
+            request = await tab.eval("oclgiState.api.renderCamera(32)")
+            got = await tab.eval("oclgiState.api.render(32).then(r => ({w: r.width, h: r.height, png: r.png.length, "
+                                 "radiance: Array.from(r.radiance)}))")
+            assert await tab.eval("document.querySelector('#render-result img') !== null")
+            assert got["png"] > 0 and (got["w"], got["h"]) == (32, request["height"])
+            api = render_at(viewer, synced["poses"], request)
+            assert np.array_equal(np.array(got["radiance"], np.float32).reshape(api.shape), api)
+
+            # Photon Maps from the estimator control: a session of the other kind at the same pose
+            await tab.eval("document.getElementById('method').value = 'photon_map'; "
+                           "document.getElementById('apply').click()")
+            await tab.wait("oclgiState.session.method === 'photon_map'")
+            pm = await tab.eval("oclgiState.api.sync()")
+            await tab.wait(f"oclgiState.drawnSeq === {pm['seq']}")
+            assert pm["poses"] == synced["poses"] and pm["k"] is not None
+            assert await shows(tab, reference_colours(viewer, pm["poses"], method="photon_map", k=pm["k"]))
             assert not await tab.eval("oclgiState.errors.length")
 
     asyncio.run(main())

@@ -5,6 +5,7 @@ coalesced, sockets independent, a closed socket's session freed."""
 import asyncio
 import json
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -106,7 +107,23 @@ BAD = [
     ({"type": "estimator", "radius": -0.1}, "radius"),
     ({"type": "estimator", "radius": 1e9}, "radius"),
     ({"type": "estimator", "radius": float("nan")}, "finite"),
-    ({"type": "estimator", "method": "photon_map"}, "one of"),
+    ({"type": "estimator", "method": "impact_count_x"}, "one of"),
+    ({"type": "estimator", "method": "photon_map", "radius": 0.1}, "no disc radius"),
+    ({"type": "estimator", "method": "detp", "k": 8}, "Photon Map"),
+    ({"type": "light", "light": "lamp", "position": [0, 1, 0]}, "no point or spot light"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 0, "height": 8}, "whole number"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 3], "fov": 40},
+      "width": 8, "height": 8}, "differ"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 180},
+      "width": 8, "height": 8}, "fov"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1e9, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 8, "height": 8}, "beyond"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "up": [0, 0, 1],
+      "fov": 40}, "width": 8, "height": 8}, "along the view"),
+    ({"type": "render", "id": 1, "camera": [0, 1, 3], "width": 8, "height": 8}, "camera"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 10**6, "height": 8}, "whole number"),
     ({"type": "estimator", "k": 8}, "Photon Map"),
     ({"type": "estimator"}, "give"),
     ({"type": "teleport"}, "unknown message type"),
@@ -283,3 +300,89 @@ def test_movable_objects_are_queried_once_per_edge_sized_cell(viewer):
     q, v = object_points(tess, objects, material, all_vertices=True)
     assert np.array_equal(q, np.arange(len(tess.vertices))) and np.array_equal(v, q)
     assert len(viewer.points) == len(queried)
+
+
+def test_switching_to_photon_maps_and_back_opens_a_session_of_the_other_kind(viewer):
+    """An estimator of the other family: a new session (Photon Maps or DETP) at the page's poses, equal to the
+    API's session of that kind moved there; the old session closed."""
+    async def test(client):
+        ws, page, hello = await connect(client, viewer)
+        assert "photon_map" in hello["methods"] and "detp" in hello["methods"]
+        await move(ws, bunny_at(0.4, 0.1, 0.3))
+        before = await sync(ws, page)
+        opened, closed = viewer.sessions_opened, viewer.sessions_closed
+        await ws.send_str(json.dumps({"type": "estimator", "method": "photon_map", "k": 20}))
+        upd = await receive_until(ws, page, lambda m: m["type"] in ("update", "error"))
+        assert upd["type"] == "update" and upd["switched"] and upd["method"] == "photon_map" and upd["k"] == 20
+        done = await sync(ws, page)
+        assert done["poses"] == before["poses"] and done["radius"] is None
+        assert viewer.sessions_opened == opened + 1 and viewer.sessions_closed == closed + 1
+        assert page.shows(reference_colours(viewer, done["poses"], method="photon_map", k=20))
+        assert not page.shows(reference_colours(viewer, done["poses"]))
+        # within the family: k by set_estimator; a move goes on in the new session
+        await ws.send_str(json.dumps({"type": "estimator", "k": 12}))
+        await move(ws, bunny_at(0.2, 0.3))
+        done = await sync(ws, page, 2)
+        assert done["k"] == 12 and done["method"] == "photon_map"
+        # a Photon Map session's move is the practical update (it depends on the way taken): the API's session
+        # takes the same steps
+        from oclgi.incremental.open_session import open_session
+
+        with open_session(viewer.engine, viewer.points, method="photon_map", photons=PHOTONS, k=20) as s:
+            s.move("bunny", np.reshape(before["poses"]["bunny"], (4, 4)))
+            s.set_estimator("photon_map", k=12)
+            s.move("bunny", np.reshape(done["poses"]["bunny"], (4, 4)))
+            assert page.shows(viewer.colours(s.irradiance()))
+        # and back to DETP, radius given
+        await ws.send_str(json.dumps({"type": "estimator", "method": "detp", "radius": 0.08}))
+        done = await sync(ws, page, 3)
+        assert done["method"] == "detp" and done["radius"] == 0.08 and done["k"] is None
+        assert page.shows(reference_colours(viewer, done["poses"], method="detp", radius=0.08))
+        await ws.close()
+    run(test, viewer)
+
+
+CAMERA = {"position": [0.3, 1.1, 3.5], "look_at": [0.0, 0.9, 0.0], "up": [0, 1, 0], "fov": 42.0}
+
+
+async def render(ws, page, ident, width=24, height=16):
+    """Ask for a render; (the rendered message, the progress messages, png bytes, radiance)."""
+    await ws.send_str(json.dumps({"type": "render", "id": ident, "camera": CAMERA, "width": width,
+                                  "height": height}))
+    seen = len(page.messages)
+    done = await receive_until(ws, page, lambda m: m["type"] in ("rendered", "error"))
+    assert done["type"] == "rendered", done
+    progress = [m for m in page.messages[seen:] if m["type"] == "render_progress" and m["id"] == ident]
+    data = await ws.receive_bytes(timeout=120)
+    magic, index, w, h, n = struct.unpack_from("<4sIIII", data)
+    assert magic == b"OGVR" and index == done["index"] and (w, h) == (width, height)
+    png = data[20:20 + n]
+    radiance = np.frombuffer(data, "<f4", offset=20 + n).reshape(h, w, 3)
+    return done, progress, png, radiance
+
+
+def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer):
+    import oclgi
+    from oclgi.io import png_bytes
+
+    async def test(client):
+        ws, page, _ = await connect(client, viewer)
+        await move(ws, bunny_at(0.5, -0.2, 0.4))
+        posed = await sync(ws, page)
+        done, progress, png, radiance = await render(ws, page, 7)
+        assert progress and progress[-1]["traced"] == progress[-1]["paths"] == PHOTONS
+        engine = viewer.engine.posed()
+        engine.place("bunny", np.array(posed["poses"]["bunny"]).reshape(4, 4))
+        cam = oclgi.Camera(position=tuple(CAMERA["position"]), look_at=tuple(CAMERA["look_at"]), fov=CAMERA["fov"],
+                           width=24, height=16)
+        r = viewer.run
+        api = engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
+                            max_depth=r.max_depth)
+        assert np.array_equal(radiance, api.radiance), "the render is not the API's at that camera and pose"
+        assert png == png_bytes(api.pixels) and api.radiance.max() > 0
+        # the session is untouched: still exact, still moving
+        after = await sync(ws, page, 2)
+        assert after["seq"] == posed["seq"]
+        await moves_exactly(ws, page, viewer, bunny_at(0.1, 0.1), 3)
+        await ws.close()
+    run(test, viewer)

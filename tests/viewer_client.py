@@ -108,13 +108,17 @@ def reference_colours(viewer, poses: dict, **run) -> np.ndarray:
     session over the viewer's points (opened where the tessellation was
     made, so its points on movable objects start where the mesh has them),
     each object moved there once; the viewer's run parameters unless
-    ``run`` overrides them."""
+    ``run`` overrides them (``lights``: parameter changes, the lights moved
+    before the session opens)."""
     from oclgi.incremental.open_session import open_session
 
     r = viewer.run
     args = dict(method=r.method, photons=r.photons, radius=r.radius)
     args.update(run)
-    with open_session(viewer.engine, viewer.points, **args) as s:
+    if args["method"] == "photon_map":
+        args.pop("radius")
+    lights = args.pop("lights", None)
+    with open_session(viewer.lit_engine(lights), viewer.points, **args) as s:
         for name, m in poses.items():
             if not np.array_equal(np.reshape(m, (4, 4)), viewer.movable[name].loaded):
                 s.move(name, np.array(m, np.float64).reshape(4, 4))

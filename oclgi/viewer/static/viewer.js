@@ -112,6 +112,7 @@ const $ = id => document.getElementById(id);
 const state = window.oclgiState = { // what a test or a benchmark reads (and drives through .api)
   ready: false, seq: -1, frames: 0, updates: 0, draws: 0, drawnSeq: -1, errors: [], log: [],
   colours: null, poses: {}, serverPoses: {}, lastUpdate: null, hello: null, connection: null,
+  lights: {}, serverLights: {}, renders: [],
 };
 
 function showError(text) {
@@ -136,6 +137,8 @@ async function main() {
   const objects = scene.objects; // movable: object i is id i + 1 in objectOf
   const loadedInverse = objects.map(o => inverseAffine(o.matrix));
   for (const o of objects) state.poses[o.name] = o.matrix.slice();
+  const lights = scene.lights || []; // point and spot lights: name, kind, position, path (precomputed positions)
+  for (const l of lights) state.lights[l.name] = l.position.slice();
 
   // geometry
   const program = gl.createProgram();
@@ -212,10 +215,45 @@ async function main() {
     const nx = 2 * x / canvas.clientWidth - 1, ny = 1 - 2 * y / canvas.clientHeight;
     return {origin: f.eye, dir: normalize(add(f.forward, add(scale(f.right, nx), scale(f.up, ny))))};
   }
-  function project(p) { // world point -> canvas pixels (CSS)
-    const m = viewProjection();
+  function project(p, m = viewProjection()) { // world point -> canvas pixels (CSS); null behind the eye
     const c = [0, 1, 2, 3].map(i => m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] + m[4 * i + 3]);
+    if (c[3] <= 0) return null;
     return [(c[0] / c[3] + 1) / 2 * canvas.clientWidth, (1 - c[1] / c[3]) / 2 * canvas.clientHeight];
+  }
+
+  // light markers: a ring at each light, dots at its precomputed positions (HTML over the canvas)
+  const markerLayer = $("markers");
+  const markers = lights.map(l => {
+    const ring = document.createElement("div");
+    ring.className = "light-marker";
+    ring.title = `${l.kind} light ${l.name}`;
+    markerLayer.appendChild(ring);
+    const dots = (l.path || []).map(() => {
+      const d = document.createElement("div");
+      d.className = "path-marker";
+      markerLayer.appendChild(d);
+      return d;
+    });
+    return {ring, dots};
+  });
+  const place = (el, p) => {
+    el.hidden = !p;
+    if (p) { el.style.left = `${p[0]}px`; el.style.top = `${p[1]}px`; }
+  };
+  function placeMarkers() {
+    const m = viewProjection();
+    lights.forEach((l, i) => {
+      place(markers[i].ring, project(state.lights[l.name], m));
+      markers[i].ring.classList.toggle("dragged", !!(drag && drag.light === l.name));
+      (l.path || []).forEach((q, j) => place(markers[i].dots[j], project(q, m)));
+    });
+  }
+  function pickLight(x, y) { // the light whose marker is under (x, y), or null
+    for (const l of lights) {
+      const p = project(state.lights[l.name]);
+      if (p && Math.hypot(p[0] - x, p[1] - y) <= 10) return l;
+    }
+    return null;
   }
   function relative(i) { return mul(state.poses[objects[i].name], loadedInverse[i]); }
   function objectBox(i) { // world box of movable object i at the pose shown
@@ -300,6 +338,7 @@ async function main() {
   ws.binaryType = "arraybuffer";
   state.ws = ws;
   const pendingMoves = new Map(); // object name -> matrix: sent once a display frame, the latest only
+  const pendingLights = new Map(); // light name -> position: likewise
   const waiting = new Map(); // sync id -> resolve
   let syncs = 0;
   const plot = [];
@@ -308,7 +347,8 @@ async function main() {
   function send(msg) { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); }
   function applyFrame(buf) {
     const view = new DataView(buf);
-    if (buf.byteLength < 16 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
+    if (buf.byteLength >= 20 && view.getUint32(0, true) === 0x5256474f) { showRender(buf); return; } // "OGVR"
+    if (buf.byteLength < 20 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
     const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
     if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
     if (mode === 0) {
@@ -346,6 +386,10 @@ async function main() {
     if (state.frames === 1) autoExposure();
   }
   function describe(msg) {
+    for (const name in msg.lights || {}) {
+      state.serverLights[name] = msg.lights[name];
+      if ((!drag || drag.light !== name) && !pendingLights.has(name)) { state.lights[name] = msg.lights[name].slice(); redraw = true; }
+    }
     for (const name in msg.poses) {
       state.serverPoses[name] = msg.poses[name];
       if ((!drag || drag.name !== name) && !pendingMoves.has(name)) { state.poses[name] = msg.poses[name].slice(); redraw = true; }
@@ -371,6 +415,13 @@ async function main() {
       rows.push(["n_Rec / n_R", `${(msg.segments_removed).toLocaleString()} / ${msg.segments.toLocaleString()}`]);
       rows.push(["dynamic points", msg.points.toLocaleString()]);
     }
+    if (msg.kind === "light") {
+      rows.push([`light ${msg.light}`, msg.reused ? `reused (position ${msg.frame})` : "recomputed"]);
+      rows.push(["by", msg.by]);
+      rows.push(["paths traced", msg.paths_traced.toLocaleString()]);
+      if (msg.why) rows.push(["no reuse", msg.why]);
+    }
+    if (msg.switched) rows.push(["new session", msg.method]);
     const now = performance.now();
     while (drawnTimes.length && drawnTimes[0] < now - 1000) drawnTimes.shift();
     rows.push(["updates/s (drawn)", drawnTimes.length.toString()]);
@@ -412,23 +463,85 @@ async function main() {
       describe(msg);
       plot.push({t: performance.now(), ms: 1e3 * (msg.seconds.server || msg.seconds.total)});
       statsDirty = true;
-      if (msg.kind === "move") moveInFlight = false;
+      if (msg.kind === "move" || msg.kind === "light") moveInFlight = false;
       $("error").textContent = "";
     } else if (msg.type === "synced") {
       describe(msg);
       const resolve = waiting.get(msg.id);
       waiting.delete(msg.id);
       if (resolve) resolve(msg);
+    } else if (msg.type === "render_started") {
+      renderStarted = performance.now();
+      $("render-progress").hidden = false;
+      $("render-progress").value = 0;
+      $("render-result").textContent = `rendering ${msg.width} x ${msg.height}...`;
+    } else if (msg.type === "render_progress") {
+      $("render-progress").value = msg.traced / msg.paths;
+      $("render-result").textContent = `rendering: ${msg.traced.toLocaleString()} / ${msg.paths.toLocaleString()} ` +
+        `paths, ${((performance.now() - renderStarted) / 1000).toFixed(1)} s`;
+    } else if (msg.type === "rendered") {
+      renderInfo = msg;
     } else if (msg.type === "error") {
+      if (msg.request === "render") { $("render-progress").hidden = true; $("render-result").textContent = ""; }
       showError(msg.message);
       moveInFlight = false;
-      if (msg.request === "move" && !drag) {
+      if ((msg.request === "move" || msg.request === "light") && !drag) {
         for (const name in state.serverPoses) state.poses[name] = state.serverPoses[name].slice();
+        for (const name in state.serverLights) state.lights[name] = state.serverLights[name].slice();
         redraw = true;
       }
     }
   };
   ws.onclose = () => { $("status").textContent = "the server closed the connection"; };
+
+  // "render this view": the engine's image from this camera, at the session's poses and lights
+  let renders = 0, renderStarted = 0, renderInfo = null;
+  const renderWaiting = new Map(); // render id -> resolve
+  function renderCamera(width) {
+    const f = frame();
+    const height = Math.max(1, Math.round(width * canvas.clientHeight / canvas.clientWidth));
+    return {camera: {position: f.eye, look_at: camera.target.slice(), up: [0, 1, 0], fov: camera.fov * 180 / Math.PI},
+            width, height};
+  }
+  function requestRender(width) {
+    const id = ++renders;
+    send({type: "render", id, ...renderCamera(width)});
+    return new Promise(resolve => renderWaiting.set(id, resolve));
+  }
+  function pfm(radiance, w, h) { // the linear radiance as a PFM (bottom row first), for HDR tools
+    const head = new TextEncoder().encode(`PF\n${w} ${h}\n-1.0\n`);
+    const out = new Uint8Array(head.length + 12 * w * h);
+    out.set(head, 0);
+    const body = new Float32Array(3 * w * h);
+    for (let y = 0; y < h; y++) body.set(radiance.subarray(3 * w * (h - 1 - y), 3 * w * (h - y)), 3 * w * y);
+    out.set(new Uint8Array(body.buffer), head.length);
+    return out;
+  }
+  function showRender(buf) {
+    const view = new DataView(buf);
+    const index = view.getUint32(4, true), w = view.getUint32(8, true), h = view.getUint32(12, true);
+    const n = view.getUint32(16, true);
+    const png = new Uint8Array(buf, 20, n);
+    const radiance = new Float32Array(buf.slice(20 + n));
+    const info = renderInfo || {};
+    const url = URL.createObjectURL(new Blob([png], {type: "image/png"}));
+    const hdr = URL.createObjectURL(new Blob([pfm(radiance, w, h)], {type: "application/octet-stream"}));
+    const name = `oclgi-view-${index}`;
+    $("render-progress").hidden = true;
+    $("render-result").innerHTML = `${w} x ${h}, ${info.method}, ${(info.photons || 0).toLocaleString()} photons, ` +
+      `${(info.seconds || 0).toFixed(1)} s: <a href="${url}" download="${name}.png">PNG</a> ` +
+      `<a href="${hdr}" download="${name}.pfm">PFM (linear)</a><img src="${url}" alt="render ${index}">`;
+    const entry = {id: info.id, index, width: w, height: h, png, radiance, info};
+    state.renders.push(entry);
+    const resolve = renderWaiting.get(info.id);
+    renderWaiting.delete(info.id);
+    if (resolve) resolve(entry);
+  }
+  $("render").onclick = () => {
+    const w = Math.round(Number($("render-width").value));
+    if (!(w >= 1 && w <= 4096)) { showError("render: the width must be 1 to 4096 pixels"); return; }
+    requestRender(w);
+  };
 
   $("apply").onclick = () => {
     const msg = {type: "estimator"};
@@ -448,15 +561,23 @@ async function main() {
   // most one move in flight, the server coalesces whatever queues up there.
   let moveInFlight = false;
   function flushMoves() {
-    if (!pendingMoves.size || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
+    if ((!pendingMoves.size && !pendingLights.size) || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
     for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+    for (const [name, position] of pendingLights) send({type: "light", light: name, position});
     pendingMoves.clear();
+    pendingLights.clear();
     moveInFlight = true;
     lastMoveSent = performance.now();
   }
   function queueMove(name, matrix) {
     state.poses[name] = matrix;
     pendingMoves.set(name, matrix);
+    changed();
+    flushMoves();
+  }
+  function queueLight(name, position) {
+    state.lights[name] = position;
+    pendingLights.set(name, position);
     changed();
     flushMoves();
   }
@@ -470,6 +591,8 @@ async function main() {
   canvas.addEventListener("pointerdown", e => {
     canvas.setPointerCapture(e.pointerId);
     const x = e.offsetX, y = e.offsetY;
+    const hitLight = e.button === 0 && !e.shiftKey ? pickLight(x, y) : null;
+    if (hitLight) { drag = {kind: "light", light: hitLight.name, height: state.lights[hitLight.name][1]}; changed(); return; }
     const hitObject = e.button === 0 && !e.shiftKey ? pick(x, y) : 0;
     changed(); // the selection's highlight, and the picking pass drew into another target
     if (hitObject > 0) {
@@ -486,6 +609,14 @@ async function main() {
   canvas.addEventListener("pointermove", e => {
     if (!drag) return;
     const x = e.offsetX, y = e.offsetY;
+    if (drag.kind === "light") {
+      const l = lights.find(l => l.name === drag.light);
+      // near a precomputed position: exactly there (the server reuses the stored paths)
+      const snap = (l.path || []).find(q => { const p = project(q); return p && Math.hypot(p[0] - x, p[1] - y) <= 8; });
+      const p = snap ? snap.slice() : planeHit(ray(x, y), drag.height);
+      if (p) queueLight(drag.light, p);
+      return;
+    }
     if (drag.kind === "object") {
       const p = planeHit(ray(x, y), drag.base);
       if (p) {
@@ -505,7 +636,7 @@ async function main() {
       camera.target = add(camera.target, add(scale(f.rightUnit, -dx * s), scale(f.upUnit, dy * s)));
     }
   });
-  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("pointerup", () => { drag = null; changed(); });
   canvas.addEventListener("wheel", e => {
     e.preventDefault();
     camera.distance *= Math.exp(e.deltaY * 0.001);
@@ -538,6 +669,7 @@ async function main() {
     }
     if (redraw) {
       draw(false);
+      placeMarkers();
       redraw = false;
       state.draws++;
       state.drawnAt = performance.now();
@@ -561,9 +693,15 @@ async function main() {
     camera: () => ({...camera}),
     orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
     move: queueMove,
+    moveLight: queueLight,
+    render: requestRender,
+    renderCamera,
+    pickLight: (x, y) => { const l = pickLight(x, y); return l ? l.name : null; },
     sync() { // answered once the server has done everything sent before it
       for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+      for (const [name, position] of pendingLights) send({type: "light", light: name, position});
       pendingMoves.clear();
+      pendingLights.clear();
       const id = ++syncs;
       return new Promise(resolve => { waiting.set(id, resolve); send({type: "sync", id}); });
     },
