@@ -172,6 +172,26 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             await tab.wait(f"oclgiState.drawnSeq === {pm['seq']}")
             assert pm["poses"] == synced["poses"] and pm["k"] is not None
             assert await shows(tab, reference_colours(viewer, pm["poses"], method="photon_map", k=pm["k"]))
+
+            # the gizmo: the square above the bunny raises it, the ring beside it turns it
+            await tab.eval("oclgiState.api.select(1)")
+            g = await tab.eval("oclgiState.api.gizmoPoints(0)")
+            at = await tab.eval(f"oclgiState.api.project({json.dumps(g['height'])})")
+            await drag(tab, at, (at[0], at[1] - 40), steps=6)
+            raised = await tab.eval("oclgiState.api.sync()")
+            before, after = np.reshape(pm["poses"]["bunny"], (4, 4)), np.reshape(raised["poses"]["bunny"], (4, 4))
+            assert after[1, 3] > before[1, 3] + 0.01 and np.allclose(after[[0, 2], 3], before[[0, 2], 3], atol=1e-6)
+            assert np.allclose(after[:3, :3], before[:3, :3], atol=1e-6)
+            g = await tab.eval("oclgiState.api.gizmoPoints(0)")
+            at = await tab.eval(f"oclgiState.api.project({json.dumps(g['turn'])})")
+            c = await tab.eval(f"oclgiState.api.project({json.dumps(g['centre'])})")
+            r = np.hypot(at[0] - c[0], at[1] - c[1])
+            await drag(tab, at, (c[0], c[1] - r), steps=6)  # a quarter turn on screen
+            turned = await tab.eval("oclgiState.api.sync()")
+            m = np.reshape(turned["poses"]["bunny"], (4, 4))
+            angle = np.arctan2(m[0, 2], m[0, 0]) - np.arctan2(after[0, 2], after[0, 0])
+            assert abs(angle) > 0.3 and np.isclose(m[1, 3], after[1, 3], atol=1e-6), m
+            assert turned["updates"] > raised["updates"] > pm["updates"]
             assert not await tab.eval("oclgiState.errors.length")
 
     asyncio.run(main())

@@ -41,7 +41,7 @@ MAGIC = b"OGVC"
 FULL, SPARSE = 0, 1
 HEADER = struct.Struct("<4sIIi")
 HEADROOM = 12  # the largest colour near 2^12 after scaling
-OVERFLOW = 15  # rescale once a colour reaches 2^15 (float16's largest is 65504, under 2^16)
+HALF_MAX = 65504.0  # float16's largest: a colour above it at the current scale means a new scale
 
 
 def vertex_terms(scene, vertex_tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +96,7 @@ class FrameEncoder:
         changed); ``colours`` become the colours sent."""
         colours = np.ascontiguousarray(colours, np.float32)
         e = self.e
-        if self.sent is None or colours.max(initial=0.0) * 2.0 ** -e >= 2.0 ** OVERFLOW:
+        if self.sent is None or colours.max(initial=0.0) * 2.0 ** -e > HALF_MAX:
             e = scale_exponent(colours)
         half = to_half(colours, e).view(np.uint16)
         if self.sent is None or e != self.e:

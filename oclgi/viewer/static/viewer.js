@@ -240,8 +240,52 @@ async function main() {
     el.hidden = !p;
     if (p) { el.style.left = `${p[0]}px`; el.style.top = `${p[1]}px`; }
   };
+  // the gizmo of the selected object: a height handle above it, a turn handle beside its base
+  const gizmo = {height: document.createElement("div"), turn: document.createElement("div")};
+  gizmo.height.className = "gizmo-height";
+  gizmo.height.title = "drag up or down: raise or lower";
+  gizmo.turn.className = "gizmo-turn";
+  gizmo.turn.title = "drag round the object: turn it";
+  markerLayer.append(gizmo.height, gizmo.turn);
+  const loadedBoxes = new Map(); // object index -> its box as loaded (8 corners); the shown box from those
+  function quickBox(i) { // a box round movable object i at the pose shown (its loaded box's corners moved)
+    if (!loadedBoxes.has(i)) {
+      const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+      for (let v = 0; v < V; v++) {
+        if (objectOf[v] !== i + 1) continue;
+        for (let a = 0; a < 3; a++) { lo[a] = Math.min(lo[a], positions[3 * v + a]); hi[a] = Math.max(hi[a], positions[3 * v + a]); }
+      }
+      const corners = [];
+      for (let k = 0; k < 8; k++) corners.push([k & 1 ? hi[0] : lo[0], k & 2 ? hi[1] : lo[1], k & 4 ? hi[2] : lo[2]]);
+      loadedBoxes.set(i, corners);
+    }
+    const m = relative(i), lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (const q of loadedBoxes.get(i)) {
+      const p = apply(m, q);
+      for (let a = 0; a < 3; a++) { lo[a] = Math.min(lo[a], p[a]); hi[a] = Math.max(hi[a], p[a]); }
+    }
+    return {lo, hi, centre: scale(add(lo, hi), 0.5)};
+  }
+  function gizmoPoints(i) { // world positions of the handles of object i
+    const b = quickBox(i), size = Math.max(extent(b), 1e-6);
+    return {height: [b.centre[0], b.hi[1] + 0.25 * size, b.centre[2]], turn: [b.hi[0] + 0.25 * size, b.lo[1], b.centre[2]],
+            centre: b.centre};
+  }
+  function extent(b) { return Math.max(b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]); }
+  function pickGizmo(x, y) { // "height", "turn" or null: the selected object's handle under (x, y)
+    if (!selected) return null;
+    const g = gizmoPoints(selected - 1);
+    for (const kind of ["height", "turn"]) {
+      const p = project(g[kind]);
+      if (p && Math.hypot(p[0] - x, p[1] - y) <= 10) return kind;
+    }
+    return null;
+  }
   function placeMarkers() {
     const m = viewProjection();
+    const g = selected ? gizmoPoints(selected - 1) : null;
+    place(gizmo.height, g && project(g.height, m));
+    place(gizmo.turn, g && project(g.turn, m));
     lights.forEach((l, i) => {
       place(markers[i].ring, project(state.lights[l.name], m));
       markers[i].ring.classList.toggle("dragged", !!(drag && drag.light === l.name));
@@ -593,6 +637,16 @@ async function main() {
     const x = e.offsetX, y = e.offsetY;
     const hitLight = e.button === 0 && !e.shiftKey ? pickLight(x, y) : null;
     if (hitLight) { drag = {kind: "light", light: hitLight.name, height: state.lights[hitLight.name][1]}; changed(); return; }
+    const handle = e.button === 0 && !e.shiftKey ? pickGizmo(x, y) : null;
+    if (handle) {
+      const i = selected - 1, name = objects[i].name, g = gizmoPoints(i);
+      const c = project(g.centre) || [x, y];
+      const d = Math.hypot(...sub(g.centre, frame().eye));
+      drag = {kind: handle, name, x, y, centre: g.centre, screenCentre: c, matrix: state.poses[name].slice(),
+              perPixel: 2 * d * Math.tan(camera.fov / 2) / canvas.clientHeight,
+              angle: Math.atan2(-(y - c[1]), x - c[0])};
+      return;
+    }
     const hitObject = e.button === 0 && !e.shiftKey ? pick(x, y) : 0;
     changed(); // the selection's highlight, and the picking pass drew into another target
     if (hitObject > 0) {
@@ -615,6 +669,17 @@ async function main() {
       const snap = (l.path || []).find(q => { const p = project(q); return p && Math.hypot(p[0] - x, p[1] - y) <= 8; });
       const p = snap ? snap.slice() : planeHit(ray(x, y), drag.height);
       if (p) queueLight(drag.light, p);
+      return;
+    }
+    if (drag.kind === "height") { // the pointer's rise on screen, at the object's depth
+      queueMove(drag.name, mul(translation(0, (drag.y - y) * drag.perPixel, 0), drag.matrix));
+      return;
+    }
+    if (drag.kind === "turn") { // about the vertical through its centre, following the pointer round it
+      const a = Math.atan2(-(y - drag.screenCentre[1]), x - drag.screenCentre[0]) - drag.angle;
+      const c = drag.centre, turn = camera.pitch >= 0 ? a : -a; // seen from below, screen turns flip
+      queueMove(drag.name, mul(translation(c[0], 0, c[2]), mul(rotationY(turn), mul(translation(-c[0], 0, -c[2]),
+                                                                                      drag.matrix))));
       return;
     }
     if (drag.kind === "object") {
@@ -689,7 +754,7 @@ async function main() {
 
   // for tests and benchmarks: the same paths the mouse takes, and a sync
   state.api = {
-    project, pick, objectBox, home,
+    project, pick, objectBox, home, gizmoPoints, select(i) { selected = i; changed(); },
     camera: () => ({...camera}),
     orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
     move: queueMove,
