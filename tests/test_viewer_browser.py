@@ -57,8 +57,10 @@ def status(url) -> dict:
 
 async def colours(tab) -> tuple[np.ndarray, int]:
     """The float16 bits the page holds (V, 3) and their scale's exponent."""
-    half = np.array(await tab.eval("Array.from(oclgiState.colours)"), np.uint16).reshape(-1, 3)
-    return half, await tab.eval("oclgiState.scaleExponent")
+    shown = np.array(await tab.eval("Array.from(oclgiState.colours)"), np.float32).reshape(-1, 3)
+    half = shown.astype(np.float16)
+    assert np.array_equal(half.astype(np.float32), shown), "the page holds values that are no float16"
+    return half.view(np.uint16), await tab.eval("oclgiState.scaleExponent")
 
 
 async def shows(tab, api: np.ndarray) -> bool:

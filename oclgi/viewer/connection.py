@@ -64,8 +64,8 @@ class Connection:
         self.in_flight = 0
         self.encoder = FrameEncoder(len(viewer.tess.vertices))
         self.colours = None  # the current solution's colours (not necessarily sent yet)
-        self.updates = 0  # moves computed
-        self.coalesced = 0  # moves replaced by a newer one before they ran
+        self.updates = 0  # moves of objects and lights computed
+        self.coalesced = 0  # moves replaced by a newer one (of the same object or light) before they ran
         self.window_start, self.window_count, self.window_warned = time.monotonic(), 0, False
         self.segments = 0
         self.renders = 0
@@ -106,7 +106,8 @@ class Connection:
                    for name, m in self.viewer.movable.items())
 
     def _light_session_for(self, name: str):
-        """The light session that can place light ``name``, or None (the reason kept in ``no_reuse``)."""
+        """(the light session that places light ``name``, None) or (None, why none can): a light session
+        opened for it at its first drag; one that refused it is not tried again (``no_reuse``)."""
         from ..incremental.light_session import LightSession
 
         light = self.viewer.lights[name]

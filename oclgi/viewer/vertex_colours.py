@@ -8,8 +8,7 @@ not sampled: a textured surface shows its material's albedo (the solution
 itself, the irradiance, does not depend on that choice).
 
 A frame carries only what the page does not have yet, as float16 (half the
-bytes of float32, and the page uploads the halves as they are: WebGL2 reads
-HALF_FLOAT attributes). A float16 keeps 11 significant bits, a relative step
+bytes of float32; the page widens them with typed-array sets). A float16 keeps 11 significant bits, a relative step
 of 2^-11 (0.05%), finer than an 8-bit sRGB code anywhere on the display's
 scale; its range (2^-24 to 65504) is kept on the radiance by a power-of-two
 scale 2^e shared by every vertex, which the page folds into its exposure:

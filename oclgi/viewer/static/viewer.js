@@ -1,9 +1,13 @@
 // oclgi view: the tessellated scene drawn with WebGL2, coloured by the
 // session's per-vertex radiance (linear; exposure and sRGB applied here).
 // The server sends the mesh once and then only changed colours, as float16
-// at a power-of-two scale (oclgi/viewer/vertex_colours.py): the page keeps
-// the halves as sent, copies a frame's runs with typed-array sets, uploads
-// them as HALF_FLOAT and folds the scale into the exposure. The page
+// at a power-of-two scale (oclgi/viewer/vertex_colours.py): the page copies
+// a frame's runs into its float32 colours with typed-array sets (a
+// Float16Array widens natively), uploads the changed runs and folds the
+// scale into the exposure. (The colours stay float32 on the GPU: a
+// three-channel 16-bit float is no vertex format of Direct3D and an
+// optional one in Vulkan, so ANGLE may convert the whole buffer at each
+// upload.) The page
 // moves a dragged object's vertices itself (a model matrix per movable
 // object), so orbiting and dragging run at display rate whatever the
 // server is doing, and the light follows when its update arrives.
@@ -18,6 +22,12 @@ function halfToFloat(h) { // an IEEE float16's bits -> its value
   if (e === 0) return s * m * Math.pow(2, -24);
   if (e === 31) return m ? NaN : s * Infinity;
   return s * (1 + m / 1024) * Math.pow(2, e - 15);
+}
+function halves(buf, offset, n) { // n float16 values at offset, readable as numbers (natively where it can)
+  if (typeof Float16Array === "function") return new Float16Array(buf, offset, n);
+  const bits = new Uint16Array(buf, offset, n), out = new Float32Array(n);
+  for (let i = 0; i < n; i++) out[i] = halfToFloat(bits[i]);
+  return out;
 }
 
 // -- 4x4 matrices: row-major arrays of 16 (as the server writes them) ------
@@ -131,7 +141,7 @@ async function main() {
   const positions = new Float32Array(meshBuffer, 16, 3 * V);
   const objectOf = new Uint32Array(meshBuffer, 16 + 12 * V, V);
   const faces = new Uint32Array(meshBuffer, 16 + 16 * V, 3 * F);
-  const colours = state.colours = new Uint16Array(3 * V); // float16 bits, times 2^state.scaleExponent
+  const colours = state.colours = new Float32Array(3 * V); // float16 values (exact in float32), times 2^scaleExponent
   state.scaleExponent = 0;
   $("scene-name").textContent = scene.name;
   const objects = scene.objects; // movable: object i is id i + 1 in objectOf
@@ -162,7 +172,7 @@ async function main() {
   gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
   const colourBuffer = buffer(gl.ARRAY_BUFFER, colours, gl.DYNAMIC_DRAW);
   gl.enableVertexAttribArray(1);
-  gl.vertexAttribPointer(1, 3, gl.HALF_FLOAT, false, 0, 0);
+  gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 0, 0);
   buffer(gl.ARRAY_BUFFER, objectOf, gl.STATIC_DRAW);
   gl.enableVertexAttribArray(2);
   gl.vertexAttribIPointer(2, 1, gl.UNSIGNED_INT, 0, 0);
@@ -322,8 +332,8 @@ async function main() {
   function autoExposure() { // the vertices' log-average luminance to middle grey
     let sum = 0, n = 0;
     for (let v = 0; v < V; v++) {
-      const y = (0.2126 * halfToFloat(colours[3 * v]) + 0.7152 * halfToFloat(colours[3 * v + 1]) +
-                 0.0722 * halfToFloat(colours[3 * v + 2])) * Math.pow(2, state.scaleExponent);
+      const y = (0.2126 * colours[3 * v] + 0.7152 * colours[3 * v + 1] + 0.0722 * colours[3 * v + 2]) *
+                Math.pow(2, state.scaleExponent);
       if (y > 0) { sum += Math.log(y); n++; }
     }
     setExposure(n ? Math.round(10 * Math.log2(0.18 / Math.exp(sum / n))) / 10 : 0);
@@ -396,14 +406,16 @@ async function main() {
     const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
     if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
     if (mode === 0) {
-      colours.set(new Uint16Array(buf, 20, 3 * V));
+      colours.set(halves(buf, 20, 3 * V));
       dirtyRanges = null;
     } else {
       const R = view.getUint32(16, true), S = view.getUint32(20, true);
       const start = new Uint32Array(buf, 24, R), length = new Uint32Array(buf, 24 + 4 * R, R);
       const single = new Uint32Array(buf, 24 + 8 * R, S);
-      const values = new Uint16Array(buf, 24 + 8 * R + 4 * S);
       let at = 0;
+      for (let r = 0; r < R; r++) at += length[r];
+      const values = halves(buf, 24 + 8 * R + 4 * S, 3 * (at + S));
+      at = 0;
       for (let r = 0; r < R; r++) { // a run: one typed-array copy
         colours.set(values.subarray(3 * at, 3 * (at + length[r])), 3 * start[r]);
         at += length[r];
@@ -727,7 +739,7 @@ async function main() {
       redraw = true;
       gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
       if (dirtyRanges === null) gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
-      else for (const [first, n] of dirtyRanges) gl.bufferSubData(gl.ARRAY_BUFFER, 6 * first, colours, 3 * first, 3 * n);
+      else for (const [first, n] of dirtyRanges) gl.bufferSubData(gl.ARRAY_BUFFER, 12 * first, colours, 3 * first, 3 * n);
       colourDirty = false;
       dirtyRanges = [];
       if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
