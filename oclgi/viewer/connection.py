@@ -265,7 +265,7 @@ class Connection:
         return {"photons": int(p.photons), "segments": int(self.segments), "method": p.method,
                 "radius": None if p.method == "photon_map" else float(p.radius),
                 "k": s.options.get("k") if p.method == "photon_map" else None,
-                "methods": list(self.viewer.methods_for(s)),
+                "methods": list(self.viewer.methods),
                 "poses": {name: s.engine.pose_matrix(name).reshape(-1).tolist() for name in self.viewer.movable},
                 "lights": {name: list(self.lights.get(f"{light.key}.position", light.position))
                            for name, light in self.viewer.lights.items()},
@@ -293,7 +293,7 @@ class Connection:
             self.window_start, self.window_count, self.window_warned = now, 0, False
         try:
             v = self.viewer
-            req = parse(text, v.movable, v.methods_for(self.session), v.diagonal, tuple(v.lights), v.box)
+            req = parse(text, v.movable, v.methods, v.diagonal, tuple(v.lights), v.box)
         except BadMessage as exc:
             return str(exc)
         if req.kind == "ack":

@@ -52,7 +52,7 @@ class Viewer:
         self.run = engine.run_params(method, photons, radius)  # checked now, not per tab
         if self.run.method != "photon_map" and not ESTIMATORS[self.run.method].incremental:
             raise OclgiError(f"method {self.run.method!r} has no incremental update; the viewer takes "
-                             f"{', '.join(self.methods_for(None))} or photon_map")
+                             f"{', '.join(self.methods)}")
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
         queried, self.value_of = object_points(tess, objects, np.asarray(scene.tri_material)[tess.vertex_tri],
@@ -83,7 +83,8 @@ class Viewer:
 
         return radiance(np.asarray(irradiance)[self.value_of], self.terms)
 
-    def methods_for(self, session) -> tuple:
+    @property
+    def methods(self) -> tuple:
         """The estimators a page can switch to: the incremental ones by
         summing the stored paths again, Photon Maps (and back) by a session
         of the other kind (oclgi/viewer/connection.py)."""

@@ -403,6 +403,8 @@ async function main() {
     const view = new DataView(buf);
     if (buf.byteLength >= 20 && view.getUint32(0, true) === 0x5256474f) { showRender(buf); return; } // "OGVR"
     if (buf.byteLength < 20 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
+    const applyStart = performance.now();
+    let sentVertices = V;
     const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
     if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
     if (mode === 0) {
@@ -415,6 +417,7 @@ async function main() {
       let at = 0;
       for (let r = 0; r < R; r++) at += length[r];
       const values = halves(buf, 24 + 8 * R + 4 * S, 3 * (at + S));
+      sentVertices = at + S;
       at = 0;
       for (let r = 0; r < R; r++) { // a run: one typed-array copy
         colours.set(values.subarray(3 * at, 3 * (at + length[r])), 3 * start[r]);
@@ -435,6 +438,7 @@ async function main() {
     }
     state.seq = seq;
     state.frames++;
+    state.frameStats = {bytes: buf.byteLength, vertices: sentVertices, applyMs: performance.now() - applyStart};
     state.frameAt = performance.now();
     state.moveToFrame = lastMoveSent ? state.frameAt - lastMoveSent : null;
     colourDirty = true;
