@@ -60,7 +60,7 @@ SEQUENTIAL = """(async () => {
     while (!(S.seq > seq && S.drawnSeq === S.seq)) await next();
     const u = S.lastUpdate;
     out.push({ms: performance.now() - t0, frame_ms: S.frameAt - t0, s: u.seconds, paths: u.paths, points: u.points,
-              n_rec: u.segments_removed, n_r: u.segments});
+              n_rec: u.segments_removed, n_r: u.segments, frame: S.frameStats});
   }
   return out;
 })()"""
@@ -164,6 +164,13 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
         # frame applied -> drawn: waiting for the display frame, upload and draw
         "draw_ms_median": float(np.median([r["ms"] - r["frame_ms"] for r in seq])),
         "continuous": cont, "continuous_per_s": cont["drawn"] / cont["seconds"],
+        # the colour frames: bytes sent, vertices in them, and the bytes the float32 per-index format took
+        # (16 + 16 per changed vertex, or 12 per vertex whole); the page's time to apply one
+        "frame_kb_median": float(np.median([r["frame"]["bytes"] for r in seq])) / 1024,
+        "frame_vertices_median": float(np.median([r["frame"]["vertices"] for r in seq])),
+        "float32_frame_kb_median": float(np.median([16 + min(16 * r["frame"]["vertices"], 12 * len(tess.vertices))
+                                                    for r in seq])) / 1024,
+        "apply_ms_median": float(np.median([r["frame"]["applyMs"] for r in seq])),
         "without_dynamic_ms": static,
     }
 
@@ -209,6 +216,12 @@ def markdown(rows: list[dict], machine: str) -> str:
                    f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
                    + " | ".join(f"{s.get(k, float('nan')):.1f}" for k in stages)
                    + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | **{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |")
+    out += ["", "The colour frames (median per update): float16 runs and single indices against the float32 "
+            "per-index format, the vertices they carry, the page's time to apply one:", "",
+            "| scene | vertices in a frame | frame KB | float32 format KB | apply ms |", "|---|---:|---:|---:|---:|"]
+    for r in rows:
+        out.append(f"| {r['scene']} + bunny | {r['frame_vertices_median']:,.0f} | {r['frame_kb_median']:.0f} | "
+                   f"{r['float32_frame_kb_median']:.0f} | {r['apply_ms_median']:.2f} |")
     out += ["", "The dynamic points' cost: the same moves through the API (session.move, median ms), over the "
             "viewer's query points and over the static vertices only:", "", "| scene | query points | static only |", "|---|---:|---:|"]
     for r in rows:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from browser import Browser, chromium_path
-from viewer_client import EDGE, PHOTONS, open_viewer, reference_colours
+from viewer_client import EDGE, PHOTONS, as_shown, open_viewer, reference_colours
 
 
 @pytest.fixture(scope="module")
@@ -55,8 +55,18 @@ def status(url) -> dict:
         return json.load(r)
 
 
-async def colours(tab) -> np.ndarray:
-    return np.array(await tab.eval("Array.from(oclgiState.colours)"), np.float32).reshape(-1, 3)
+async def colours(tab) -> tuple[np.ndarray, int]:
+    """The float16 bits the page holds (V, 3) and their scale's exponent."""
+    shown = np.array(await tab.eval("Array.from(oclgiState.colours)"), np.float32).reshape(-1, 3)
+    half = shown.astype(np.float16)
+    assert np.array_equal(half.astype(np.float32), shown), "the page holds values that are no float16"
+    return half.view(np.uint16), await tab.eval("oclgiState.scaleExponent")
+
+
+async def shows(tab, api: np.ndarray) -> bool:
+    """The page holds the API's colours rounded to float16 at its scale, bit for bit."""
+    half, e = await colours(tab)
+    return np.array_equal(half, as_shown(api, e))
 
 
 async def drag(tab, start, end, steps=12):
@@ -66,6 +76,21 @@ async def drag(tab, start, end, steps=12):
         await tab.mouse("mouseMoved", start[0] + t * (end[0] - start[0]), start[1] + t * (end[1] - start[1]))
         await asyncio.sleep(0.03)
     await tab.mouse("mouseReleased", *end)
+
+
+def render_at(viewer, poses, request) -> np.ndarray:
+    """The API's render radiance at ``poses`` from the camera a page asks for."""
+    import oclgi
+
+    engine = viewer.engine.posed()
+    for name, m in poses.items():
+        engine.place(name, np.array(m).reshape(4, 4))
+    c = request["camera"]
+    cam = oclgi.Camera(position=tuple(c["position"]), look_at=tuple(c["look_at"]), up=tuple(c["up"]), fov=c["fov"],
+                       width=request["width"], height=request["height"])
+    r = viewer.run
+    return engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
+                         max_depth=r.max_depth).radiance
 
 
 def test_view_in_headless_chromium(viewer, server, tmp_path):
@@ -78,8 +103,8 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
         async with Browser() as browser:
             tab = await browser.open(url)
             await tab.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0 && oclgiState.draws > 1")
-            shown = await colours(tab)
-            assert np.array_equal(shown, home), "the first frame is not the API's solution"
+            shown, e0 = await colours(tab)
+            assert np.array_equal(shown, as_shown(home, e0)), "the first frame is not the API's solution"
             await tab.screenshot(tmp_path / "loaded.png")
 
             # drag the bunny with the mouse, from its middle to the right across the floor
@@ -94,10 +119,12 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             await tab.wait(f"oclgiState.drawnSeq === {synced['seq']}")
             pose = np.array(synced["poses"]["bunny"]).reshape(4, 4)
             assert pose[0, 3] > 0.5 and abs(pose[1, 3]) < 1e-6, f"the bunny did not slide along the floor: {pose}"
-            moved = await colours(tab)
+            moved, e = await colours(tab)
             api = reference_colours(viewer, synced["poses"])
-            assert np.array_equal(moved, api), "the page's colours are not the API's at the dragged pose"
-            changed, light_changed = (moved != shown).any(axis=1), (api != home).any(axis=1)
+            assert e == e0 and np.array_equal(moved, as_shown(api, e)), \
+                "the page's colours are not the API's at the dragged pose (to float16)"
+            changed = (moved != shown).any(axis=1)
+            light_changed = (as_shown(api, e) != as_shown(home, e)).any(axis=1)
             assert np.array_equal(changed, light_changed)
             assert changed[static].sum() > 50, "the floor's light did not follow the bunny"
             await tab.screenshot(tmp_path / "dragged.png")
@@ -118,8 +145,8 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             tab2 = await browser.open(url)
             await tab2.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0")
             assert status(url)["open"] == 2
-            assert np.array_equal(await colours(tab2), home)
-            assert np.array_equal(await colours(tab), moved)
+            assert await shows(tab2, home)
+            assert np.array_equal((await colours(tab))[0], moved)
             released = status(url)["buffers_released"]
             await tab2.close()
             for _ in range(200):
@@ -129,6 +156,44 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
                 await asyncio.sleep(0.05)
             assert s["open"] == 1 and s["closed"] == 1 and s["buffers_released"] > released
             assert (await tab.eval("oclgiState.api.sync()"))["poses"] == synced["poses"]
+
+            # "render this view": the engine's image from the page's camera at the dragged pose
+            request = await tab.eval("oclgiState.api.renderCamera(32)")
+            got = await tab.eval("oclgiState.api.render(32).then(r => ({w: r.width, h: r.height, png: r.png.length, "
+                                 "radiance: Array.from(r.radiance)}))")
+            assert await tab.eval("document.querySelector('#render-result img') !== null")
+            assert got["png"] > 0 and (got["w"], got["h"]) == (32, request["height"])
+            api = render_at(viewer, synced["poses"], request)
+            assert np.array_equal(np.array(got["radiance"], np.float32).reshape(api.shape), api)
+
+            # Photon Maps from the estimator control: a session of the other kind at the same pose
+            await tab.eval("document.getElementById('method').value = 'photon_map'; "
+                           "document.getElementById('apply').click()")
+            await tab.wait("oclgiState.session.method === 'photon_map'")
+            pm = await tab.eval("oclgiState.api.sync()")
+            await tab.wait(f"oclgiState.drawnSeq === {pm['seq']}")
+            assert pm["poses"] == synced["poses"] and pm["k"] is not None
+            assert await shows(tab, reference_colours(viewer, pm["poses"], method="photon_map", k=pm["k"]))
+
+            # the gizmo: the square above the bunny raises it, the ring beside it turns it
+            await tab.eval("oclgiState.api.select(1)")
+            g = await tab.eval("oclgiState.api.gizmoPoints(0)")
+            at = await tab.eval(f"oclgiState.api.project({json.dumps(g['height'])})")
+            await drag(tab, at, (at[0], at[1] - 40), steps=6)
+            raised = await tab.eval("oclgiState.api.sync()")
+            before, after = np.reshape(pm["poses"]["bunny"], (4, 4)), np.reshape(raised["poses"]["bunny"], (4, 4))
+            assert after[1, 3] > before[1, 3] + 0.01 and np.allclose(after[[0, 2], 3], before[[0, 2], 3], atol=1e-6)
+            assert np.allclose(after[:3, :3], before[:3, :3], atol=1e-6)
+            g = await tab.eval("oclgiState.api.gizmoPoints(0)")
+            at = await tab.eval(f"oclgiState.api.project({json.dumps(g['turn'])})")
+            c = await tab.eval(f"oclgiState.api.project({json.dumps(g['centre'])})")
+            r = np.hypot(at[0] - c[0], at[1] - c[1])
+            await drag(tab, at, (c[0], c[1] - r), steps=6)  # a quarter turn on screen
+            turned = await tab.eval("oclgiState.api.sync()")
+            m = np.reshape(turned["poses"]["bunny"], (4, 4))
+            angle = np.arctan2(m[0, 2], m[0, 0]) - np.arctan2(after[0, 2], after[0, 0])
+            assert abs(angle) > 0.3 and np.isclose(m[1, 3], after[1, 3], atol=1e-6), m
+            assert turned["updates"] > raised["updates"] > pm["updates"]
             assert not await tab.eval("oclgiState.errors.length")
 
     asyncio.run(main())

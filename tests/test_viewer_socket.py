@@ -5,6 +5,7 @@ coalesced, sockets independent, a closed socket's session freed."""
 import asyncio
 import json
 import math
+import struct
 
 import numpy as np
 import pytest
@@ -55,17 +56,19 @@ async def moves_exactly(ws, page, viewer, matrix, ident=1):
     """Move the bunny; the page's colours then equal the API's at the pose."""
     await move(ws, matrix)
     done = await sync(ws, page, ident)
-    assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+    assert page.shows(reference_colours(viewer, done["poses"]))
 
 
 def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
     async def test(client):
         ws, page, hello = await connect(client, viewer)
         assert hello["photons"] == PHOTONS and hello["method"] == "detp_disc_index"
-        assert np.array_equal(page.colours, home)
+        assert page.shows(home)
         e = _irradiance_of(viewer)[viewer.value_of]  # each vertex shows its query point's value
+        # float16 at the frame's scale: half an ulp of 11 bits, or of the smallest subnormal
         np.testing.assert_allclose(page.colours, expected_radiance(viewer.engine.scene, viewer.tess, e),
-                                   rtol=2e-6, atol=1e-7)
+                                   rtol=2.0 ** -11 + 2e-6, atol=2.0 ** (page.e - 25))
+        assert page.colours.max() * 2.0 ** -page.e < 2 ** 12 <= 2 * page.colours.max() * 2.0 ** -page.e
         for m in (bunny_at(0.3, 0.0), bunny_at(0.6, -0.2, 0.5)):
             await move(ws, m)
             upd = await receive_until(ws, page, lambda m: m["type"] == "update")
@@ -73,7 +76,7 @@ def test_frames_equal_a_fresh_session_and_the_radiance_formula(viewer, home):
         synced = await sync(ws, page)
         assert np.allclose(synced["poses"]["bunny"], bunny_at(0.6, -0.2, 0.5), atol=1e-6)  # float32 records
         ref = reference_colours(viewer, synced["poses"])
-        assert np.array_equal(page.colours, ref), "the page's colours are not a fresh session's at the pose"
+        assert page.shows(ref), "the page's colours are not a fresh session's at the pose"
         static = viewer.tess.vertex_tri < viewer.engine.scene.object_ranges()[0][1]
         changed = (ref != home).any(axis=1)
         assert changed[static].sum() > 20, "the floor's light did not follow the bunny"
@@ -104,7 +107,23 @@ BAD = [
     ({"type": "estimator", "radius": -0.1}, "radius"),
     ({"type": "estimator", "radius": 1e9}, "radius"),
     ({"type": "estimator", "radius": float("nan")}, "finite"),
-    ({"type": "estimator", "method": "photon_map"}, "one of"),
+    ({"type": "estimator", "method": "impact_count_x"}, "one of"),
+    ({"type": "estimator", "method": "photon_map", "radius": 0.1}, "no disc radius"),
+    ({"type": "estimator", "method": "detp", "k": 8}, "Photon Map"),
+    ({"type": "light", "light": "lamp", "position": [0, 1, 0]}, "no point or spot light"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 0, "height": 8}, "whole number"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 3], "fov": 40},
+      "width": 8, "height": 8}, "differ"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 180},
+      "width": 8, "height": 8}, "fov"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1e9, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 8, "height": 8}, "beyond"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "up": [0, 0, 1],
+      "fov": 40}, "width": 8, "height": 8}, "along the view"),
+    ({"type": "render", "id": 1, "camera": [0, 1, 3], "width": 8, "height": 8}, "camera"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 10**6, "height": 8}, "whole number"),
     ({"type": "estimator", "k": 8}, "Photon Map"),
     ({"type": "estimator"}, "give"),
     ({"type": "teleport"}, "unknown message type"),
@@ -151,7 +170,7 @@ def test_a_flood_of_moves_is_coalesced_refused_past_the_limit_and_ends_exact(vie
         assert done["coalesced"] > 0 and done["updates"] < MAX_MESSAGES_PER_SECOND, done
         # the last move computed was one of the drag's, and the page equals a fresh session there
         assert any(np.allclose(done["poses"]["bunny"], bunny_at(0.5 * i / n, 0.0), atol=1e-6) for i in range(n))
-        assert np.array_equal(page.colours, reference_colours(viewer, done["poses"]))
+        assert page.shows(reference_colours(viewer, done["poses"]))
         await ws.close()
     run(test, viewer)
 
@@ -170,8 +189,8 @@ def test_two_sockets_have_independent_sessions_and_a_closed_one_is_freed(viewer,
         await move(a, bunny_at(0.6, 0.0))
         await sync(a, page_a)
         synced_b = await sync(b, page_b)
-        assert synced_b["poses"]["bunny"] == bunny_at(0, 0) and np.array_equal(page_b.colours, home)
-        assert not np.array_equal(page_a.colours, home)
+        assert synced_b["poses"]["bunny"] == bunny_at(0, 0) and page_b.shows(home)
+        assert not page_a.shows(home)
         sessions = [c.session for c in viewer.connections]
         await b.close()
         for _ in range(200):
@@ -196,29 +215,70 @@ def test_estimator_and_photons_from_the_page_equal_a_fresh_session(viewer):
         done = await sync(ws, page)
         assert done["method"] == "detp" and done["radius"] == 0.1 and done["photons"] == 12_000
         ref = reference_colours(viewer, done["poses"], method="detp", radius=0.1, photons=12_000)
-        assert np.array_equal(page.colours, ref)
+        assert page.shows(ref)
         await ws.close()
     run(test, viewer)
 
 
-def test_frame_encoder_sends_only_changes():
+def test_frame_encoder_sends_changed_runs_as_float16():
     from oclgi.viewer.vertex_colours import FrameEncoder
 
     rng = np.random.default_rng(3)
     enc, page = FrameEncoder(100), PageModel(100)
-    c = rng.random((100, 3), dtype=np.float32)
-    page.apply(enc.frame(c, 0))
-    assert np.array_equal(page.colours, c)
+    c = rng.random((100, 3), dtype=np.float32) * 40
+    first = enc.frame(c, 0)
+    assert len(first) == 20 + 6 * 100  # the first frame: every colour
+    page.apply(first)
+    assert page.e == 6 - 12 and page.shows(c)  # the largest colour (32 to 40) near 2^12 after scaling
+    assert np.abs(page.colours - c).max() <= 2.0 ** -11 * c.max()
     assert enc.frame(c, 1) is None
-    c[[3, 50, 99], 1] += 1
+    c[[3, 50, 99], 1] += 1  # alone: three indices
     f = enc.frame(c, 2)
-    assert len(f) == 16 + 16 * 3
+    assert len(f) == 24 + 4 * 3 + 6 * 3
     page.apply(f)
-    c[:60] *= 2
+    assert page.shows(c)
+    c[10:30] += 1  # a run, and two alone
+    c[[40, 70], 0] += 1
     f = enc.frame(c, 3)
-    assert len(f) == 16 + 12 * 100  # most changed: the whole array
+    assert len(f) == 24 + 8 + 4 * 2 + 6 * 22
     page.apply(f)
-    assert np.array_equal(page.colours, c) and page.seq == 3
+    assert page.shows(c)
+    c[:60] *= 1.5  # one long run
+    f = enc.frame(c, 4)
+    assert len(f) == 24 + 8 + 6 * 60
+    page.apply(f)
+    c[np.arange(100) % 10 != 0] *= 1.5  # most changed, in ten runs: the whole array is smaller
+    f = enc.frame(c, 5)
+    assert len(f) == 20 + 6 * 100
+    page.apply(f)
+    assert page.shows(c) and page.seq == 5
+    # a change below float16's step at this scale is no change on the page
+    tiny = c.copy()
+    tiny[5, 0] = np.nextafter(tiny[5, 0], np.float32(np.inf))
+    assert enc.frame(tiny, 6) is None
+    # a colour that would overflow float16 at this scale: a new scale, the whole array again
+    c[7] = 3e6
+    f = enc.frame(c, 7)
+    assert len(f) == 20 + 6 * 100
+    page.apply(f)
+    assert page.e == 22 - 12 and page.shows(c) and np.isfinite(page.colours).all()
+    assert np.abs(page.colours[7] - 3e6).max() <= 2.0 ** -11 * 3e6
+
+
+def test_sparse_frames_cost_less_than_the_per_index_float32_ones(viewer):
+    """A move's frame: the bunny's vertices one run, the floor's changes few runs (the tessellation keeps a
+    triangle's cut vertices together); at most the old format's size (16 + 16 bytes per changed vertex,
+    or 12 per vertex whole), about half of it or less."""
+    from oclgi.viewer.vertex_colours import FrameEncoder
+
+    enc = FrameEncoder(len(viewer.tess.vertices))
+    enc.frame(reference_colours(viewer, {}), 0)
+    moved = reference_colours(viewer, {"bunny": bunny_at(0.4, -0.1)})
+    changed = (moved != reference_colours(viewer, {})).any(axis=1).sum()
+    f = enc.frame(moved, 1)
+    old = 16 + min(16 * changed, 12 * len(moved))
+    assert len(f) <= old / 2 + 8, (len(f), old, changed)
+    print(len(f), old, changed, len(moved))
 
 
 def test_movable_objects_are_queried_once_per_edge_sized_cell(viewer):
@@ -240,3 +300,89 @@ def test_movable_objects_are_queried_once_per_edge_sized_cell(viewer):
     q, v = object_points(tess, objects, material, all_vertices=True)
     assert np.array_equal(q, np.arange(len(tess.vertices))) and np.array_equal(v, q)
     assert len(viewer.points) == len(queried)
+
+
+def test_switching_to_photon_maps_and_back_opens_a_session_of_the_other_kind(viewer):
+    """An estimator of the other family: a new session (Photon Maps or DETP) at the page's poses, equal to the
+    API's session of that kind moved there; the old session closed."""
+    async def test(client):
+        ws, page, hello = await connect(client, viewer)
+        assert "photon_map" in hello["methods"] and "detp" in hello["methods"]
+        await move(ws, bunny_at(0.4, 0.1, 0.3))
+        before = await sync(ws, page)
+        opened, closed = viewer.sessions_opened, viewer.sessions_closed
+        await ws.send_str(json.dumps({"type": "estimator", "method": "photon_map", "k": 20}))
+        upd = await receive_until(ws, page, lambda m: m["type"] in ("update", "error"))
+        assert upd["type"] == "update" and upd["switched"] and upd["method"] == "photon_map" and upd["k"] == 20
+        done = await sync(ws, page)
+        assert done["poses"] == before["poses"] and done["radius"] is None
+        assert viewer.sessions_opened == opened + 1 and viewer.sessions_closed == closed + 1
+        assert page.shows(reference_colours(viewer, done["poses"], method="photon_map", k=20))
+        assert not page.shows(reference_colours(viewer, done["poses"]))
+        # within the family: k by set_estimator; a move goes on in the new session
+        await ws.send_str(json.dumps({"type": "estimator", "k": 12}))
+        await move(ws, bunny_at(0.2, 0.3))
+        done = await sync(ws, page, 2)
+        assert done["k"] == 12 and done["method"] == "photon_map"
+        # a Photon Map session's move is the practical update (it depends on the way taken): the API's session
+        # takes the same steps
+        from oclgi.incremental.open_session import open_session
+
+        with open_session(viewer.engine, viewer.points, method="photon_map", photons=PHOTONS, k=20) as s:
+            s.move("bunny", np.reshape(before["poses"]["bunny"], (4, 4)))
+            s.set_estimator("photon_map", k=12)
+            s.move("bunny", np.reshape(done["poses"]["bunny"], (4, 4)))
+            assert page.shows(viewer.colours(s.irradiance()))
+        # and back to DETP, radius given
+        await ws.send_str(json.dumps({"type": "estimator", "method": "detp", "radius": 0.08}))
+        done = await sync(ws, page, 3)
+        assert done["method"] == "detp" and done["radius"] == 0.08 and done["k"] is None
+        assert page.shows(reference_colours(viewer, done["poses"], method="detp", radius=0.08))
+        await ws.close()
+    run(test, viewer)
+
+
+CAMERA = {"position": [0.3, 1.1, 3.5], "look_at": [0.0, 0.9, 0.0], "up": [0, 1, 0], "fov": 42.0}
+
+
+async def render(ws, page, ident, width=24, height=16):
+    """Ask for a render; (the rendered message, the progress messages, png bytes, radiance)."""
+    await ws.send_str(json.dumps({"type": "render", "id": ident, "camera": CAMERA, "width": width,
+                                  "height": height}))
+    seen = len(page.messages)
+    done = await receive_until(ws, page, lambda m: m["type"] in ("rendered", "error"))
+    assert done["type"] == "rendered", done
+    progress = [m for m in page.messages[seen:] if m["type"] == "render_progress" and m["id"] == ident]
+    data = await ws.receive_bytes(timeout=120)
+    magic, index, w, h, n = struct.unpack_from("<4sIIII", data)
+    assert magic == b"OGVR" and index == done["index"] and (w, h) == (width, height)
+    png = data[20:20 + n]
+    radiance = np.frombuffer(data, "<f4", offset=20 + n).reshape(h, w, 3)
+    return done, progress, png, radiance
+
+
+def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer):
+    import oclgi
+    from oclgi.io import png_bytes
+
+    async def test(client):
+        ws, page, _ = await connect(client, viewer)
+        await move(ws, bunny_at(0.5, -0.2, 0.4))
+        posed = await sync(ws, page)
+        done, progress, png, radiance = await render(ws, page, 7)
+        assert progress and progress[-1]["traced"] == progress[-1]["paths"] == PHOTONS
+        engine = viewer.engine.posed()
+        engine.place("bunny", np.array(posed["poses"]["bunny"]).reshape(4, 4))
+        cam = oclgi.Camera(position=tuple(CAMERA["position"]), look_at=tuple(CAMERA["look_at"]), fov=CAMERA["fov"],
+                           width=24, height=16)
+        r = viewer.run
+        api = engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
+                            max_depth=r.max_depth)
+        assert np.array_equal(radiance, api.radiance), "the render is not the API's at that camera and pose"
+        assert png == png_bytes(api.pixels) and api.radiance.max() > 0
+        # the session is untouched: still exact, still moving
+        after = await sync(ws, page, 2)
+        assert after["seq"] == posed["seq"]
+        await moves_exactly(ws, page, viewer, bunny_at(0.1, 0.1), 3)
+        await ws.close()
+    run(test, viewer)

@@ -25,24 +25,53 @@ def open_viewer(scene_path, photons: int = PHOTONS, edge: float = EDGE):
     return Viewer(oclgi.Engine(scene), tessellate(scene, edge), photons=photons)
 
 
+def as_shown(colours: np.ndarray, e: int) -> np.ndarray:
+    """The float16 bits a page holds for float32 ``colours`` at scale 2^e:
+    colours * 2^-e rounded to the nearest float16 (ties to even)."""
+    return np.ldexp(np.asarray(colours, np.float32), -e).astype(np.float16).view(np.uint16)
+
+
 class PageModel:
-    """What a page holds: the colours, applied frame by frame."""
+    """What a page holds: float16 colours at a power-of-two scale, applied frame by frame."""
 
     def __init__(self, n_vertices: int):
-        self.colours = np.zeros((n_vertices, 3), np.float32)
-        self.seq, self.frames, self.messages = -1, 0, []
+        self.half = np.zeros((n_vertices, 3), np.uint16)
+        self.e = 0
+        self.seq, self.frames, self.messages, self.sizes = -1, 0, [], []
+
+    @property
+    def colours(self) -> np.ndarray:
+        """The colours shown, float32 (exact: a float16 times a power of two)."""
+        return np.ldexp(self.half.view(np.float16).astype(np.float32), self.e)
+
+    def shows(self, colours: np.ndarray) -> bool:
+        """The page holds ``colours`` (float32, the API's) rounded to float16 at its scale, bit for bit."""
+        return np.array_equal(self.half, as_shown(colours, self.e))
 
     def apply(self, data: bytes) -> None:
-        magic, seq, mode, count = struct.unpack_from("<4sIII", data)
+        magic, seq, mode, e = struct.unpack_from("<4sIIi", data)
         assert magic == b"OGVC"
+        n = len(self.half)
         if mode == 0:
-            assert count == len(self.colours) and len(data) == 16 + 12 * count
-            self.colours[:] = np.frombuffer(data, "<f4", offset=16).reshape(-1, 3)
+            (count,) = struct.unpack_from("<I", data, 16)
+            assert count == n and len(data) == 20 + 6 * n
+            self.half[:] = np.frombuffer(data, "<u2", offset=20).reshape(-1, 3)
         else:
-            assert mode == 1 and len(data) == 16 + 16 * count
-            index = np.frombuffer(data, "<u4", count, offset=16)
-            self.colours[index] = np.frombuffer(data, "<f4", offset=16 + 4 * count).reshape(-1, 3)
-        self.seq, self.frames = seq, self.frames + 1
+            assert mode == 1
+            r, s = struct.unpack_from("<II", data, 16)
+            start = np.frombuffer(data, "<u4", r, offset=24)
+            length = np.frombuffer(data, "<u4", r, offset=24 + 4 * r)
+            single = np.frombuffer(data, "<u4", s, offset=24 + 8 * r)
+            values = np.frombuffer(data, "<u2", offset=24 + 8 * r + 4 * s).reshape(-1, 3)
+            assert len(values) == int(length.sum()) + s and (length >= 2).all()
+            at = 0
+            for a, k in zip(start.tolist(), length.tolist()):  # one obvious copy per run
+                self.half[a:a + k] = values[at:at + k]
+                at += k
+            for i, v in zip(single.tolist(), range(at, at + s)):
+                self.half[i] = values[v]
+        self.e, self.seq, self.frames = e, seq, self.frames + 1
+        self.sizes.append(len(data))
 
 
 async def receive_until(ws, page: PageModel, predicate, ack: bool = True):
@@ -79,13 +108,17 @@ def reference_colours(viewer, poses: dict, **run) -> np.ndarray:
     session over the viewer's points (opened where the tessellation was
     made, so its points on movable objects start where the mesh has them),
     each object moved there once; the viewer's run parameters unless
-    ``run`` overrides them."""
+    ``run`` overrides them (``lights``: parameter changes, the lights moved
+    before the session opens)."""
     from oclgi.incremental.open_session import open_session
 
     r = viewer.run
     args = dict(method=r.method, photons=r.photons, radius=r.radius)
     args.update(run)
-    with open_session(viewer.engine, viewer.points, **args) as s:
+    if args["method"] == "photon_map":
+        args.pop("radius")
+    lights = args.pop("lights", None)
+    with open_session(viewer.lit_engine(lights), viewer.points, **args) as s:
         for name, m in poses.items():
             if not np.array_equal(np.reshape(m, (4, 4)), viewer.movable[name].loaded):
                 s.move(name, np.array(m, np.float64).reshape(4, 4))

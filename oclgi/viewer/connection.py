@@ -15,6 +15,17 @@ on the server, and the server must never fall behind a drag:
   (oclgi/viewer/vertex_colours.py), so a frame can be skipped: while newer
   moves wait and the page has not yet applied two frames, the frame of a
   pose already overtaken is not sent; the last one always is;
+- a light drag updates by a light session (oclgi/incremental/light_session.py)
+  while every object is where it was loaded and the light has precomputed
+  positions (its ``path``): reused there, recomputed elsewhere; otherwise
+  the session re-traces with the light moved (a parameter update). The
+  session catches up on the light when it is next needed (a move, an
+  estimator, photons);
+- an estimator of the other family (Photon Maps against DETP and Impact
+  Count) opens a session of the other kind at the current poses and
+  lights, and closes the old one;
+- a render is the engine's image at the session's poses and lights from
+  the page's camera, batch by batch with progress messages between;
 - a flood (more than MAX_MESSAGES_PER_SECOND requests in a second) is
   refused, with one error a second, and the session is left as it was;
   a ``sync`` is still answered, so the page learns where things stand.
@@ -24,17 +35,21 @@ from __future__ import annotations
 
 import asyncio
 import json
+import struct
 import time
 
 import numpy as np
 
 from ..errors import OclgiError
+from ..io import png_bytes
 from .messages import BadMessage, Request, parse
 from .vertex_colours import FrameEncoder
 
 MAX_MESSAGES_PER_SECOND = 240  # a drag sends one a display frame (60 to 144 a second)
 MAX_IN_FLIGHT = 2  # frames sent and not yet acknowledged before an overtaken one is skipped
 MAX_QUEUED = 64  # requests waiting (moves of one object coalesce, so only mixed ones pile up)
+RENDER_MAGIC = b"OGVR"  # a render's binary message (Connection._send_render)
+RENDER_HEADER = struct.Struct("<4sIIII")
 
 
 class Connection:
@@ -49,33 +64,177 @@ class Connection:
         self.in_flight = 0
         self.encoder = FrameEncoder(len(viewer.tess.vertices))
         self.colours = None  # the current solution's colours (not necessarily sent yet)
-        self.updates = 0  # moves computed
-        self.coalesced = 0  # moves replaced by a newer one before they ran
+        self.updates = 0  # moves of objects and lights computed
+        self.coalesced = 0  # moves replaced by a newer one (of the same object or light) before they ran
         self.window_start, self.window_count, self.window_warned = time.monotonic(), 0, False
         self.segments = 0
+        self.renders = 0
         self.task = None
+        self.lights = {}  # parameter changes of the lights moved ("light.NAME.position" -> position)
+        self.light_session = None  # (light name, LightSession), opened at the first drag of a light with a path
+        self.current = None  # the session whose solution the page is shown: self.session or the light session's
+        self.session_stale = False  # the lights moved in the light session only
+        self.no_reuse = {}  # light name -> why a light session cannot serve it
 
     # -- device work (in the viewer's worker thread) ----------------------------------------
     def _colours(self) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
-        colours = self.viewer.colours(self.session.irradiance())
+        colours = self.viewer.colours(self.current.irradiance())
         return colours, time.perf_counter() - t0
 
     def _open(self):
         v = self.viewer
-        self.session = v.open_session()
+        self.session = self.current = v.open_session()
         self.segments = int(self.session.store.path_len().sum())
         return self._colours()
 
-    def _apply(self, req: Request) -> dict:
+    def _main(self):
+        """The session, brought up to the lights' positions if they moved in the light session only."""
         s = self.session
+        if self.session_stale:
+            params = s.parameters()
+            for key, value in self.lights.items():
+                params[key] = value
+            params.update()
+            self.segments = int(s.store.path_len().sum())
+            self.session_stale = False
+        self.current = s
+        return s
+
+    def _at_loaded_poses(self) -> bool:
+        return all(np.array_equal(self.session.engine.pose_matrix(name), m.loaded)
+                   for name, m in self.viewer.movable.items())
+
+    def _light_session_for(self, name: str):
+        """(the light session that places light ``name``, None) or (None, why none can): a light session
+        opened for it at its first drag; one that refused it is not tried again (``no_reuse``)."""
+        from ..incremental.light_session import LightSession
+
+        light = self.viewer.lights[name]
+        others = {k for k in self.lights if not k.startswith(light.key + ".")}
+        p = self.session.params
+        if light.path is None:
+            reason = "the light has no precomputed positions (a path in the scene file)"
+        elif p.method == "photon_map":
+            reason = "a Photon Map session recomputes"
+        elif not self._at_loaded_poses():
+            reason = "an object moved: the stored light paths are the scene's as loaded"
+        elif others:
+            reason = "another light moved"
+        else:
+            reason = self.no_reuse.get(name)  # a light session refused this light before
+        if reason:
+            return None, reason
+        if self.light_session is not None and self.light_session[0] == name:
+            return self.light_session[1], None
+        self._drop_light_session()
+        try:
+            ls = LightSession(self.viewer.engine, self.viewer.points, light=light.index, photons=p.photons,
+                              seed=p.seed, max_depth=p.max_depth, method=p.method, radius=p.radius)
+        except OclgiError as exc:  # another emitter, a glossy first hit: reuse does not apply
+            self.no_reuse[name] = str(exc)
+            return None, str(exc)
+        self.light_session = (name, ls)
+        return ls, None
+
+    def _drop_light_session(self) -> None:
+        if self.light_session is not None:
+            self.light_session[1].close()
+            self.light_session = None
+
+    def _move_light(self, name: str, position: tuple) -> dict:
+        light = self.viewer.lights[name]
+        key = f"{light.key}.position"
+        ls, why = self._light_session_for(name)
+        if ls is not None:
+            done = ls.move_light(position)
+            self.lights[key] = position
+            self.session_stale, self.current = True, ls
+            return {"light": name, "by": "light session", "reused": done.reused, "frame": done.frame,
+                    "paths_traced": done.paths_traced, "seconds": dict(done.seconds)}
+        s = self._main()
+        params = s.parameters()
+        params[key] = position
+        up = params.update()
+        self.lights[key] = position
+        self.segments = int(s.store.path_len().sum())
+        return {"light": name, "by": "session", "reused": False, "frame": None, "why": why,
+                "paths_traced": up.paths_traced, "seconds": {"total": up.seconds}}
+
+    def _switch_family(self, fields: dict) -> dict:
+        """A session of the other kind (Photon Maps <-> DETP, Impact Count) at the current poses and lights."""
+        t0 = time.perf_counter()
+        old = self._main()
+        method = fields["method"]
+        options = {}
+        if method == "photon_map":
+            if "radius" in fields:
+                raise BadMessage("estimator: the Photon Map has no disc radius (it takes k)")
+            if "k" in fields:
+                options["k"] = fields["k"]
+        else:
+            if "k" in fields:
+                raise BadMessage(f"estimator: k is the Photon Map's option, not {method}'s")
+            if "radius" in fields:
+                options["radius"] = fields["radius"]
+        new = self.viewer.open_session(method, old.params.photons, self.lights, **options)
+        self.viewer.sessions_opened += 1
+        try:
+            for name, m in self.viewer.movable.items():
+                pose = old.engine.pose_matrix(name)
+                if not np.array_equal(pose, m.loaded):
+                    new.move(name, pose)
+        except BaseException:
+            self._close_session(new)
+            raise
+        self._drop_light_session()
+        self.session = self.current = new
+        self._close_session(old)
+        self.segments = int(new.store.path_len().sum())
+        return {"switched": True, "seconds": {"total": time.perf_counter() - t0}}
+
+    def _render(self, fields: dict, on_batch) -> dict:
+        """The engine's image from the page's camera at the session's poses
+        and lights (``Engine.render``'s steps, ``on_batch`` between batches)."""
+        from ..scene.scene import Camera
+
+        t0 = time.perf_counter()
+        s = self.session
+        engine = s.engine.posed()
+        if self.session_stale:
+            engine._apply_parameters(self.lights)
+        p = s.params
+        cam = Camera(position=fields["position"], look_at=fields["look_at"], up=fields["up"], fov=fields["fov"],
+                     width=fields["width"], height=fields["height"])
+        args = dict(method=p.method, photons=p.photons, seed=p.seed, max_depth=p.max_depth)
+        if p.method == "photon_map":
+            args["k"] = s.options["k"]
+        else:
+            args["radius"] = p.radius
+        run = engine.render_run(cam, **args)
+        est = run.complete(False, on_batch)
+        image = engine.render_result(run, est)
+        return {"image": image, "seconds": time.perf_counter() - t0, "method": p.method, "photons": int(p.photons)}
+
+    def _apply(self, req: Request) -> dict:
         info = {"kind": req.kind}
-        if req.kind == "move":
+        if req.kind == "light":
+            info.update(self._move_light(req.fields["light"], req.fields["position"]))
+            colours, read = self._colours()
+            info["seconds"]["read"] = read
+            return {"info": info, "colours": colours}
+        s = self._main()
+        if req.kind == "estimator" and "method" in req.fields and (
+                (req.fields["method"] == "photon_map") != (s.params.method == "photon_map")):
+            info.update(self._switch_family(req.fields))
+            s = self.session
+        elif req.kind == "move":
             st = s.move(req.fields["object"], req.fields["matrix"])
             self.segments += st.segments_added - st.segments_removed
             info.update(paths=st.paths, segments_removed=st.segments_removed, segments_added=st.segments_added,
                         points=st.points, seconds=dict(st.seconds))
         elif req.kind == "estimator":
+            self._drop_light_session()  # its estimator is the old one
             t0 = time.perf_counter()
             f = dict(req.fields)
             if "k" in f:
@@ -92,6 +251,7 @@ class Connection:
                 params.update()
             info["seconds"] = {"total": time.perf_counter() - t0}
         elif req.kind == "photons":
+            self._drop_light_session()
             info["seconds"] = {"total": s.set_photons(req.fields["count"])}
             self.segments = int(s.store.path_len().sum())
         colours, read = self._colours()
@@ -105,8 +265,11 @@ class Connection:
         return {"photons": int(p.photons), "segments": int(self.segments), "method": p.method,
                 "radius": None if p.method == "photon_map" else float(p.radius),
                 "k": s.options.get("k") if p.method == "photon_map" else None,
-                "methods": list(self.viewer.methods_for(s)),
-                "poses": {name: s.engine.pose_matrix(name).reshape(-1).tolist() for name in self.viewer.movable}}
+                "methods": list(self.viewer.methods),
+                "poses": {name: s.engine.pose_matrix(name).reshape(-1).tolist() for name in self.viewer.movable},
+                "lights": {name: list(self.lights.get(f"{light.key}.position", light.position))
+                           for name, light in self.viewer.lights.items()},
+                "shown_by": "light session" if self.current is not self.session else "session"}
 
     async def send_json(self, msg: dict) -> None:
         if not self.ws.closed:
@@ -129,7 +292,8 @@ class Connection:
         if now - self.window_start >= 1.0:
             self.window_start, self.window_count, self.window_warned = now, 0, False
         try:
-            req = parse(text, self.viewer.movable, self.viewer.methods_for(self.session), self.viewer.diagonal)
+            v = self.viewer
+            req = parse(text, v.movable, v.methods, v.diagonal, tuple(v.lights), v.box)
         except BadMessage as exc:
             return str(exc)
         if req.kind == "ack":
@@ -144,8 +308,9 @@ class Connection:
             return (f"too many requests: at most {MAX_MESSAGES_PER_SECOND} a second; the rest of this second's "
                     "are dropped")
         last = self.pending[-1] if self.pending else None
-        if (req.kind == "move" and last is not None and last.kind == "move"
-                and last.fields["object"] == req.fields["object"]):
+        if (req.kind in ("move", "light") and last is not None and last.kind == req.kind
+                and last.fields.get("object") == req.fields.get("object")
+                and last.fields.get("light") == req.fields.get("light")):
             self.pending[-1] = req
             self.coalesced += 1
         elif len(self.pending) >= MAX_QUEUED:
@@ -176,6 +341,9 @@ class Connection:
                     await self.send_json({"type": "synced", "id": req.fields["id"], "seq": self.seq,
                                           "updates": self.updates, "coalesced": self.coalesced, **self.describe()})
                     continue
+                if req.kind == "render":
+                    await self._send_render(req)
+                    continue
                 t0 = time.perf_counter()
                 try:
                     done = await self.viewer.device(self._apply, req)
@@ -183,14 +351,46 @@ class Connection:
                     await self.error(str(exc), req.kind)
                     continue
                 self.seq += 1
-                self.updates += req.kind == "move"
+                self.updates += req.kind in ("move", "light")
                 self.colours = done["colours"]
                 info = done["info"]
                 info["seconds"]["server"] = time.perf_counter() - t0
                 await self.send_json({"type": "update", "seq": self.seq, **info, **self.describe()})
-                newer_move = any(r.kind == "move" for r in self.pending)
+                newer_move = any(r.kind in ("move", "light") for r in self.pending)
                 await self.send_frame(force=not newer_move)
             await self.send_frame()
+
+    async def _send_render(self, req: Request) -> None:
+        """Render, with a ``render_progress`` message a batch (at most ten a
+        second), then ``rendered`` and the image (RENDER_MAGIC: uint32 id
+        index, width, height, PNG length; the PNG; float32 radiance[H][W][3])."""
+        loop = asyncio.get_running_loop()
+        ident, last = req.fields["id"], [0.0]
+
+        def on_batch(run):  # in the device's thread
+            now = time.monotonic()
+            if now - last[0] >= 0.1 or run.done:
+                last[0] = now
+                msg = {"type": "render_progress", "id": ident, "traced": int(run.traced),
+                       "paths": int(run.paths.count)}
+                asyncio.run_coroutine_threadsafe(self.send_json(msg), loop)
+
+        await self.send_json({"type": "render_started", "id": ident, "width": req.fields["width"],
+                              "height": req.fields["height"]})
+        try:
+            done = await self.viewer.device(self._render, req.fields, on_batch)
+        except OclgiError as exc:
+            await self.error(str(exc), "render")
+            return
+        image = done.pop("image")
+        png = png_bytes(image.pixels)
+        h, w = image.radiance.shape[:2]
+        self.renders += 1
+        await self.send_json({"type": "rendered", "id": ident, "index": self.renders, "width": w, "height": h,
+                              "seconds": done["seconds"], "method": done["method"], "photons": done["photons"]})
+        if not self.ws.closed:
+            await self.ws.send_bytes(RENDER_HEADER.pack(RENDER_MAGIC, self.renders, w, h, len(png)) + png
+                                     + np.ascontiguousarray(image.radiance, "<f4").tobytes())
 
     def close(self):
         """Stop the work and close the session (now, in the device's thread,
@@ -204,6 +404,8 @@ class Connection:
     def _close_session(self, session) -> None:
         if session is None:
             return
+        if self.light_session is not None and session is not self.light_session[1]:
+            self._drop_light_session()
         session.close()
         self.viewer.sessions_closed += 1
         self.viewer.buffers_released += len(session.released_buffers)

@@ -15,6 +15,11 @@ Every message from the page is a JSON object with a ``type``:
 ``sync``        ``id`` (any number)                                    answered ``synced``
                                                                        once all before it
                                                                        is done and sent
+``light``       ``light`` (a point or spot light's name),              places the light
+                ``position`` (3 numbers)
+``render``      ``id`` (any number), ``camera`` (``position``,         answered by the
+                ``look_at``, ``up``, ``fov`` in degrees, vertical),    image: progress,
+                ``width``, ``height`` (pixels)                         then ``rendered``
 ==============  =====================================================  ==================
 
 A move must keep the object rigid: its matrix is the object's loaded
@@ -38,6 +43,7 @@ from ..errors import OclgiError
 MAX_MESSAGE_BYTES = 16_384  # a move is about 400 bytes; anything longer is refused unread
 MAX_PHOTONS = 4_000_000  # per tab: photons x max_depth x 48 bytes stay on the device
 MAX_K = 1000  # Photon Maps' neighbours
+MAX_RENDER_SIDE = 4096  # pixels: a render's camera points and image stay well inside the device's memory
 RIGID_TOLERANCE = 1e-4  # of the rotation's columns: orthonormal to float32-ish rounding of a page's matrix
 
 
@@ -47,7 +53,7 @@ class BadMessage(OclgiError):
 
 @dataclass(frozen=True)
 class Request:
-    kind: str  # "move", "estimator", "photons", "ack", "sync"
+    kind: str  # "move", "estimator", "photons", "ack", "sync", "light", "render"
     fields: dict
 
 
@@ -103,11 +109,44 @@ def _short(v) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def parse(text, movable: dict, methods: tuple, diagonal: float) -> Request:
+def _point(msg: dict, key: str, kind: str, lo=None, hi=None) -> tuple:
+    v = msg.get(key)
+    if not isinstance(v, list) or len(v) != 3 or not all(
+            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v):
+        raise BadMessage(f"{kind}: {key!r} must be 3 finite numbers, got {_short(v)}")
+    if lo is not None and not all(a <= c <= b for a, c, b in zip(lo, v, hi)):
+        raise BadMessage(f"{kind}: {key!r} {_short(v)} is beyond the scene's box grown by its diagonal")
+    return tuple(float(c) for c in v)
+
+
+def _camera(msg: dict, lo, hi) -> dict:
+    cam = msg.get("camera")
+    if not isinstance(cam, dict):
+        raise BadMessage(f"render: 'camera' must be an object with position, look_at, up and fov, got {_short(cam)}")
+    out = {"position": _point(cam, "position", "render camera", lo, hi),
+           "look_at": _point(cam, "look_at", "render camera"),
+           "up": _point(cam, "up", "render camera") if "up" in cam else (0.0, 1.0, 0.0)}
+    fov = _number(cam, "fov", "render camera")
+    if not 0 < fov < 180:
+        raise BadMessage(f"render camera: 'fov' must be in (0, 180) degrees, got {fov!r}")
+    forward = np.subtract(out["look_at"], out["position"])
+    if not np.linalg.norm(forward) > 0:
+        raise BadMessage("render camera: 'look_at' must differ from 'position'")
+    if np.linalg.norm(np.cross(forward / np.linalg.norm(forward), out["up"])) < 1e-6 * np.linalg.norm(out["up"]):
+        raise BadMessage("render camera: 'up' must not be along the view direction (nor zero)")
+    out["fov"] = float(fov)
+    out["width"] = _integer(msg, "width", "render", 1, MAX_RENDER_SIDE)
+    out["height"] = _integer(msg, "height", "render", 1, MAX_RENDER_SIDE)
+    return out
+
+
+def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = (), box=None) -> Request:
     """The request in ``text`` (a str from the socket), or BadMessage.
     ``movable``: name -> Movable; ``methods``: the
     estimators this session can switch to; ``diagonal``: the scene's (the
-    largest disc radius)."""
+    largest disc radius); ``lights``: the point and spot lights' names;
+    ``box``: (lo, hi), where a light or a render's camera may be (the
+    scene's box grown by its diagonal)."""
     if not isinstance(text, str):
         raise BadMessage("messages must be JSON text, not binary")
     if len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
@@ -147,4 +186,13 @@ def parse(text, movable: dict, methods: tuple, diagonal: float) -> Request:
         return Request("ack", {"seq": _integer(msg, "seq", kind, 0, 2**32 - 1)})
     if kind == "sync":
         return Request("sync", {"id": _number(msg, "id", kind)})
-    raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync)")
+    lo, hi = box if box is not None else (None, None)
+    if kind == "light":
+        name = msg.get("light")
+        if not isinstance(name, str) or name not in lights:
+            raise BadMessage(f"light: no point or spot light {_short(name)}; the scene's are "
+                             f"{', '.join(map(repr, lights)) or 'none'}")
+        return Request("light", {"light": name, "position": _point(msg, "position", kind, lo, hi)})
+    if kind == "render":
+        return Request("render", {"id": _number(msg, "id", kind), **_camera(msg, lo, hi)})
+    raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync, light, render)")

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OclgiError
+from .draggable_lights import movable_lights
 
 STATIC = Path(__file__).resolve().parent / "static"
 DEFAULT_HOST = "127.0.0.1"
@@ -51,7 +52,7 @@ class Viewer:
         self.run = engine.run_params(method, photons, radius)  # checked now, not per tab
         if self.run.method != "photon_map" and not ESTIMATORS[self.run.method].incremental:
             raise OclgiError(f"method {self.run.method!r} has no incremental update; the viewer takes "
-                             f"{', '.join(self.methods_for(None))} or photon_map")
+                             f"{', '.join(self.methods)}")
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
         queried, self.value_of = object_points(tess, objects, np.asarray(scene.tri_material)[tess.vertex_tri],
@@ -64,8 +65,12 @@ class Viewer:
             v = tess.vertices[objects == rank + 1]
             self.movable[name] = Movable(engine.pose_matrix(name), (v.min(axis=0) + v.max(axis=0)) / 2,
                                          lo - scene.diagonal, hi + scene.diagonal)
+        self.lights = movable_lights(scene)
+        self.box = (lo - scene.diagonal, hi + scene.diagonal)
         self.mesh = mesh_bytes(tess, objects)
-        self.description = dict(description(engine, tess, movable), points=len(self.points))
+        self.description = dict(description(engine, tess, movable), points=len(self.points),
+                                lights=[{"name": name, "kind": light.kind, "position": list(light.position),
+                                         "path": light.path} for name, light in self.lights.items()])
         self.diagonal = scene.diagonal
         self.executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="oclgi-device")
         self.connections: set = set()
@@ -78,20 +83,35 @@ class Viewer:
 
         return radiance(np.asarray(irradiance)[self.value_of], self.terms)
 
-    def methods_for(self, session) -> tuple:
-        """The estimators a session can switch to without re-tracing."""
+    @property
+    def methods(self) -> tuple:
+        """The estimators a page can switch to: the incremental ones by
+        summing the stored paths again, Photon Maps (and back) by a session
+        of the other kind (oclgi/viewer/connection.py)."""
         from ..estimators import ESTIMATORS
 
-        if session is not None and session.params.method == "photon_map":
-            return ("photon_map",)
-        return tuple(m for m, c in ESTIMATORS.items() if c.incremental)
+        return (*(m for m, c in ESTIMATORS.items() if c.incremental), "photon_map")
 
-    def open_session(self):
+    def open_session(self, method=None, photons=None, lights: dict | None = None, **options):
+        """A session at the loaded poses over the viewer's points: the
+        viewer's run unless told otherwise; ``lights``: parameter changes
+        (``light.NAME.position``) in force from the start."""
         from ..incremental.open_session import open_session
 
         r = self.run
-        kwargs = {} if r.method == "photon_map" else {"radius": r.radius}
-        return open_session(self.engine, self.points, method=r.method, photons=r.photons, **kwargs)
+        method = method or r.method
+        if method != "photon_map":
+            options.setdefault("radius", r.radius)
+        return open_session(self.lit_engine(lights), self.points, method=method, photons=photons or r.photons,
+                            **options)
+
+    def lit_engine(self, lights: dict | None):
+        """The shared engine, or a view of it with the lights moved."""
+        if not lights:
+            return self.engine
+        view = self.engine.posed()
+        view._apply_parameters(lights)
+        return view
 
     async def device(self, fn, *args):
         """``fn(*args)`` in the device's worker thread (one call at a time)."""

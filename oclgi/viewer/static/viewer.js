@@ -1,6 +1,13 @@
 // oclgi view: the tessellated scene drawn with WebGL2, coloured by the
 // session's per-vertex radiance (linear; exposure and sRGB applied here).
-// The server sends the mesh once and then only changed colours; the page
+// The server sends the mesh once and then only changed colours, as float16
+// at a power-of-two scale (oclgi/viewer/vertex_colours.py): the page copies
+// a frame's runs into its float32 colours with typed-array sets (a
+// Float16Array widens natively), uploads the changed runs and folds the
+// scale into the exposure. (The colours stay float32 on the GPU: a
+// three-channel 16-bit float is no vertex format of Direct3D and an
+// optional one in Vulkan, so ANGLE may convert the whole buffer at each
+// upload.) The page
 // moves a dragged object's vertices itself (a model matrix per movable
 // object), so orbiting and dragging run at display rate whatever the
 // server is doing, and the light follows when its update arrives.
@@ -8,6 +15,20 @@
 
 const MAX_OBJECTS = 16; // model matrices in the shader: the static scene and up to 15 movable objects
 const PLOT_SECONDS = 10;
+const MAX_RANGE_UPLOADS = 64; // a frame's changed runs uploaded one by one up to this many, else the whole array
+
+function halfToFloat(h) { // an IEEE float16's bits -> its value
+  const e = (h >> 10) & 31, m = h & 1023, s = h & 0x8000 ? -1 : 1;
+  if (e === 0) return s * m * Math.pow(2, -24);
+  if (e === 31) return m ? NaN : s * Infinity;
+  return s * (1 + m / 1024) * Math.pow(2, e - 15);
+}
+function halves(buf, offset, n) { // n float16 values at offset, readable as numbers (natively where it can)
+  if (typeof Float16Array === "function") return new Float16Array(buf, offset, n);
+  const bits = new Uint16Array(buf, offset, n), out = new Float32Array(n);
+  for (let i = 0; i < n; i++) out[i] = halfToFloat(bits[i]);
+  return out;
+}
 
 // -- 4x4 matrices: row-major arrays of 16 (as the server writes them) ------
 function mul(a, b) {
@@ -101,6 +122,7 @@ const $ = id => document.getElementById(id);
 const state = window.oclgiState = { // what a test or a benchmark reads (and drives through .api)
   ready: false, seq: -1, frames: 0, updates: 0, draws: 0, drawnSeq: -1, errors: [], log: [],
   colours: null, poses: {}, serverPoses: {}, lastUpdate: null, hello: null, connection: null,
+  lights: {}, serverLights: {}, renders: [],
 };
 
 function showError(text) {
@@ -119,11 +141,14 @@ async function main() {
   const positions = new Float32Array(meshBuffer, 16, 3 * V);
   const objectOf = new Uint32Array(meshBuffer, 16 + 12 * V, V);
   const faces = new Uint32Array(meshBuffer, 16 + 16 * V, 3 * F);
-  const colours = state.colours = new Float32Array(3 * V);
+  const colours = state.colours = new Float32Array(3 * V); // float16 values (exact in float32), times 2^scaleExponent
+  state.scaleExponent = 0;
   $("scene-name").textContent = scene.name;
   const objects = scene.objects; // movable: object i is id i + 1 in objectOf
   const loadedInverse = objects.map(o => inverseAffine(o.matrix));
   for (const o of objects) state.poses[o.name] = o.matrix.slice();
+  const lights = scene.lights || []; // point and spot lights: name, kind, position, path (precomputed positions)
+  for (const l of lights) state.lights[l.name] = l.position.slice();
 
   // geometry
   const program = gl.createProgram();
@@ -154,6 +179,7 @@ async function main() {
   buffer(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
   gl.bindVertexArray(null);
   let colourDirty = true;
+  let dirtyRanges = null; // [first, count] in vertices changed since the last upload; null: the whole array
   let redraw = true; // something shown changed: the next display frame draws (an idle page costs nothing)
   const changed = () => { redraw = true; };
 
@@ -199,10 +225,89 @@ async function main() {
     const nx = 2 * x / canvas.clientWidth - 1, ny = 1 - 2 * y / canvas.clientHeight;
     return {origin: f.eye, dir: normalize(add(f.forward, add(scale(f.right, nx), scale(f.up, ny))))};
   }
-  function project(p) { // world point -> canvas pixels (CSS)
-    const m = viewProjection();
+  function project(p, m = viewProjection()) { // world point -> canvas pixels (CSS); null behind the eye
     const c = [0, 1, 2, 3].map(i => m[4 * i] * p[0] + m[4 * i + 1] * p[1] + m[4 * i + 2] * p[2] + m[4 * i + 3]);
+    if (c[3] <= 0) return null;
     return [(c[0] / c[3] + 1) / 2 * canvas.clientWidth, (1 - c[1] / c[3]) / 2 * canvas.clientHeight];
+  }
+
+  // light markers: a ring at each light, dots at its precomputed positions (HTML over the canvas)
+  const markerLayer = $("markers");
+  const markers = lights.map(l => {
+    const ring = document.createElement("div");
+    ring.className = "light-marker";
+    ring.title = `${l.kind} light ${l.name}`;
+    markerLayer.appendChild(ring);
+    const dots = (l.path || []).map(() => {
+      const d = document.createElement("div");
+      d.className = "path-marker";
+      markerLayer.appendChild(d);
+      return d;
+    });
+    return {ring, dots};
+  });
+  const place = (el, p) => {
+    el.hidden = !p;
+    if (p) { el.style.left = `${p[0]}px`; el.style.top = `${p[1]}px`; }
+  };
+  // the gizmo of the selected object: a height handle above it, a turn handle beside its base
+  const gizmo = {height: document.createElement("div"), turn: document.createElement("div")};
+  gizmo.height.className = "gizmo-height";
+  gizmo.height.title = "drag up or down: raise or lower";
+  gizmo.turn.className = "gizmo-turn";
+  gizmo.turn.title = "drag round the object: turn it";
+  markerLayer.append(gizmo.height, gizmo.turn);
+  const loadedBoxes = new Map(); // object index -> its box as loaded (8 corners); the shown box from those
+  function quickBox(i) { // a box round movable object i at the pose shown (its loaded box's corners moved)
+    if (!loadedBoxes.has(i)) {
+      const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+      for (let v = 0; v < V; v++) {
+        if (objectOf[v] !== i + 1) continue;
+        for (let a = 0; a < 3; a++) { lo[a] = Math.min(lo[a], positions[3 * v + a]); hi[a] = Math.max(hi[a], positions[3 * v + a]); }
+      }
+      const corners = [];
+      for (let k = 0; k < 8; k++) corners.push([k & 1 ? hi[0] : lo[0], k & 2 ? hi[1] : lo[1], k & 4 ? hi[2] : lo[2]]);
+      loadedBoxes.set(i, corners);
+    }
+    const m = relative(i), lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (const q of loadedBoxes.get(i)) {
+      const p = apply(m, q);
+      for (let a = 0; a < 3; a++) { lo[a] = Math.min(lo[a], p[a]); hi[a] = Math.max(hi[a], p[a]); }
+    }
+    return {lo, hi, centre: scale(add(lo, hi), 0.5)};
+  }
+  function gizmoPoints(i) { // world positions of the handles of object i
+    const b = quickBox(i), size = Math.max(extent(b), 1e-6);
+    return {height: [b.centre[0], b.hi[1] + 0.25 * size, b.centre[2]], turn: [b.hi[0] + 0.25 * size, b.lo[1], b.centre[2]],
+            centre: b.centre};
+  }
+  function extent(b) { return Math.max(b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]); }
+  function pickGizmo(x, y) { // "height", "turn" or null: the selected object's handle under (x, y)
+    if (!selected) return null;
+    const g = gizmoPoints(selected - 1);
+    for (const kind of ["height", "turn"]) {
+      const p = project(g[kind]);
+      if (p && Math.hypot(p[0] - x, p[1] - y) <= 10) return kind;
+    }
+    return null;
+  }
+  function placeMarkers() {
+    const m = viewProjection();
+    const g = selected ? gizmoPoints(selected - 1) : null;
+    place(gizmo.height, g && project(g.height, m));
+    place(gizmo.turn, g && project(g.turn, m));
+    lights.forEach((l, i) => {
+      place(markers[i].ring, project(state.lights[l.name], m));
+      markers[i].ring.classList.toggle("dragged", !!(drag && drag.light === l.name));
+      (l.path || []).forEach((q, j) => place(markers[i].dots[j], project(q, m)));
+    });
+  }
+  function pickLight(x, y) { // the light whose marker is under (x, y), or null
+    for (const l of lights) {
+      const p = project(state.lights[l.name]);
+      if (p && Math.hypot(p[0] - x, p[1] - y) <= 10) return l;
+    }
+    return null;
   }
   function relative(i) { return mul(state.poses[objects[i].name], loadedInverse[i]); }
   function objectBox(i) { // world box of movable object i at the pose shown
@@ -227,7 +332,8 @@ async function main() {
   function autoExposure() { // the vertices' log-average luminance to middle grey
     let sum = 0, n = 0;
     for (let v = 0; v < V; v++) {
-      const y = 0.2126 * colours[3 * v] + 0.7152 * colours[3 * v + 1] + 0.0722 * colours[3 * v + 2];
+      const y = (0.2126 * colours[3 * v] + 0.7152 * colours[3 * v + 1] + 0.0722 * colours[3 * v + 2]) *
+                Math.pow(2, state.scaleExponent);
       if (y > 0) { sum += Math.log(y); n++; }
     }
     setExposure(n ? Math.round(10 * Math.log2(0.18 / Math.exp(sum / n))) / 10 : 0);
@@ -251,7 +357,7 @@ async function main() {
     for (let i = 0; i < objects.length && i + 1 < MAX_OBJECTS; i++) modelData.set(columnMajor(relative(i)), 16 * (i + 1));
     gl.uniformMatrix4fv(uniforms.model, false, modelData);
     gl.uniformMatrix4fv(uniforms.viewProjection, false, columnMajor(viewProjection()));
-    gl.uniform1f(uniforms.exposure, exposure);
+    gl.uniform1f(uniforms.exposure, exposure * Math.pow(2, state.scaleExponent));
     gl.uniform1i(uniforms.picking, picking ? 1 : 0);
     gl.uniform1i(uniforms.selected, selected);
     gl.bindVertexArray(vao);
@@ -286,6 +392,7 @@ async function main() {
   ws.binaryType = "arraybuffer";
   state.ws = ws;
   const pendingMoves = new Map(); // object name -> matrix: sent once a display frame, the latest only
+  const pendingLights = new Map(); // light name -> position: likewise
   const waiting = new Map(); // sync id -> resolve
   let syncs = 0;
   const plot = [];
@@ -294,19 +401,44 @@ async function main() {
   function send(msg) { if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify(msg)); }
   function applyFrame(buf) {
     const view = new DataView(buf);
-    if (buf.byteLength < 16 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
-    const seq = view.getUint32(4, true), mode = view.getUint32(8, true), count = view.getUint32(12, true);
+    if (buf.byteLength >= 20 && view.getUint32(0, true) === 0x5256474f) { showRender(buf); return; } // "OGVR"
+    if (buf.byteLength < 20 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
+    const applyStart = performance.now();
+    let sentVertices = V;
+    const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
+    if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
     if (mode === 0) {
-      colours.set(new Float32Array(buf, 16, 3 * V));
+      colours.set(halves(buf, 20, 3 * V));
+      dirtyRanges = null;
     } else {
-      const index = new Uint32Array(buf, 16, count), values = new Float32Array(buf, 16 + 4 * count, 3 * count);
-      for (let i = 0; i < count; i++) {
-        const v = 3 * index[i];
-        colours[v] = values[3 * i]; colours[v + 1] = values[3 * i + 1]; colours[v + 2] = values[3 * i + 2];
+      const R = view.getUint32(16, true), S = view.getUint32(20, true);
+      const start = new Uint32Array(buf, 24, R), length = new Uint32Array(buf, 24 + 4 * R, R);
+      const single = new Uint32Array(buf, 24 + 8 * R, S);
+      let at = 0;
+      for (let r = 0; r < R; r++) at += length[r];
+      const values = halves(buf, 24 + 8 * R + 4 * S, 3 * (at + S));
+      sentVertices = at + S;
+      at = 0;
+      for (let r = 0; r < R; r++) { // a run: one typed-array copy
+        colours.set(values.subarray(3 * at, 3 * (at + length[r])), 3 * start[r]);
+        at += length[r];
+      }
+      for (let i = 0; i < S; i++) { // a vertex alone
+        const v = 3 * single[i], w = 3 * (at + i);
+        colours[v] = values[w]; colours[v + 1] = values[w + 1]; colours[v + 2] = values[w + 2];
+      }
+      if (dirtyRanges !== null || !colourDirty) {
+        if (!colourDirty) dirtyRanges = [];
+        if (dirtyRanges.length + R + S > MAX_RANGE_UPLOADS) dirtyRanges = null;
+        else {
+          for (let r = 0; r < R; r++) dirtyRanges.push([start[r], length[r]]);
+          for (let i = 0; i < S; i++) dirtyRanges.push([single[i], 1]);
+        }
       }
     }
     state.seq = seq;
     state.frames++;
+    state.frameStats = {bytes: buf.byteLength, vertices: sentVertices, applyMs: performance.now() - applyStart};
     state.frameAt = performance.now();
     state.moveToFrame = lastMoveSent ? state.frameAt - lastMoveSent : null;
     colourDirty = true;
@@ -314,6 +446,10 @@ async function main() {
     if (state.frames === 1) autoExposure();
   }
   function describe(msg) {
+    for (const name in msg.lights || {}) {
+      state.serverLights[name] = msg.lights[name];
+      if ((!drag || drag.light !== name) && !pendingLights.has(name)) { state.lights[name] = msg.lights[name].slice(); redraw = true; }
+    }
     for (const name in msg.poses) {
       state.serverPoses[name] = msg.poses[name];
       if ((!drag || drag.name !== name) && !pendingMoves.has(name)) { state.poses[name] = msg.poses[name].slice(); redraw = true; }
@@ -339,6 +475,13 @@ async function main() {
       rows.push(["n_Rec / n_R", `${(msg.segments_removed).toLocaleString()} / ${msg.segments.toLocaleString()}`]);
       rows.push(["dynamic points", msg.points.toLocaleString()]);
     }
+    if (msg.kind === "light") {
+      rows.push([`light ${msg.light}`, msg.reused ? `reused (position ${msg.frame})` : "recomputed"]);
+      rows.push(["by", msg.by]);
+      rows.push(["paths traced", msg.paths_traced.toLocaleString()]);
+      if (msg.why) rows.push(["no reuse", msg.why]);
+    }
+    if (msg.switched) rows.push(["new session", msg.method]);
     const now = performance.now();
     while (drawnTimes.length && drawnTimes[0] < now - 1000) drawnTimes.shift();
     rows.push(["updates/s (drawn)", drawnTimes.length.toString()]);
@@ -380,23 +523,85 @@ async function main() {
       describe(msg);
       plot.push({t: performance.now(), ms: 1e3 * (msg.seconds.server || msg.seconds.total)});
       statsDirty = true;
-      if (msg.kind === "move") moveInFlight = false;
+      if (msg.kind === "move" || msg.kind === "light") moveInFlight = false;
       $("error").textContent = "";
     } else if (msg.type === "synced") {
       describe(msg);
       const resolve = waiting.get(msg.id);
       waiting.delete(msg.id);
       if (resolve) resolve(msg);
+    } else if (msg.type === "render_started") {
+      renderStarted = performance.now();
+      $("render-progress").hidden = false;
+      $("render-progress").value = 0;
+      $("render-result").textContent = `rendering ${msg.width} x ${msg.height}...`;
+    } else if (msg.type === "render_progress") {
+      $("render-progress").value = msg.traced / msg.paths;
+      $("render-result").textContent = `rendering: ${msg.traced.toLocaleString()} / ${msg.paths.toLocaleString()} ` +
+        `paths, ${((performance.now() - renderStarted) / 1000).toFixed(1)} s`;
+    } else if (msg.type === "rendered") {
+      renderInfo = msg;
     } else if (msg.type === "error") {
+      if (msg.request === "render") { $("render-progress").hidden = true; $("render-result").textContent = ""; }
       showError(msg.message);
       moveInFlight = false;
-      if (msg.request === "move" && !drag) {
+      if ((msg.request === "move" || msg.request === "light") && !drag) {
         for (const name in state.serverPoses) state.poses[name] = state.serverPoses[name].slice();
+        for (const name in state.serverLights) state.lights[name] = state.serverLights[name].slice();
         redraw = true;
       }
     }
   };
   ws.onclose = () => { $("status").textContent = "the server closed the connection"; };
+
+  // "render this view": the engine's image from this camera, at the session's poses and lights
+  let renders = 0, renderStarted = 0, renderInfo = null;
+  const renderWaiting = new Map(); // render id -> resolve
+  function renderCamera(width) {
+    const f = frame();
+    const height = Math.max(1, Math.round(width * canvas.clientHeight / canvas.clientWidth));
+    return {camera: {position: f.eye, look_at: camera.target.slice(), up: [0, 1, 0], fov: camera.fov * 180 / Math.PI},
+            width, height};
+  }
+  function requestRender(width) {
+    const id = ++renders;
+    send({type: "render", id, ...renderCamera(width)});
+    return new Promise(resolve => renderWaiting.set(id, resolve));
+  }
+  function pfm(radiance, w, h) { // the linear radiance as a PFM (bottom row first), for HDR tools
+    const head = new TextEncoder().encode(`PF\n${w} ${h}\n-1.0\n`);
+    const out = new Uint8Array(head.length + 12 * w * h);
+    out.set(head, 0);
+    const body = new Float32Array(3 * w * h);
+    for (let y = 0; y < h; y++) body.set(radiance.subarray(3 * w * (h - 1 - y), 3 * w * (h - y)), 3 * w * y);
+    out.set(new Uint8Array(body.buffer), head.length);
+    return out;
+  }
+  function showRender(buf) {
+    const view = new DataView(buf);
+    const index = view.getUint32(4, true), w = view.getUint32(8, true), h = view.getUint32(12, true);
+    const n = view.getUint32(16, true);
+    const png = new Uint8Array(buf, 20, n);
+    const radiance = new Float32Array(buf.slice(20 + n));
+    const info = renderInfo || {};
+    const url = URL.createObjectURL(new Blob([png], {type: "image/png"}));
+    const hdr = URL.createObjectURL(new Blob([pfm(radiance, w, h)], {type: "application/octet-stream"}));
+    const name = `oclgi-view-${index}`;
+    $("render-progress").hidden = true;
+    $("render-result").innerHTML = `${w} x ${h}, ${info.method}, ${(info.photons || 0).toLocaleString()} photons, ` +
+      `${(info.seconds || 0).toFixed(1)} s: <a href="${url}" download="${name}.png">PNG</a> ` +
+      `<a href="${hdr}" download="${name}.pfm">PFM (linear)</a><img src="${url}" alt="render ${index}">`;
+    const entry = {id: info.id, index, width: w, height: h, png, radiance, info};
+    state.renders.push(entry);
+    const resolve = renderWaiting.get(info.id);
+    renderWaiting.delete(info.id);
+    if (resolve) resolve(entry);
+  }
+  $("render").onclick = () => {
+    const w = Math.round(Number($("render-width").value));
+    if (!(w >= 1 && w <= 4096)) { showError("render: the width must be 1 to 4096 pixels"); return; }
+    requestRender(w);
+  };
 
   $("apply").onclick = () => {
     const msg = {type: "estimator"};
@@ -416,15 +621,23 @@ async function main() {
   // most one move in flight, the server coalesces whatever queues up there.
   let moveInFlight = false;
   function flushMoves() {
-    if (!pendingMoves.size || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
+    if ((!pendingMoves.size && !pendingLights.size) || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
     for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+    for (const [name, position] of pendingLights) send({type: "light", light: name, position});
     pendingMoves.clear();
+    pendingLights.clear();
     moveInFlight = true;
     lastMoveSent = performance.now();
   }
   function queueMove(name, matrix) {
     state.poses[name] = matrix;
     pendingMoves.set(name, matrix);
+    changed();
+    flushMoves();
+  }
+  function queueLight(name, position) {
+    state.lights[name] = position;
+    pendingLights.set(name, position);
     changed();
     flushMoves();
   }
@@ -438,6 +651,18 @@ async function main() {
   canvas.addEventListener("pointerdown", e => {
     canvas.setPointerCapture(e.pointerId);
     const x = e.offsetX, y = e.offsetY;
+    const hitLight = e.button === 0 && !e.shiftKey ? pickLight(x, y) : null;
+    if (hitLight) { drag = {kind: "light", light: hitLight.name, height: state.lights[hitLight.name][1]}; changed(); return; }
+    const handle = e.button === 0 && !e.shiftKey ? pickGizmo(x, y) : null;
+    if (handle) {
+      const i = selected - 1, name = objects[i].name, g = gizmoPoints(i);
+      const c = project(g.centre) || [x, y];
+      const d = Math.hypot(...sub(g.centre, frame().eye));
+      drag = {kind: handle, name, x, y, centre: g.centre, screenCentre: c, matrix: state.poses[name].slice(),
+              perPixel: 2 * d * Math.tan(camera.fov / 2) / canvas.clientHeight,
+              angle: Math.atan2(-(y - c[1]), x - c[0])};
+      return;
+    }
     const hitObject = e.button === 0 && !e.shiftKey ? pick(x, y) : 0;
     changed(); // the selection's highlight, and the picking pass drew into another target
     if (hitObject > 0) {
@@ -454,6 +679,25 @@ async function main() {
   canvas.addEventListener("pointermove", e => {
     if (!drag) return;
     const x = e.offsetX, y = e.offsetY;
+    if (drag.kind === "light") {
+      const l = lights.find(l => l.name === drag.light);
+      // near a precomputed position: exactly there (the server reuses the stored paths)
+      const snap = (l.path || []).find(q => { const p = project(q); return p && Math.hypot(p[0] - x, p[1] - y) <= 8; });
+      const p = snap ? snap.slice() : planeHit(ray(x, y), drag.height);
+      if (p) queueLight(drag.light, p);
+      return;
+    }
+    if (drag.kind === "height") { // the pointer's rise on screen, at the object's depth
+      queueMove(drag.name, mul(translation(0, (drag.y - y) * drag.perPixel, 0), drag.matrix));
+      return;
+    }
+    if (drag.kind === "turn") { // about the vertical through its centre, following the pointer round it
+      const a = Math.atan2(-(y - drag.screenCentre[1]), x - drag.screenCentre[0]) - drag.angle;
+      const c = drag.centre, turn = camera.pitch >= 0 ? a : -a; // seen from below, screen turns flip
+      queueMove(drag.name, mul(translation(c[0], 0, c[2]), mul(rotationY(turn), mul(translation(-c[0], 0, -c[2]),
+                                                                                      drag.matrix))));
+      return;
+    }
     if (drag.kind === "object") {
       const p = planeHit(ray(x, y), drag.base);
       if (p) {
@@ -473,7 +717,7 @@ async function main() {
       camera.target = add(camera.target, add(scale(f.rightUnit, -dx * s), scale(f.upUnit, dy * s)));
     }
   });
-  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("pointerup", () => { drag = null; changed(); });
   canvas.addEventListener("wheel", e => {
     e.preventDefault();
     camera.distance *= Math.exp(e.deltaY * 0.001);
@@ -498,12 +742,15 @@ async function main() {
     if (colourDirty) {
       redraw = true;
       gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
-      gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+      if (dirtyRanges === null) gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
+      else for (const [first, n] of dirtyRanges) gl.bufferSubData(gl.ARRAY_BUFFER, 12 * first, colours, 3 * first, 3 * n);
       colourDirty = false;
+      dirtyRanges = [];
       if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
     }
     if (redraw) {
       draw(false);
+      placeMarkers();
       redraw = false;
       state.draws++;
       state.drawnAt = performance.now();
@@ -523,13 +770,19 @@ async function main() {
 
   // for tests and benchmarks: the same paths the mouse takes, and a sync
   state.api = {
-    project, pick, objectBox, home,
+    project, pick, objectBox, home, gizmoPoints, select(i) { selected = i; changed(); },
     camera: () => ({...camera}),
     orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
     move: queueMove,
+    moveLight: queueLight,
+    render: requestRender,
+    renderCamera,
+    pickLight: (x, y) => { const l = pickLight(x, y); return l ? l.name : null; },
     sync() { // answered once the server has done everything sent before it
       for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
+      for (const [name, position] of pendingLights) send({type: "light", light: name, position});
       pendingMoves.clear();
+      pendingLights.clear();
       const id = ++syncs;
       return new Promise(resolve => { waiting.set(id, resolve); send({type: "sync", id}); });
     },
