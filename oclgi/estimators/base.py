@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from . import radius_options
+from . import detp_direct, radius_options
 
 
 class Estimator:
@@ -138,7 +138,11 @@ class DetpEstimator(Estimator):
     ``pilot_photons`` and ``radius_min``: oclgi/estimators/adaptive_radius.py;
     variants with a ``radii_maker`` only); ``radii``: with "adaptive",
     the radius of each point given instead of computed (a session's first
-    frame's, ``Session.estimator.radii``). Every variant selects segments
+    frame's, ``Session.estimator.radii``); ``direct``: "photons" (the
+    direct light from the photons' first segments, as the indirect) or
+    "exact" (delta lights only: the first segments do not count and the
+    resolve adds the direct irradiance by shadow rays,
+    oclgi/estimators/detp_direct.py). Every variant selects segments
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
     same sums, bit for bit.
     """
@@ -153,12 +157,17 @@ class DetpEstimator(Estimator):
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
                  radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
-                 consistent_span: float = 1.0, **kw):
+                 consistent_span: float = 1.0, direct: str = "photons", **kw):
         radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
+        exact_direct = detp_direct.check(direct)
         span = radius_options.consistent_span(consistent, consistent_span)
         if radius_mode == "adaptive" and self.radii_maker is None:
             raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
         given = radius_options.given_radii(radii, radius_mode, len(points))
+        self.direct = None
+        if exact_direct:  # the lights' own segments give way to the shadow rays
+            self.direct = detp_direct.DirectLight(queue, compiled, kw.get("count_emitted", True), kw.get("local_size"))
+            kw = dict(kw, count_emitted=False)
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
         self.radius_mode = radius_mode
@@ -239,12 +248,15 @@ class DetpEstimator(Estimator):
         """Rebuild whatever the variant built over the points (default: nothing)."""
 
     def resolve(self, scale: float) -> cl.Buffer:
-        """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2)."""
+        """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2),
+        plus the delta lights' direct irradiance with ``direct = "exact"``."""
         if self.radius_mode != "fixed":  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
             launch(self.queue, self.k_resolve_radii, self.n, self.acc, self.n, 1.0 / (scale * math.pi),
                    self.inv_radius2_buf, self.irr)
-            return self.irr
-        inv = 1.0 / (scale * math.pi * self.radius**2)
-        launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
+        else:
+            inv = 1.0 / (scale * math.pi * self.radius**2)
+            launch(self.queue, self.k_resolve, self.n, self.acc, self.n, inv, self.irr)
+        if self.direct is not None:
+            self.direct.add(self.positions, self.normals, self.n, self.irr)
         return self.irr
 
