@@ -1,12 +1,16 @@
 """Accuracy on complex geometry against Mitsuba 3 (issue 16, items 2 to 4):
 fixed-radius DETP, adaptive DETP, surface-consistent DETP (with fixed or
-adaptive radii), Ray Maps kNN and Photon Maps at equal
+adaptive radii), DETP with the exact direct light of delta lights (with
+fixed or adaptive radii), Ray Maps kNN and Photon Maps at equal
 time on the generated scenes of bench/complex_scenes.py (a tree of small
-leaves under a sun; a closed room with columns, arches, a gallery and a
-pillar by a wall, under a ceiling light).
+leaves under a sun; a two-storey courtyard with galleries, columns and
+arches under a sun through its opening; a closed room with columns,
+arches, a gallery and a pillar by a wall, under a ceiling light). A method
+a scene refuses (the exact direct light under an area light) is listed as
+refused.
 
 For each scene: query points drawn on each part (ground / wood / leaves;
-floor / walls / stone), those with other geometry just above them along
+floor / walls / stone twice), those with other geometry just above them along
 the normal dropped (Mitsuba's irradiance meter cannot measure there,
 oclgi.study.mitsuba.irradiance); Mitsuba's path-traced irradiance twice,
 with two seeds, the reference being their mean and its own error the
@@ -29,7 +33,7 @@ Writes bench/results/complex_accuracy.md; the references are cached in
 ``--out`` (default out/complex_accuracy) keyed by scene, points and spp.
 
 Usage: ``.venv/bin/python bench/complex_accuracy.py [--seconds 10]
-[--points 256] [--spp 4096] [--leaves 40000]`` (``--quick``: 64 points,
+[--points 256] [--spp 4096] [--leaves 46000] [--scenes foliage,courtyard,arcade]`` (``--quick``: 64 points,
 512 spp, 3 s). Needs Mitsuba (``pip install 'oclgi[mitsuba]'``); the
 ``llvm_ad_rgb`` variant (``--variant``) is much faster than ``scalar_rgb``.
 """
@@ -60,6 +64,8 @@ METHODS = [
     ("DETP, adaptive radii", "detp_disc_index", {"radius_mode": "adaptive"}),
     ("DETP, consistent", "detp_disc_index", {"consistent": True}),
     ("DETP, adaptive + consistent", "detp_disc_index", {"radius_mode": "adaptive", "consistent": True}),
+    ("DETP, exact direct", "detp_disc_index", {"direct": "exact"}),
+    ("DETP, adaptive + exact direct", "detp_disc_index", {"radius_mode": "adaptive", "direct": "exact"}),
     ("Ray Maps kNN", "ray_map_knn", {}),
     ("Photon Maps", "photon_map", {}),
 ]
@@ -67,16 +73,22 @@ SHADOW_FLOOR = 0.05  # of the scene's mean reference irradiance
 CORES = 2  # the time of a run is its CPU time over this many cores
 
 
-def scene_setups(leaves: int, n_points: int, rng):
-    """(name, scene, points, part of each point) for both scenes."""
+SCENES = ("foliage", "courtyard", "arcade")
+
+
+def scene_setups(leaves: int, n_points: int, rng, names=SCENES):
+    """(name, scene, points, part of each point, counts) for the scenes
+    ``names``; each scene's points drawn from ``rng`` in SCENES' order,
+    so a scene's points do not depend on which others are run."""
     out = []
-    s = complex_scenes.foliage(leaves)
     k = n_points // 8
-    groups = {"ground": (0, 3 * k, "up"), "wood": (1, k, "up"), "leaves": (2, n_points - 4 * k, "both")}
-    out.append(("foliage", s, groups))
-    a = complex_scenes.arcade()
-    groups = {"floor": (0, 3 * k, "up"), "walls": (1, 3 * k, "up"), "stone": (2, n_points - 6 * k, "up")}
-    out.append(("arcade", a, groups))
+    rooms = {"floor": (0, 3 * k, "up"), "walls": (1, 3 * k, "up"), "stone": (2, n_points - 6 * k, "up")}
+    for name in SCENES:
+        if name == "foliage":
+            groups = {"ground": (0, 3 * k, "up"), "wood": (1, k, "up"), "leaves": (2, n_points - 4 * k, "both")}
+            out.append((name, complex_scenes.foliage(leaves), groups))
+        else:
+            out.append((name, getattr(complex_scenes, name)(), rooms))
     result = []
     for name, scene, groups in out:
         parts, pts = [], []
@@ -87,7 +99,8 @@ def scene_setups(leaves: int, n_points: int, rng):
             parts += [part] * (2 * count)
         cat = oclgi.QueryPoints(np.concatenate([q.positions for q in pts]), np.concatenate([q.normals for q in pts]),
                                 np.concatenate([q.barys for q in pts]))
-        result.append((name, scene, cat, np.array(parts), {p: g[1] for p, g in groups.items()}))
+        if name in names:
+            result.append((name, scene, cat, np.array(parts), {p: g[1] for p, g in groups.items()}))
     return result
 
 
@@ -189,7 +202,8 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--points", type=int, default=256)
     ap.add_argument("--spp", type=int, default=4096)
-    ap.add_argument("--leaves", type=int, default=40_000)
+    ap.add_argument("--leaves", type=int, default=46_000)
+    ap.add_argument("--scenes", default=",".join(SCENES), help="of " + ", ".join(SCENES))
     ap.add_argument("--variant", default="llvm_ad_rgb")
     ap.add_argument("--probe", type=int, default=200_000, help="photons of the first timing probe")
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "complex_accuracy")
@@ -212,7 +226,10 @@ def main():
              "e.g. the k-nearest index's build, counts at half its wall time); estimation from tracing to "
              "resolve, adaptive radii's pilot included, the scene's BVH and the kernels' build excluded.", ""]
     summary = []
-    for name, scene, pts, parts, counts in scene_setups(args.leaves, args.points, rng):
+    names = args.scenes.split(",")
+    if not set(names) <= set(SCENES):
+        raise SystemExit(f"--scenes: of {', '.join(SCENES)}, got {args.scenes!r}")
+    for name, scene, pts, parts, counts in scene_setups(args.leaves, args.points, rng, names):
         ok = measurable(scene, pts, args.variant)
         pts, parts = choose(pts, parts, counts, ok)
         a, b, ref_seconds = reference(name, scene, pts, args.spp, args.variant, args.out)
@@ -236,6 +253,11 @@ def main():
                   "|---|---|---|---|---|---|---|" + "---|" * len(counts)]
         for label, method, options in METHODS:
             print(f"{name}: {label}", flush=True)
+            try:
+                engine.estimator(pts, engine.run_params(method, 1000, None), **options)
+            except oclgi.OclgiError as exc:  # e.g. the exact direct light under an area light
+                lines.append(f"| {label} | refused: {exc} |")
+                continue
             photons, seconds, e = equal_time(engine, pts, method, options, args.seconds, args.probe)
             rel, off = errors(e, ref, floor)
             per_part = " | ".join(f"{np.median(rel[parts == p]):.1%} / {int(off[parts == p].sum())}" for p in counts)

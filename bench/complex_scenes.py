@@ -5,12 +5,19 @@ DETP disc, and occluders near walls.
                        branches and ``n_leaves`` small two-sided leaf quads
                        (side 0.06 to 0.12, against a default disc radius of
                        1% of the 23-unit diagonal, 0.23) in an ellipsoidal
-                       crown; 40,000 leaves make about 90,000 triangles.
+                       crown; 46,000 leaves make 101,272 triangles.
 ``arcade()``           a closed room (10 x 4 x 6) lit by a ceiling area
                        light: a row of columns with arches of thin tubes
                        (0.12 radius) and a lintel carrying a gallery's
                        ceiling in front of the back wall, and a pillar 0.15
                        from a side wall; about 24,500 triangles.
+
+``courtyard()``         a closed two-storey building (20 x 8 x 16) around a
+                       court open to the sky, lit by a sun through the
+                       opening: on each storey a gallery behind a ring of
+                       columns carrying arches of tubes (0.12 radius), the
+                       first floor's slab with a parapet, the roof a ring
+                       around the opening; about 110,000 triangles.
 
 ``points(scene, kind, n, rng)`` draws query points on the scenes' parts
 (each with its triangle and the side its triangle faces, leaves on a random
@@ -128,7 +135,7 @@ def leaves(rng, n, centre, radii, side=(0.06, 0.12)):
     return verts, faces
 
 
-def foliage(n_leaves: int = 40_000, seed: int = 16) -> oclgi.Scene:
+def foliage(n_leaves: int = 46_000, seed: int = 16) -> oclgi.Scene:
     """The tree scene (see the module's docstring); parts named ground, wood, leaves."""
     rng = np.random.default_rng(seed)
     ground = grid([-8, 0, 8], [16, 0, 0], [0, 0, -16], 64, 64)  # normal +y
@@ -179,6 +186,61 @@ def arcade() -> oclgi.Scene:
             {"name": "light", "vertices": light[0], "faces": light[1], "albedo": [0, 0, 0],
              "emission": [12.0, 12.0, 12.0]},
         ],
+        "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
+    })
+
+
+def courtyard() -> oclgi.Scene:
+    """The two-storey courtyard (see the module's docstring); parts named
+    floor (the ground floor), walls (outer walls and the roof's underside)
+    and stone (columns, arches, the gallery slab and its parapet)."""
+    W, D, H1, H = 20.0, 16.0, 4.0, 8.0  # footprint, first floor, roof
+    g = 3.0  # gallery depth: the column ring stands g inside the outer walls
+    floor = grid([0, 0, D], [W, 0, 0], [0, 0, -D], 80, 64)  # normal +y
+    walls = [grid([0, 0, 0], [W, 0, 0], [0, H, 0], 80, 32),  # z = 0, normal +z
+             grid([W, 0, D], [-W, 0, 0], [0, H, 0], 80, 32),  # z = D, normal -z
+             grid([0, 0, D], [0, 0, -D], [0, H, 0], 64, 32),  # x = 0, normal +x
+             grid([W, 0, 0], [0, 0, D], [0, H, 0], 64, 32)]  # x = W, normal -x
+    # the roof: a ring around the court's opening, facing down
+    walls += [grid([0, H, 0], [W, 0, 0], [0, 0, g], 80, 12), grid([0, H, D - g], [W, 0, 0], [0, 0, g], 80, 12),
+              grid([0, H, g], [g, 0, 0], [0, 0, D - 2 * g], 12, 40),
+              grid([W - g, H, g], [g, 0, 0], [0, 0, D - 2 * g], 12, 40)]
+    stone = []
+    # the first floor's gallery slab (0.3 thick) and a parapet 0.3 in front of the columns
+    slab_lo, slab_hi = H1 - 0.3, H1
+    for lo, hi in (([0, slab_lo, 0], [W, slab_hi, g]), ([0, slab_lo, D - g], [W, slab_hi, D]),
+                   ([0, slab_lo, g], [g, slab_hi, D - g]), ([W - g, slab_lo, g], [W, slab_hi, D - g])):
+        stone.append(box(lo, hi, 16))
+    t = 0.15
+    for lo, hi in (([g - 0.3, H1, g - 0.3 - t], [W - g + 0.3, H1 + 1.0, g - 0.3]),
+                   ([g - 0.3, H1, D - g + 0.3], [W - g + 0.3, H1 + 1.0, D - g + 0.3 + t]),
+                   ([g - 0.3 - t, H1, g - 0.3], [g - 0.3, H1 + 1.0, D - g + 0.3]),
+                   ([W - g + 0.3, H1, g - 0.3], [W - g + 0.3 + t, H1 + 1.0, D - g + 0.3])):
+        stone.append(box(lo, hi, 8))
+    # the column ring, 2 m bays: 8 columns along x, 6 along z (corners shared)
+    xs, zs = np.linspace(g, W - g, 8), np.linspace(g, D - g, 6)
+    ring = [(x, g) for x in xs] + [(x, D - g) for x in xs] + [(g, z) for z in zs[1:-1]] + [(W - g, z) for z in zs[1:-1]]
+    bays = [((a, g), (b, g)) for a, b in zip(xs[:-1], xs[1:])] + [((a, D - g), (b, D - g)) for a, b in zip(xs[:-1], xs[1:])]
+    bays += [((g, a), (g, b)) for a, b in zip(zs[:-1], zs[1:])] + [((W - g, a), (W - g, b)) for a, b in zip(zs[:-1], zs[1:])]
+    for y0, y1, rc in ((0.0, slab_lo, 0.22), (H1, H, 0.18)):
+        stone += [cylinder([x, y0, z], [0, y1 - y0, 0], rc, 36, 8) for x, z in ring]
+        for (ax, az), (bx, bz) in bays:
+            span = np.array([bx - ax, 0.0, bz - az])
+            half = 0.5 * np.linalg.norm(span)
+            major, minor = half - rc, 0.12
+            centre = [0.5 * (ax + bx), y1 - major - minor, 0.5 * (az + bz)]
+            stone.append(arch(centre, span / (2 * half), [0, 1, 0], major, minor, 32, 12))
+    floor_v, floor_f = floor
+    walls_v, walls_f = merge(walls)
+    stone_v, stone_f = merge(stone)
+    return oclgi.load_dict({
+        "name": "courtyard",
+        "mesh": [
+            {"name": "floor", "vertices": floor_v, "faces": floor_f, "albedo": [0.45, 0.45, 0.45]},
+            {"name": "walls", "vertices": walls_v, "faces": walls_f, "albedo": [0.6, 0.6, 0.6]},
+            {"name": "stone", "vertices": stone_v, "faces": stone_f, "albedo": [0.55, 0.55, 0.55]},
+        ],
+        "sun": [{"direction": [0.45, -1.0, 0.3], "irradiance": [3.0, 3.0, 3.0]}],
         "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
     })
 
