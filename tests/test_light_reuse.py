@@ -362,3 +362,27 @@ def test_reweighted_frames_equal_the_frames(spot, consistent):
         Reweighting(reuse, reuse.estimator(points(), method="detp", radius=RADIUS))
     with pytest.raises(OclgiError, match="another animation or estimator"):
         reuse.estimate(0, full, reweighting=rw)
+
+
+@pytest.mark.parametrize("spot", [False, True], ids=["point", "spot"])
+def test_exact_direct_light_follows_the_frame(spot):
+    """With direct = "exact" each frame's direct term (exact direct minus
+    the same estimator without the light's own segments) is the one a fresh
+    engine with the light at that frame's position computes: the resolve
+    reads the frame's light, not the one loaded."""
+    axes = AXES if spot else None
+    engine = oclgi.Engine(box(POSITIONS[0], AXES[0] if spot else None))
+    reuse = LightReuse(engine, "lamp", POSITIONS, axes, photons=1200, seed=9, max_depth=6)
+    exact = reuse.estimator(points(), radius=RADIUS, direct="exact")
+    indirect = reuse.estimator(points(), radius=RADIUS, count_emitted=False)
+    seen = []
+    for j in (2, 0, 3, 1):
+        direct = reuse.estimate(j, exact).irradiance - reuse.estimate(j, indirect).irradiance
+        fresh = oclgi.Engine(box(POSITIONS[j], AXES[j] if spot else None))
+        kw = dict(method="detp_disc_index", photons=1200, seed=9, max_depth=6, radius=RADIUS)
+        want = (fresh.irradiance(points(), direct="exact", **kw).irradiance
+                - fresh.irradiance(points(), count_emitted=False, **kw).irradiance)
+        assert want.max() > 0.05
+        np.testing.assert_allclose(direct, want, rtol=1e-4, atol=1e-5 * want.max())
+        seen.append(direct)
+    assert not np.allclose(seen[0], seen[1], rtol=0.05)  # the frames' direct light differs

@@ -24,6 +24,7 @@ class Estimator:
     incremental = True  # sums can be updated exactly by adding and subtracting segments
     family = ""  # "detp" for the DETP variants (same sums, different algorithms), else the method's own
     fuses_with_find = False  # sums a store's segments in the update's find pass (kernels/update.cl)
+    sums_changes = False  # accumulate_change stands for a move's subtraction and addition passes
 
     def __init__(self, queue, compiled, points, count_emitted: bool = True,
                  local_size: int | None = None, count_work: bool = False):

@@ -47,7 +47,6 @@ import pyopencl as cl
 from ..cl.constants import EMITTER_IES, EMITTER_POINT, EMITTER_SPOT, EMITTER_SUN
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from ..scene.lights import emitter_rows
 
 DIRECT_MODES = ("photons", "exact")
 DELTA_KINDS = (EMITTER_POINT, EMITTER_SPOT, EMITTER_SUN, EMITTER_IES)
@@ -67,24 +66,16 @@ class DirectLight:
         if not count_emitted:
             raise OclgiError("direct 'exact' adds the direct light that count_emitted = false leaves out: "
                              "give one of them")
-        rows = emitter_rows(compiled.scene)
-        kinds = compiled.emitters_host["kind"]
-        if len(rows.kind) != len(kinds) or not np.array_equal(rows.kind, kinds):
-            raise OclgiError("direct 'exact': the compiled scene's lights are not its scene's")
-        other = sorted({int(k) for k in kinds if k not in DELTA_KINDS})
+        other = sorted({int(k) for k in compiled.emitters_host["kind"] if k not in DELTA_KINDS})
         if other:
             raise OclgiError(f"{compiled.scene.name}: direct 'exact' lights delta lights only (point, spot, IES "
                              "and sun lights); this scene has area lights or a sky, whose direct light "
                              "comes by photons: use direct = 'photons'")
         self.queue, self.compiled, self.local_size = queue, compiled, local_size
-        bound = np.zeros((len(kinds), 4), np.float32)
-        bound[:, :3] = rows.bound
-        self.bound = cl.Buffer(queue.context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=bound if len(bound) else np.zeros((1, 4), np.float32))
         self.kernel = programs(queue.context).get("detp_direct").detp_direct_add
 
     def add(self, positions: cl.Buffer, normals: cl.Buffer, n: int, irradiance: cl.Buffer) -> None:
         """irradiance[i].xyz += the direct irradiance at point i (at the current pose)."""
         c = self.compiled
-        launch(self.queue, self.kernel, n, *c.scene_args, c.emitters, c.n_emitters, c.emitter_cdf, self.bound,
+        launch(self.queue, self.kernel, n, *c.scene_args, c.emitters, c.n_emitters, c.emitter_cdf, c.emitter_bound,
                positions, normals, n, np.float32(c.eps), irradiance, local_size=self.local_size)

@@ -321,7 +321,7 @@ class Session(SessionBase):
             stats.segments_removed = self.store.suffix_segments(affected)
             # One pass after the re-trace (then "subtract" is the gather alone)
             # or a pass on each side of it.
-            change = self.sum_changes and all(getattr(est, "sums_changes", False) for est in estimators)
+            change = self.sum_changes and all(est.sums_changes for est in estimators)
             old = self.store.suffixes(affected, -1.0)
             if not change:
                 for est in estimators:

@@ -171,6 +171,11 @@ class CompiledScene:
         self.emitters = _buffer(ctx, em)
         self.emitter_cdf = _buffer(ctx, cdf_table)
         self.emitters_host, self.emitter_cdf_host = em, cdf_table
+        # each emitter's bound on its photons' power (RGB, float4 rows): the
+        # intensity exact direct light reads (oclgi/estimators/detp_direct.py)
+        bound = np.zeros((len(em), 4), np.float32)
+        bound[:, :3] = rows.bound
+        self.emitter_bound = _buffer(ctx, bound)
 
     def with_scene(self, scene: Scene) -> "CompiledScene":
         """This compiled scene with the materials and lights of ``scene``

@@ -338,8 +338,9 @@ class LightReuse:
         t1 = time.perf_counter()
         scale = self.compiled.fixed_scale(self.paths_per_position)
         irr = np.empty((estimator.n, 4), np.float32)
-        device = estimator.resolve(scale)
-        cl.enqueue_copy(self.queue, irr, device)
+        with self.light_at(frame):  # a resolve that reads the lights (direct = "exact") sees the frame's
+            device = estimator.resolve(scale)
+            cl.enqueue_copy(self.queue, irr, device)
         t2 = time.perf_counter()
         p = getattr(self, "run_params", self.params)
         stats = Stats(photons=self.paths_per_position, segments=self.segments, points=estimator.n, method=p.method,
