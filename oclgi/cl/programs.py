@@ -62,6 +62,14 @@ def kernel_dir() -> Path:
     raise OclgiError("oclgi's OpenCL kernels were not found; reinstall the package")
 
 
+def correctly_rounded_divide_sqrt(device: cl.Device) -> bool:
+    """Whether the device can build with -cl-fp32-correctly-rounded-divide-sqrt."""
+    try:
+        return bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
+    except (cl.Error, AttributeError):
+        return False
+
+
 def compiler_output_wanted() -> bool:
     return os.environ.get(COMPILER_OUTPUT_ENV, "").strip() not in ("", "0")
 
@@ -188,6 +196,14 @@ class ProgramCache:
         # for bit across kernels; no quantity oclgi computes is near 1e-38.
         # Argument info lets the cache declare each kernel's scalar types.
         options = ["-I", str(self.dir), "-cl-denorms-are-zero", "-cl-kernel-arg-info"]
+        # Correctly rounded float division and sqrt wherever the device offers
+        # them: OpenCL lets x / y be 2.5 ulp off by default, and GPU drivers
+        # take that licence (NVIDIA's p / p is not always 1), so two kernels
+        # that must agree bit for bit (light reuse at one position and the
+        # ordinary run) would differ in the last place. CPU runtimes divide
+        # exactly anyway: the flag changes nothing there.
+        if correctly_rounded_divide_sqrt(self.ctx.devices[0]):
+            options.append("-cl-fp32-correctly-rounded-divide-sqrt")
         for name, value in build_defines(dict(defines)):  # the shared constants, then the program's own
             options.append(f"-DOCLGI_{name.upper()}={int(value) if isinstance(value, bool) else value}")
         return options
