@@ -46,6 +46,20 @@ inline RayShear ray_shear(float3 d)
     return r;
 }
 
+/* dot and cross with their operations written out, (x + y) + z: the
+ * builtins are library code that FP_CONTRACT does not reach, and a GPU
+ * driver's may fuse multiply-adds (NVIDIA's do), so tri_intersect and the
+ * lane-wise tri4_intersect below would differ in the last bits there. */
+HOT_INLINE float dot_exact(float3 a, float3 b)
+{
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+HOT_INLINE float3 cross_exact(float3 a, float3 b)
+{
+    return (float3)(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+
 /* Returns 1 and sets t and the barycentrics (u of v1, v of v2) when the ray
  * hits the triangle at 0 < t < tmax. */
 HOT_INLINE int tri_intersect(float3 o, RayShear r, float3 v0, float3 v1, float3 v2,
@@ -67,9 +81,9 @@ HOT_INLINE int tri_intersect(float3 o, RayShear r, float3 v0, float3 v1, float3 
      * when the triangle is large or far against t (up to 1e-3 relative on
      * Sponza's floors); the plane equation in the ray's own frame keeps
      * them. Inside/outside stays the watertight decision above. */
-    float3 n = cross(v1 - v0, v2 - v0);
-    float dn = dot(r.d, n);
-    float tt = dn != 0.0f ? dot(a, n) / dn : (U * az + V * bz + W * cz) * r.sz * inv;
+    float3 n = cross_exact(v1 - v0, v2 - v0);
+    float dn = dot_exact(r.d, n);
+    float tt = dn != 0.0f ? dot_exact(a, n) / dn : (U * az + V * bz + W * cz) * r.sz * inv;
     if (!(tt > 0.0f && tt < tmax)) return 0;
     *t = tt;
     *u = V * inv;
@@ -90,8 +104,8 @@ HOT_INLINE float lane4_of(float4 v, int k)
 /* tri_intersect on the first n (1..4) of 4 triangles at once: p points at
  * 9 float4, the x, y, z of v0, v1, v2 (oclgi_types.h TriBlock4), one
  * triangle per lane. Each lane computes exactly tri_intersect's operations
- * in the same order (dot and cross written out as PoCL computes them:
- * (x + y) + z, no fused multiply-add), so every triangle is accepted or
+ * in the same order (dot_exact and cross_exact written out: (x + y) + z, no
+ * fused multiply-add), so every triangle is accepted or
  * not, at the same t, u, v bits, as one at a time. Returns the lane of the
  * nearest accepted triangle, the lowest of equal t (the one a sequential
  * test in lane order keeps), or -1. */
