@@ -435,6 +435,12 @@ class Engine:
         if getattr(cls, "radii_maker", None) is not None and options.get("radius_mode") == "adaptive" \
                 and options.get("radii") is None:
             options = dict(options, pilot=self.pilot_paths(options))
+        if cls.family == "detp" and options.get("gather", 0):
+            from .estimators.final_gather import FinalGather
+
+            return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius,
+                               extension=params.extension, count_emitted=params.count_emitted,
+                               local_size=self.local_size, count_work=flag(count_work, "count_work"), **options)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size,
                    count_work=flag(count_work, "count_work"), **options)

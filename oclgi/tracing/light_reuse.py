@@ -306,7 +306,9 @@ class LightReuse:
         """A fresh estimator for this animation's frames (``Engine.estimator``
         with the run's parameters: n photons, for the resolve)."""
         from .. import queries
+        from ..estimators.final_gather import refuse_incremental
 
+        refuse_incremental(options, "light animations")
         if not isinstance(points, queries.QueryPoints):  # an (n, 6) array, as Engine.irradiance takes
             a = queries.real_array(points, "points")
             if a.ndim != 2 or a.shape[1] != 6:
