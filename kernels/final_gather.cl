@@ -21,10 +21,12 @@
  * Directions are stratified: the first s^2 rays of a point (s = floor(
  *     sqrt(n_rays))) take one cell each of an s x s grid over the unit
  *     square of (u1, u2), jittered in the cell; the rest are plain random.
- *     Random numbers: rng.h keyed by the gather's own seed, the point i as
- *     the path and j * OCLGI_CAMERA_MAX_DEPTH + surface as the bounce: a pure
- *     function of (seed, point, ray, surface), so the rays are the same
- *     whatever the launch, the batch or the work-group size.
+ *     Random numbers: rng.h keyed by the run's seed (seed_lo, seed_hi) xor
+ *     the gather's own constants, the point i as the path, j *
+ *     OCLGI_CAMERA_MAX_DEPTH + surface as the bounce and 2 gather_seed (+1
+ *     for the direction's jitter) as the block: a pure function of (seeds,
+ *     point, ray, surface), so the rays are the same whatever the launch,
+ *     the batch or the work-group size.
  *
  * final_gather_resolve  one work-item per point: out_i += (1 / N) sum_j
  *     weight_ij E(h_ij), j in order 0 .. N-1 (E the hits' resolved DETP
@@ -43,7 +45,7 @@
 __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 *tri_normals,
                                 __global const int *tri_material, __global const Material *materials,
                                 __global const float4 *points, __global const float4 *point_normals,
-                                int n_points, int n_rays, uint seed, float eps,
+                                int n_points, int n_rays, uint seed_lo, uint seed_hi, uint gather_seed, float eps,
                                 __global float4 *positions, __global float4 *normals,
                                 __global float2 *barys, __global float4 *weights)
 {
@@ -59,8 +61,8 @@ __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 
     weights[g] = (float4)(0.0f);
     if (!(len > 0.0f)) return;
     nx /= len;
-    uint s_lo = GATHER_SEED_LO ^ seed, s_hi = GATHER_SEED_HI;
-    float4 u = rng_uniform4(s_lo, s_hi, (uint)i, (uint)(j * OCLGI_CAMERA_MAX_DEPTH), 1);
+    uint s_lo = GATHER_SEED_LO ^ seed_lo, s_hi = GATHER_SEED_HI ^ seed_hi;
+    float4 u = rng_uniform4(s_lo, s_hi, (uint)i, (uint)(j * OCLGI_CAMERA_MAX_DEPTH), 2u * gather_seed + 1u);
     int s = (int)sqrt((float)n_rays);
     while ((s + 1) * (s + 1) <= n_rays) ++s;
     while (s * s > n_rays) --s;
@@ -81,7 +83,7 @@ __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 
         float3 n = tri_normals[h.tri].xyz;
         int front = dot(n, d) < 0.0f;
         float3 ns = front ? n : -n;
-        float4 r = rng_uniform4(s_lo, s_hi, (uint)i, (uint)(j * OCLGI_CAMERA_MAX_DEPTH + depth), 0);
+        float4 r = rng_uniform4(s_lo, s_hi, (uint)i, (uint)(j * OCLGI_CAMERA_MAX_DEPTH + depth), 2u * gather_seed);
         int kind = m->kind;
         if (kind == OCLGI_BSDF_DIFFUSE || kind == OCLGI_BSDF_PHONG) {
             if (!front && !(m->flags & OCLGI_MATERIAL_TWOSIDED)) return; /* a black back */

@@ -438,7 +438,7 @@ class Engine:
         if cls.family == "detp" and options.get("gather", 0):
             from .estimators.final_gather import FinalGather
 
-            return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius,
+            return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius, seed=params.seed,
                                extension=params.extension, count_emitted=params.count_emitted,
                                local_size=self.local_size, count_work=flag(count_work, "count_work"), **options)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,

@@ -25,9 +25,10 @@ hit comes by shadow rays (oclgi/estimators/detp_direct.py), the discs at
 the hits carry the indirect light only, so nothing is counted twice
 (a gather ray never reaches a delta light). Emitted light is not
 gathered, so scenes with area lights or a sky are refused, as
-``direct = "exact"`` refuses them. ``gather_seed`` (default 0) keys the
-rays' random numbers (Philox, a pure function of (seed, point, ray,
-surface)). The discs at the hits are the variant's own (fixed or adaptive
+``direct = "exact"`` refuses them. The rays' random numbers are Philox
+keyed by the run's seed, with ``gather_seed`` (default 0) in the counter: a
+pure function of (seeds, point, ray, surface), so runs of different seeds
+have independent rays (the study's variance is the gather's too). The discs at the hits are the variant's own (fixed or adaptive
 radii, any DETP variant); their sums are its 64-bit fixed-point sums over
 N discs per point; the gather's resolve adds each point's N rays in a
 fixed order, one work-item per point, so the result is the same bits for
@@ -62,6 +63,7 @@ from ..errors import OclgiError
 from .base import Estimator
 
 MAX_RAYS = 65536
+MAX_GATHER_SEED = 1 << 31  # the Philox counter's block is 2 gather_seed (+1): a uint
 
 
 def check(gather, gather_seed) -> int:
@@ -71,8 +73,8 @@ def check(gather, gather_seed) -> int:
         raise OclgiError(f"gather must be an integer from 0 (no final gathering) to {MAX_RAYS} rays per point, "
                          f"got {gather!r}")
     if isinstance(gather_seed, (bool, np.bool_)) or not isinstance(gather_seed, (int, np.integer)) \
-            or not 0 <= gather_seed < 2**32:
-        raise OclgiError(f"gather_seed must be an integer from 0 to 2^32 - 1, got {gather_seed!r}")
+            or not 0 <= gather_seed < MAX_GATHER_SEED:
+        raise OclgiError(f"gather_seed must be an integer from 0 to 2^31 - 1, got {gather_seed!r}")
     return int(gather)
 
 
@@ -83,10 +85,16 @@ def refuse_incremental(options: dict, where: str) -> None:
                          "query points' rays hit, which a move changes; use gather = 0")
 
 
-def gather_rays(queue, compiled, points, n_rays: int, seed: int, local_size=None):
+def gather_key(run_seed: int, gather_seed: int) -> tuple:
+    """The rays' Philox key words (the run's seed, 64 bits) and counter
+    block (gather_seed): every pair has its own rays."""
+    return np.uint32(run_seed & 0xFFFFFFFF), np.uint32(run_seed >> 32), np.uint32(gather_seed)
+
+
+def gather_rays(queue, compiled, points, n_rays: int, key: tuple, local_size=None):
     """The hits of ``n_rays`` cosine rays per point (kernels/final_gather.cl
-    final_gather_rays): (QueryPoints of the hits, point-major, and their
-    (n * n_rays, 4) float32 weights)."""
+    final_gather_rays) with Philox key ``key`` (gather_key): (QueryPoints
+    of the hits, point-major, and their (n * n_rays, 4) float32 weights)."""
     ctx = queue.context
     n = len(points) * n_rays
     mf = cl.mem_flags
@@ -96,7 +104,7 @@ def gather_rays(queue, compiled, points, n_rays: int, seed: int, local_size=None
     c = compiled
     k = programs(ctx).get("final_gather").final_gather_rays
     launch(queue, k, n, *c.scene_args, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
-           c.tri_normals, c.tri_material, c.materials, pts, nrm, len(points), int(n_rays), np.uint32(seed),
+           c.tri_normals, c.tri_material, c.materials, pts, nrm, len(points), int(n_rays), *key,
            np.float32(c.eps), pos, hn, bary, wt, local_size=local_size)
     host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
     for h, dev in zip(host, (pos, hn, bary, wt)):
@@ -112,7 +120,7 @@ class FinalGather(Estimator):
     incremental = False  # the hits move with the geometry (refused by sessions)
 
     def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
-                 direct: str = "photons", **kw):
+                 direct: str = "photons", seed: int = 0, **kw):
         n_rays = check(gather, gather_seed)
         if direct != "exact":
             raise OclgiError(f"gather (final gathering) needs direct = 'exact': the direct light of the points "
@@ -128,7 +136,8 @@ class FinalGather(Estimator):
         from .detp_direct import DirectLight
 
         self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
-        hits, weights = gather_rays(queue, compiled, points, n_rays, self.gather_seed, self.local_size)
+        hits, weights = gather_rays(queue, compiled, points, n_rays, gather_key(int(seed), self.gather_seed),
+                                    self.local_size)
         self.hits = hits
         self.hit_weights = weights
         # The variant's own discs at the hits, with their own exact direct light.
