@@ -1,7 +1,9 @@
 """Accuracy on complex geometry against Mitsuba 3 (issue 16, items 2 to 4):
 fixed-radius DETP, adaptive DETP, surface-consistent DETP (with fixed or
 adaptive radii), DETP with the exact direct light of delta lights (with
-fixed or adaptive radii), Ray Maps kNN and Photon Maps at equal
+fixed or adaptive radii), DETP with final gathering (1,024 or 4,096 rays
+per point, fixed radii; 1,024 with adaptive radii at the hits), Ray Maps
+kNN and Photon Maps at equal
 time on the generated scenes of bench/complex_scenes.py (a tree of small
 leaves under a sun; a two-storey courtyard with galleries, columns and
 arches under a sun through its opening; a closed room with columns,
@@ -71,6 +73,10 @@ METHODS = [
     ("DETP, adaptive + consistent", "detp_disc_index", {"radius_mode": "adaptive", "consistent": True}),
     ("DETP, exact direct", "detp_disc_index", {"direct": "exact"}),
     ("DETP, adaptive + exact direct", "detp_disc_index", {"radius_mode": "adaptive", "direct": "exact"}),
+    ("DETP, exact direct + gather 1024", "detp_disc_index", {"direct": "exact", "gather": 1024}),
+    ("DETP, exact direct + gather 4096", "detp_disc_index", {"direct": "exact", "gather": 4096}),
+    ("DETP, adaptive + exact direct + gather 1024", "detp_disc_index",
+     {"radius_mode": "adaptive", "direct": "exact", "gather": 1024}),
     ("Ray Maps kNN", "ray_map_knn", {}),
     ("Photon Maps", "photon_map", {}),
 ]
