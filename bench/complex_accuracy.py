@@ -40,7 +40,8 @@ Writes bench/results/complex_accuracy.md; the references are cached in
 ``--out`` (default out/complex_accuracy) keyed by scene, points and spp.
 
 Usage: ``.venv/bin/python bench/complex_accuracy.py [--seconds 10]
-[--points 256] [--spp 4096] [--leaves 46000] [--scenes foliage,courtyard,arcade]`` (``--quick``: 64 points,
+[--points 256] [--spp 4096] [--leaves 46000] [--scenes foliage,courtyard,arcade]
+[--methods TEXT]`` (``--quick``: 64 points,
 512 spp, 3 s). Needs Mitsuba (``pip install 'oclgi[mitsuba]'``); the
 ``llvm_ad_rgb`` variant (``--variant``) is much faster than ``scalar_rgb``.
 """
@@ -264,6 +265,8 @@ def main():
     ap.add_argument("--probe", type=int, default=200_000, help="photons of the first timing probe")
     ap.add_argument("--out", type=Path, default=ROOT / "out" / "complex_accuracy")
     ap.add_argument("--results", type=Path, default=RESULTS / "complex_accuracy.md")
+    ap.add_argument("--methods", default="", help="only the methods whose label contains this text "
+                    "(e.g. 'gather')")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--references-only", action="store_true", help="compute (and cache) Mitsuba's references only")
     args = ap.parse_args()
@@ -272,6 +275,7 @@ def main():
     rng = np.random.default_rng(16)
     lines = ["# Accuracy on complex geometry against Mitsuba 3", "",
              f"`bench/complex_accuracy.py --seconds {args.seconds:g} --points {args.points} --spp {args.spp} "
+             + (f"--methods {args.methods!r} " if args.methods else "") +
              f"--leaves {args.leaves}`; {platform.machine()}, PoCL device: "
              f"{oclgi.Engine(complex_scenes.arcade()).queue.device.name}.", "",
              f"Relative error |E - E_ref| / max(E_ref, f), f = {SHADOW_FLOOR:.0%} of the scene's mean reference "
@@ -317,6 +321,8 @@ def main():
                   " | ".join(f"{p} median / off 2x" for p in counts) + " |",
                   "|---|---|---|---|---|---|---|" + "---|" * len(counts)]
         for label, method, options in METHODS:
+            if args.methods not in label:
+                continue
             print(f"{name}: {label}", flush=True)
             try:
                 engine.estimator(pts, engine.run_params(method, 1000, None), **options)
@@ -333,7 +339,7 @@ def main():
             summary.append((name, label, photons, seconds, np.median(rel), np.percentile(rel, 90), rel.max(),
                             int(off.sum())))
         radii = engine.estimator(pts, engine.run_params("detp_disc_index", 1000, None),
-                                 radius_mode="adaptive").radii / scene.radius
+                                 radius_mode="adaptive").radii / scene.radius  # the points' own
         lines += ["", "Adaptive radii over d, median (10% / 90%) per part: " + ", ".join(
             f"{p} {np.median(radii[parts == p]):.2f} ({np.percentile(radii[parts == p], 10):.2f} / "
             f"{np.percentile(radii[parts == p], 90):.2f})" for p in counts) + "."]

@@ -145,7 +145,7 @@ def test_refused(shadow, scenes_dir):
         engine.irradiance(pts, photons=1000, gather=8)
     with pytest.raises(OclgiError, match="delta lights only"):
         cornell_engine(scenes_dir).irradiance(pts, photons=1000, direct="exact", gather=8)
-    for bad in (-1, 1.5, True, 70_000, "8"):
+    for bad in (-1, 1.5, True, 70_000, "8", float("nan")):
         with pytest.raises(OclgiError, match="gather must be an integer"):
             engine.irradiance(pts, photons=1000, direct="exact", gather=bad)
     with pytest.raises(OclgiError, match="gather_seed must be"):

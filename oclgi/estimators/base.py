@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from . import detp_direct, radius_options
+from . import detp_direct, gather_options, radius_options
 
 
 class Estimator:
@@ -163,9 +163,7 @@ class DetpEstimator(Estimator):
                  radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
                  consistent_span: float = 1.0, direct: str = "photons", gather: int = 0, gather_seed: int = 0,
                  **kw):
-        from . import final_gather  # (it builds on this module)
-
-        if final_gather.check(gather, gather_seed):
+        if gather_options.check(gather, gather_seed):
             # the points' discs give way to discs at the hits of their rays: a
             # different estimator over this variant (Engine.estimator makes it)
             raise OclgiError("gather > 0: build the estimator with Engine.estimator (final_gather.FinalGather "

@@ -61,29 +61,7 @@ from .. import queries
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import Estimator
-
-MAX_RAYS = 65536
-MAX_GATHER_SEED = 1 << 31  # the Philox counter's block is 2 gather_seed (+1): a uint
-
-
-def check(gather, gather_seed) -> int:
-    """The number of gather rays per point (0: none); one error line for a bad value."""
-    if isinstance(gather, (bool, np.bool_)) or not isinstance(gather, (int, np.integer)) \
-            or not 0 <= gather <= MAX_RAYS:
-        raise OclgiError(f"gather must be an integer from 0 (no final gathering) to {MAX_RAYS} rays per point, "
-                         f"got {gather!r}")
-    if isinstance(gather_seed, (bool, np.bool_)) or not isinstance(gather_seed, (int, np.integer)) \
-            or not 0 <= gather_seed < MAX_GATHER_SEED:
-        raise OclgiError(f"gather_seed must be an integer from 0 to 2^31 - 1, got {gather_seed!r}")
-    return int(gather)
-
-
-def refuse_incremental(options: dict, where: str) -> None:
-    """Sessions and light animations cannot keep a gathered estimate exact."""
-    if options.get("gather", 0):
-        raise OclgiError(f"{where}: gather (final gathering) is not offered here: its discs sit where the "
-                         "query points' rays hit, which a move changes; use gather = 0")
-
+from .gather_options import check
 
 def gather_key(run_seed: int, gather_seed: int) -> tuple:
     """The rays' Philox key words (the run's seed, 64 bits) and counter
@@ -131,7 +109,7 @@ class FinalGather(Estimator):
                          local_size=kw.get("local_size"), count_work=count_work)
         self.name = variant.name
         self.n_rays = n_rays
-        self.gather_seed = int(gather_seed)
+        self.gather_seed = int(gather_seed)  # checked integral by check()
         # The direct light at the points themselves (refuses area lights and skies, as direct 'exact' does).
         from .detp_direct import DirectLight
 

@@ -108,7 +108,7 @@ class Session(SessionBase):
     def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
         from ..estimators import ESTIMATORS
 
-        from ..estimators.final_gather import refuse_incremental
+        from ..estimators.gather_options import refuse_incremental
 
         cls = ESTIMATORS[method]
         refuse_incremental(options, "sessions")
