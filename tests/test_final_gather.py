@@ -169,3 +169,18 @@ def test_light_animations_refuse_it():
     reuse = LightReuse(oclgi.Engine(box(POSITIONS[0])), "lamp", POSITIONS, photons=500, seed=1, max_depth=2)
     with pytest.raises(OclgiError, match="light animations: gather"):
         reuse.estimator(points(), radius=0.1, direct="exact", gather=8)
+
+
+def test_the_study_compares_it(shadow):
+    """`oclgi study` (run_study) takes the option like any other: its rows
+    are labelled with it, and the seeds give the rays their noise."""
+    from oclgi.study import Config, run_study
+
+    engine, pts = shadow
+    plain = Config("detp_disc_index", [4_000, 12_000], radius=0.15, direct="exact")
+    gathered = Config("detp_disc_index", [4_000, 12_000], radius=0.15, direct="exact", gather=64)
+    result = run_study(engine, [plain, gathered], points=pts, seeds=3, reference="detp:48000", progress=False)
+    rows = [r for r in result.rows if "gather=64" in r.label]
+    assert len(rows) == 2 and len(result.rows) == 4
+    assert all(np.isfinite(r.summary["nrmse"]) for r in result.rows)
+    assert all((r.variance > 0).any() for r in rows), "each seed has its own rays"
