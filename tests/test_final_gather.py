@@ -184,3 +184,16 @@ def test_the_study_compares_it(shadow):
     assert len(rows) == 2 and len(result.rows) == 4
     assert all(np.isfinite(r.summary["nrmse"]) for r in result.rows)
     assert all((r.variance > 0).any() for r in rows), "each seed has its own rays"
+
+
+def test_a_render_gathers(scenes_dir):
+    """An image takes the option too (the camera's visible points gather; a
+    pixel that sees nothing gathers nothing): the same mean radiance as
+    without gathering, to the noise of a small run."""
+    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_ies.toml"))
+    kw = dict(width=24, height=24, photons=100_000, method="detp_disc_index", direct="exact")
+    gathered = engine.render(gather=32, **kw)
+    plain = engine.render(**kw)
+    assert np.isfinite(gathered.radiance).all()
+    np.testing.assert_allclose(gathered.radiance.mean(), plain.radiance.mean(), rtol=0.1)
+    assert not np.array_equal(gathered.radiance, plain.radiance)

@@ -124,7 +124,7 @@ class FinalGather(Estimator):
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
         self.weights_buf = self.upload(weights)
-        self.out = self.zeros(self.n * 16)
+        self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
         self.k_resolve = self.program("final_gather").final_gather_resolve
 
     @property
@@ -160,8 +160,8 @@ class FinalGather(Estimator):
     def resolve(self, scale: float) -> cl.Buffer:
         """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""
         hit_irr = self.inner.resolve(scale)
-        cl.enqueue_copy(self.queue, self.out, np.zeros((self.n, 4), np.float32))
-        self.direct.add(self.positions, self.normals, self.n, self.out)
-        launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.n, self.n_rays, self.out,
+        cl.enqueue_copy(self.queue, self.irr, np.zeros((self.n, 4), np.float32))
+        self.direct.add(self.positions, self.normals, self.n, self.irr)
+        launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.n, self.n_rays, self.irr,
                local_size=self.local_size)
-        return self.out
+        return self.irr
