@@ -61,7 +61,10 @@ from .. import queries
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import Estimator
+from .detp_direct import DirectLight
+from .detp_direct import check as check_direct
 from .gather_options import check
+
 
 def gather_key(run_seed: int, gather_seed: int) -> tuple:
     """The rays' Philox key words (the run's seed, 64 bits) and counter
@@ -100,7 +103,7 @@ class FinalGather(Estimator):
     def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
                  direct: str = "photons", seed: int = 0, **kw):
         n_rays = check(gather, gather_seed)
-        if direct != "exact":
+        if not check_direct(direct):
             raise OclgiError(f"gather (final gathering) needs direct = 'exact': the direct light of the points "
                              f"and of the hits by shadow rays, the discs the indirect light only (got direct = "
                              f"{direct!r})")
@@ -111,8 +114,6 @@ class FinalGather(Estimator):
         self.n_rays = n_rays
         self.gather_seed = int(gather_seed)  # checked integral by check()
         # The direct light at the points themselves (refuses area lights and skies, as direct 'exact' does).
-        from .detp_direct import DirectLight
-
         self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
         hits, weights = gather_rays(queue, compiled, points, n_rays, gather_key(int(seed), self.gather_seed),
                                     self.local_size)
