@@ -378,8 +378,10 @@ class Engine:
         points = as_query_points(points)
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         count_work = params.flag(count_work, "count_work")
-        budget.check(budget.irradiance_need(len(points), r.method, r.photons, r.max_depth, self.batch_bytes,
-                                            options.get("k")), self.queue.device)
+        # final gathering keeps a disc at each of the N hits of each point
+        rays = params.integral(options.get("gather", 0))
+        budget.check(budget.irradiance_need(len(points) * max(rays or 1, 1), r.method, r.photons, r.max_depth,
+                                            self.batch_bytes, options.get("k")), self.queue.device)
         est = self.estimator(points, r, count_work=count_work, **options)
         return Run(self, est, r, paths)
 
@@ -435,6 +437,12 @@ class Engine:
         if getattr(cls, "radii_maker", None) is not None and options.get("radius_mode") == "adaptive" \
                 and options.get("radii") is None:
             options = dict(options, pilot=self.pilot_paths(options))
+        if cls.family == "detp" and options.get("gather", 0):
+            from .estimators.final_gather import FinalGather
+
+            return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius, seed=params.seed,
+                               extension=params.extension, count_emitted=params.count_emitted,
+                               local_size=self.local_size, count_work=flag(count_work, "count_work"), **options)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size,
                    count_work=flag(count_work, "count_work"), **options)

@@ -33,6 +33,7 @@ VIEW = (8, 8)  # camera points of the Cornell box: 64
 SESSION_RADIUS = 0.15
 SESSION_POINTS = 64
 WORK_KEYS = ("t", "u", "nodes")
+GATHER = dict(method="detp_disc_index", photons=PHOTONS, radius=RADIUS, direct="exact", gather=8)
 
 
 def cornell_points(engine):
@@ -77,6 +78,12 @@ def irradiance(comm, out):
     if root:
         _save(out, "render_radiance", result.radiance)
         _save(out, "render_pixels", result.pixels)
+    # final gathering (a delta light: the IES downlight): its sums are the hits'
+    ies = oclgi.Engine(distributed.load_scene(comm, SCENES / "cornell_ies.toml"))
+    est = distributed.irradiance(ies, cornell_points(ies) if root else None, comm, **GATHER)
+    if root:
+        _save(out, "gather_acc", est.accumulators)
+        _save(out, "gather_irr", est.irradiance)
 
 
 def session(comm, out, moves_file):

@@ -144,24 +144,68 @@ def test_session_exact_with_first_frame_radii(moving, method):
     moving.move("bunny", np.eye(4))
 
 
-def test_patches_and_boundary_distance():
+def _boundary_distance_reference(patches, x, tri):
+    """Every point against every boundary edge of its patch, float64 (numpy)."""
+    out = np.full(len(x), np.inf)
+    for i, (p, t) in enumerate(zip(np.asarray(x, np.float64), tri)):
+        if t < 0:
+            continue
+        patch = patches.label[t]
+        e = patches.edges[patches.offsets[patch]:patches.offsets[patch + 1]]
+        if len(e):
+            a, ab = e[:, 0], e[:, 1] - e[:, 0]
+            s = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+            out[i] = np.linalg.norm(p - (a + s[:, None] * ab), axis=1).min()
+    return out
+
+
+def test_patches_and_boundary_distance(cl_env):
     """A unit cube: six patches (faces 90 degrees apart); a finely cut square
-    is one patch whatever its tessellation; distances to the boundary."""
+    is one patch whatever its tessellation; distances to the boundary (the
+    device's float32, kernels/surface_patches.cl)."""
     from analytic_scenes import grid
 
+    _, queue = cl_env
     v, f = grid(8, 1.0)  # a 2 x 2 square, 128 triangles
     patches = SurfacePatches(v, f)
     assert patches.n_patches == 1
     assert len(patches.edges) == 4 * 8
     x = np.array([[0.0, 0, 0], [0.9, 0, 0], [0.5, 0, -0.7]])
     tri = np.zeros(3, np.int64)
-    np.testing.assert_allclose(patches.boundary_distance(x, tri), [1.0, 0.1, 0.3], atol=1e-12)
+    np.testing.assert_allclose(patches.boundary_distance(queue, x, tri), [1.0, 0.1, 0.3], atol=1e-6)
     cube_v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
     cube_f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
     cube = SurfacePatches(cube_v, cube_f)
     assert cube.n_patches == 6
-    assert cube.boundary_distance(np.array([[0.5, 0.5, 0.0]]), np.array([0]))[0] == pytest.approx(0.5)
+    assert cube.boundary_distance(queue, np.array([[0.5, 0.5, 0.0]]), np.array([0]))[0] == pytest.approx(0.5)
+
+
+def test_boundary_distance_against_a_float64_reference(cl_env, rng):
+    """The device's distances equal every-edge float64 ones on a mesh of many
+    patches (a cube, a fine square, a bent strip), points on random
+    triangles and some on none."""
+    from analytic_scenes import grid
+
+    _, queue = cl_env
+    v1, f1 = grid(12, 1.5)
+    cube_v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float) + [3.0, 0.2, 0.0]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    cube_f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    strip_v = np.array([[x, 0.3 * np.sin(x), z] for x in np.linspace(-2, 2, 9) for z in (4.0, 5.0)])
+    strip_f = np.array([t for i in range(8) for t in ((2 * i, 2 * i + 1, 2 * i + 3), (2 * i, 2 * i + 3, 2 * i + 2))])
+    v = np.concatenate([v1, cube_v, strip_v])
+    f = np.concatenate([f1, cube_f + len(v1), strip_f + len(v1) + len(cube_v)])
+    patches = SurfacePatches(v, f)
+    assert patches.n_patches >= 8
+    tri = rng.integers(-1, len(f), 500)
+    b = rng.dirichlet([1, 1, 1], 500)
+    x = np.einsum("rk,rkc->rc", b, v[f[np.maximum(tri, 0)]])
+    got = patches.boundary_distance(queue, x, tri)
+    want = _boundary_distance_reference(patches, x, tri)
+    assert np.array_equal(np.isinf(got), np.isinf(want)) and np.isinf(got).any()
+    fin = np.isfinite(want)
+    np.testing.assert_allclose(got[fin], want[fin], rtol=1e-5, atol=1e-6)
 
 
 @pytest.fixture(scope="module")

@@ -68,6 +68,8 @@ def single():
     out["work"] = [work[k] for k in worker.WORK_KEYS]
     out["render"] = engine.render(width=worker.VIEW[0], height=worker.VIEW[1], method="detp_disc_index",
                                   photons=worker.PHOTONS, radius=worker.RADIUS)
+    ies = oclgi.Engine(oclgi.load_file(worker.SCENES / "cornell_ies.toml"))
+    out["gather"] = ies.irradiance(worker.cornell_points(ies), **worker.GATHER)
     return out
 
 
@@ -109,6 +111,10 @@ def test_every_estimator_equals_one_process(tmp_path, single, ranks):
     assert any(single["work"]) and np.load(tmp_path / "work.npy").tolist() == single["work"]
     assert _same(np.load(tmp_path / "render_radiance.npy"), single["render"].radiance)
     assert _same(np.load(tmp_path / "render_pixels.npy"), single["render"].pixels)
+    gather = single["gather"]
+    assert len(gather.accumulators) == 8 * len(gather.irradiance) and gather.accumulators.any()
+    assert _same(np.load(tmp_path / "gather_acc.npy"), gather.accumulators)
+    assert _same(np.load(tmp_path / "gather_irr.npy"), gather.irradiance)
 
 
 @pytest.mark.parametrize("ranks", [2, 3])

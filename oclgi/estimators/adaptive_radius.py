@@ -47,7 +47,8 @@ makes the session's exact update hold (oclgi/incremental/session.py builds
 the estimator once; its radii stay those of the first frame).
 
 Cost: the pilot trace, the pilot's k-nearest index (host build, about 1 s
-for 10^5 segments) and one search per point, and the patches (host numpy).
+for 10^5 segments) and one search per point, and the patches (host numpy,
+once) and each point's distance to its patch's boundary (on the device).
 
 Parameters (options of ``detp`` and ``detp_disc_index``):
 
@@ -135,6 +136,6 @@ class AdaptiveRadii:
             ratio = np.sqrt(d2[:, -1].astype(np.float64)) / self.r_u  # inf: fewer than k found
         r_dens = d * np.clip(ratio, self.radius_min, 1.0)
         tri = points.tri
-        cap = np.maximum(self.patches.boundary_distance(points.positions, tri),
+        cap = np.maximum(self.patches.boundary_distance(self.queue, points.positions, tri, self.local_size),
                          np.minimum(self.radius_min * d, self.patches.patch_size(tri)))
         return np.minimum(r_dens, cap)

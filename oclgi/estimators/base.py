@@ -16,7 +16,7 @@ import pyopencl as cl
 
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
-from . import detp_direct, radius_options
+from . import detp_direct, gather_options, radius_options
 
 
 class Estimator:
@@ -143,7 +143,10 @@ class DetpEstimator(Estimator):
     direct light from the photons' first segments, as the indirect) or
     "exact" (delta lights only: the first segments do not count and the
     resolve adds the direct irradiance by shadow rays,
-    oclgi/estimators/detp_direct.py). Every variant selects segments
+    oclgi/estimators/detp_direct.py); ``gather`` N > 0 with
+    ``gather_seed``: final gathering, the discs at the hits of N cosine
+    rays per point (oclgi/estimators/final_gather.py, made by
+    Engine.estimator). Every variant selects segments
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
     same sums, bit for bit.
     """
@@ -158,7 +161,13 @@ class DetpEstimator(Estimator):
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
                  radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
-                 consistent_span: float = 1.0, direct: str = "photons", **kw):
+                 consistent_span: float = 1.0, direct: str = "photons", gather: int = 0, gather_seed: int = 0,
+                 **kw):
+        if gather_options.check(gather, gather_seed):
+            # the points' discs give way to discs at the hits of their rays: a
+            # different estimator over this variant (Engine.estimator makes it)
+            raise OclgiError("gather > 0: build the estimator with Engine.estimator (final_gather.FinalGather "
+                             f"over {self.name})")
         radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
         exact_direct = detp_direct.check(direct)
         span = radius_options.consistent_span(consistent, consistent_span)

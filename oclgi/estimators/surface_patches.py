@@ -24,8 +24,8 @@ tessellated plane would cap the radius to the tessellation; the patch
 follows the surface, not the mesh.
 
 Cost: the patches, O(F log F) on the host; the distances, every point
-against every boundary edge of its own patch, O(points x edges per patch)
-in chunks of ``PAIRS`` point-edge pairs (numpy float64).
+against every boundary edge of its own patch, O(points x edges per patch),
+one work-item per point on the device (kernels/surface_patches.cl).
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from __future__ import annotations
 import numpy as np
 
 SMOOTH_COS = float(np.cos(np.radians(25.0)))  # neighbours closer than 25 degrees are one patch
-PAIRS = 1 << 22  # point-edge pairs per chunk of the distance computation
 
 
 def triangle_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -98,38 +97,37 @@ class SurfacePatches:
         self.edges, self.edge_patch = ends[by], patch[by]
         self.offsets = np.searchsorted(self.edge_patch, np.arange(self.n_patches + 1))
 
-    def boundary_distance(self, positions: np.ndarray, tri: np.ndarray) -> np.ndarray:
-        """Distance from each point (``positions`` (n, 3) on triangle ``tri``)
-        to the boundary of its patch: inf for a closed patch (a sphere) or a
-        point on no triangle (tri < 0)."""
-        x = np.asarray(positions, np.float64)[:, :3]
-        tri = np.asarray(tri, np.int64)
-        out = np.full(len(x), np.inf)
-        on = np.nonzero(tri >= 0)[0]
-        patch = self.label[tri[on]]
-        lo, hi = self.offsets[patch], self.offsets[patch + 1]
-        count = hi - lo
-        start = 0
-        while start < len(on):
-            # as many points as keep the chunk's pairs within PAIRS (at least one)
-            cum = np.cumsum(count[start:])
-            stop = start + max(1, int(np.searchsorted(cum, PAIRS, side="right")))
-            c = count[start:stop]
-            if c.sum():
-                who = np.repeat(np.arange(start, stop), c)
-                first = np.repeat(lo[start:stop] - np.cumsum(c) + c, c)
-                e = first + np.arange(len(who))
-                a, b = self.edges[e, 0], self.edges[e, 1]
-                p = x[on[who]]
-                ab = b - a
-                t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300),
-                            0.0, 1.0)
-                d = np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
-                best = np.full(stop - start, np.inf)
-                np.minimum.at(best, who - start, d)
-                out[on[start:stop]] = best
-            start = stop
-        return out
+    def boundary_distance(self, queue, positions: np.ndarray, tri: np.ndarray, local_size=None) -> np.ndarray:
+        """Distance from each point (``positions`` (n, 3 or 4) on triangle
+        ``tri``) to the boundary of its patch, on the device
+        (kernels/surface_patches.cl, float32): inf for a closed patch (a
+        sphere) or a point on no triangle (tri < 0)."""
+        import pyopencl as cl
+
+        from ..cl.programs import launch, programs
+
+        n = len(positions)
+        if n == 0:
+            return np.zeros(0)
+        ctx = queue.context
+        mf = cl.mem_flags
+        if getattr(self, "_device", (None,))[0] is not ctx:  # the patches' tables, uploaded once per context
+            ends = np.zeros((max(len(self.edges), 1), 2, 4), np.float32)
+            ends[:len(self.edges), :, :3] = self.edges
+            tables = (self.label.astype(np.int32), self.offsets.astype(np.int32), ends)
+            self._device = (ctx, *(cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(t))
+                                   for t in tables))
+        _, label, offsets, edges = self._device
+        pos = np.zeros((n, 4), np.float32)
+        pos[:, :3] = np.asarray(positions)[:, :3]
+        pos_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pos)
+        tri_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(tri, np.int32))
+        out = np.empty(n, np.float32)
+        out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, out.nbytes)
+        launch(queue, programs(ctx).get("surface_patches").patch_boundary_distance, n, pos_buf, tri_buf, label,
+               offsets, edges, n, out_buf, local_size=local_size)
+        cl.enqueue_copy(queue, out, out_buf)
+        return out.astype(np.float64)
 
     def patch_size(self, tri: np.ndarray) -> np.ndarray:
         """Half the radius of the disc with the area of each point's patch:

@@ -108,7 +108,10 @@ class Session(SessionBase):
     def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
         from ..estimators import ESTIMATORS
 
+        from ..estimators.gather_options import refuse_incremental
+
         cls = ESTIMATORS[method]
+        refuse_incremental(options, "sessions")
         if not cls.incremental:
             raise OclgiError(f"method {method!r} has no exact incremental update; sessions take "
                              f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")

@@ -307,6 +307,9 @@ class LightReuse:
         with the run's parameters: n photons, for the resolve)."""
         from .. import queries
 
+        if options.get("gather", 0):  # (the estimators' refusal, gather_options.refuse_incremental, in words)
+            raise OclgiError("light animations: gather (final gathering) is not offered here: its discs sit "
+                             "where the query points' rays hit, and each frame's would need its own; use gather = 0")
         if not isinstance(points, queries.QueryPoints):  # an (n, 6) array, as Engine.irradiance takes
             a = queries.real_array(points, "points")
             if a.ndim != 2 or a.shape[1] != 6:

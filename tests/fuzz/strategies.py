@@ -625,9 +625,9 @@ def _ints(lo, hi):
 
 
 OPTION_KEYS = ["q", "order", "leaf_size", "k", "estimator", "extension", "count_emitted", "radius", "photons",
-               "bogus", "", "max_depth"]
+               "bogus", "", "max_depth", "direct", "gather", "gather_seed"]
 OPTION_VALUES = ["0.6", "morton", "hilbert", "none", "8", "50", "k", "radius", "0", "0.1", "true", "false",
-                 "-1", "nan", "inf", "1e400", "", "x", "1000000000", "2", "1.5"]
+                 "-1", "nan", "inf", "1e400", "", "x", "1000000000", "2", "1.5", "exact", "65536"]
 option = st.builds(lambda k, v, eq: f"{k}{eq}{v}", st.sampled_from(OPTION_KEYS), st.sampled_from(OPTION_VALUES),
                    st.sampled_from(["=", "=", ":", ""]))
 COMMON = {

@@ -1,0 +1,168 @@
+"""Final gathering for DETP (the option ``gather = N`` of every DETP
+variant; the kernels are kernels/final_gather.cl).
+
+Why. A DETP disc reads the mean irradiance over the disc from the
+segments that cross it, so its error is the disc's: noise (a disc
+catches few segments where the light is dim) and bias (the mean over the
+disc is not the point's value near corners, edges and occluders). On a
+scene lit mostly indirectly (the courtyard of bench/complex_scenes.py:
+most points see no sun) both fall on the indirect light, which is
+smooth over the hemisphere a point sees. Final gathering (Jensen's) moves
+the density estimate one bounce away: from each query point x, N
+cosine-distributed rays find the surfaces x sees, DETP estimates the
+irradiance E(h) at those hits, and
+
+    E(x) = E_direct(x) + (1 / N) sum_j rho(h_j) E(h_j)
+
+(diffuse hits: their radiance towards x is rho E / pi, and cosine
+sampling's pdf is cos / pi). The disc's bias and noise at the hits are
+averaged over N different discs, and x's own disc, the one that straddles
+x's corner or shadow edge, is gone.
+
+What. ``gather = N`` (1 to 65536 rays per point; 0, the default: no
+gathering) needs ``direct = "exact"``: the direct light of x and of each
+hit comes by shadow rays (oclgi/estimators/detp_direct.py), the discs at
+the hits carry the indirect light only, so nothing is counted twice
+(a gather ray never reaches a delta light). Emitted light is not
+gathered, so scenes with area lights or a sky are refused, as
+``direct = "exact"`` refuses them. The rays' random numbers are Philox
+keyed by the run's seed, with ``gather_seed`` (default 0) in the counter: a
+pure function of (seeds, point, ray, surface), so runs of different seeds
+have independent rays (the study's variance is the gather's too). The discs at the hits are the variant's own (fixed or adaptive
+radii, any DETP variant); their sums are its 64-bit fixed-point sums over
+N discs per point; the gather's resolve adds each point's N rays in a
+fixed order, one work-item per point, so the result is the same bits for
+every work-group size and batch split.
+
+The rays go through mirrors, glass and highlights as camera rays do
+(kernels/camera.cl's rules) and stop at the first surface with a diffuse
+part; the weight a hit is seen with includes its albedo (textures too).
+
+Bias traded: the disc's, at the hits instead of at x (one bounce away,
+where a disc's mean over its area changes E(x) little), plus the ray's
+lift of eps off x. Variance: the hemisphere's (how much rho E varies over
+what x sees) over N, plus the discs' noise averaged over N discs.
+
+Cost: N rays per point at setup, N discs per point (a disc index of N n_P
+discs: the segments' walk meets about N times more discs), and N shadow
+rays per point and light at each resolve.
+
+Refused where it could not be exact: sessions and light animations (the
+hits depend on the geometry, and the discs are not the query points);
+their errors say so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from .. import queries
+from ..cl.programs import launch, programs
+from ..errors import OclgiError
+from .base import Estimator
+from .detp_direct import DirectLight
+from .detp_direct import check as check_direct
+from .gather_options import check
+
+
+def gather_key(run_seed: int, gather_seed: int) -> tuple:
+    """The rays' Philox key words (the run's seed, 64 bits) and counter
+    block (gather_seed): every pair has its own rays."""
+    return np.uint32(run_seed & 0xFFFFFFFF), np.uint32(run_seed >> 32), np.uint32(gather_seed)
+
+
+def gather_rays(queue, compiled, points, n_rays: int, key: tuple, local_size=None):
+    """The hits of ``n_rays`` cosine rays per point (kernels/final_gather.cl
+    final_gather_rays) with Philox key ``key`` (gather_key): (QueryPoints
+    of the hits, point-major, and their (n * n_rays, 4) float32 weights)."""
+    ctx = queue.context
+    n = len(points) * n_rays
+    mf = cl.mem_flags
+    pts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(points.positions))
+    nrm = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(points.normals))
+    pos, hn, bary, wt = (cl.Buffer(ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8, 16))
+    c = compiled
+    k = programs(ctx).get("final_gather").final_gather_rays
+    launch(queue, k, n, *c.scene_args, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
+           c.tri_normals, c.tri_material, c.materials, pts, nrm, len(points), int(n_rays), *key,
+           np.float32(c.eps), pos, hn, bary, wt, local_size=local_size)
+    host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
+    for h, dev in zip(host, (pos, hn, bary, wt)):
+        cl.enqueue_copy(queue, h, dev)
+    return queries.QueryPoints(*host[:3]), host[3]
+
+
+class FinalGather(Estimator):
+    """A DETP variant's discs at the hits of N rays per point, gathered back
+    to the points (see the module's docstring)."""
+
+    family = "detp"
+    incremental = False  # the hits move with the geometry (refused by sessions)
+
+    def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
+                 direct: str = "photons", seed: int = 0, **kw):
+        n_rays = check(gather, gather_seed)
+        if not check_direct(direct):
+            raise OclgiError(f"gather (final gathering) needs direct = 'exact': the direct light of the points "
+                             f"and of the hits by shadow rays, the discs the indirect light only (got direct = "
+                             f"{direct!r})")
+        count_work = kw.pop("count_work", False)
+        super().__init__(queue, compiled, points, count_emitted=kw.get("count_emitted", True),
+                         local_size=kw.get("local_size"), count_work=count_work)
+        self.name = variant.name
+        self.n_rays = n_rays
+        self.gather_seed = int(gather_seed)  # checked integral by check()
+        # The direct light at the points themselves (refuses area lights and skies, as direct 'exact' does).
+        self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
+        hits, weights = gather_rays(queue, compiled, points, n_rays, gather_key(int(seed), self.gather_seed),
+                                    self.local_size)
+        self.hits = hits
+        self.hit_weights = weights
+        # The variant's own discs at the hits, with their own exact direct light.
+        self.inner = variant(queue, compiled, hits, radius, direct="exact", count_work=count_work, **kw)
+        self.radius = self.inner.radius
+        self.positions = self.upload(points.positions)
+        self.normals = self.upload(points.normals)
+        self.weights_buf = self.upload(weights)
+        self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
+        self.k_resolve = self.program("final_gather").final_gather_resolve
+
+    @property
+    def radii(self) -> np.ndarray:
+        """The discs' radii, one per hit (point-major, n_rays per point)."""
+        return self.inner.radii
+
+    def accumulate(self, batch):
+        self.inner.accumulate(batch)
+
+    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
+        self.inner.first_batch(paths_done, paths_total, segments)
+
+    def accumulators(self) -> np.ndarray:
+        """The hits' int64 sums (n * n_rays rows, point-major)."""
+        return self.inner.accumulators()
+
+    def state(self) -> dict:
+        return self.inner.state()
+
+    def restore(self, state: dict) -> None:
+        self.inner.restore(state)
+
+    def work(self) -> dict | None:
+        return self.inner.work()
+
+    def replace_points(self, index, new) -> None:
+        raise OclgiError("gather (final gathering): the query points cannot be replaced (sessions refuse it)")
+
+    def set_accumulators(self, index, values) -> None:
+        raise OclgiError("gather (final gathering): the sums are the hits', not the points'")
+
+    def resolve(self, scale: float) -> cl.Buffer:
+        """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""
+        hit_irr = self.inner.resolve(scale)
+        cl.enqueue_copy(self.queue, self.irr, np.zeros((self.n, 4), np.float32))
+        self.direct.add(self.positions, self.normals, self.n, self.irr)
+        launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.n, self.n_rays, self.irr,
+               local_size=self.local_size)
+        return self.irr

@@ -1,0 +1,30 @@
+"""The options of DETP's final gathering (oclgi/estimators/final_gather.py)
+checked, and the refusal of the places that cannot keep it exact; apart, so
+that the DETP base class can check them without importing the estimator
+built on it."""
+
+from __future__ import annotations
+
+from ..errors import OclgiError
+from ..params import integral
+
+MAX_RAYS = 65536
+MAX_GATHER_SEED = 1 << 31  # the Philox counter's block is 2 gather_seed (+1): a uint
+
+
+def check(gather, gather_seed) -> int:
+    """The number of gather rays per point (0: none); one error line for a bad value."""
+    n, seed = integral(gather), integral(gather_seed)
+    if n is None or not 0 <= n <= MAX_RAYS:
+        raise OclgiError(f"gather must be an integer from 0 (no final gathering) to {MAX_RAYS} rays per point, "
+                         f"got {gather!r}")
+    if seed is None or not 0 <= seed < MAX_GATHER_SEED:
+        raise OclgiError(f"gather_seed must be an integer from 0 to 2^31 - 1, got {gather_seed!r}")
+    return n
+
+
+def refuse_incremental(options: dict, where: str) -> None:
+    """Sessions cannot keep a gathered estimate exact (light animations say so in their own words)."""
+    if options.get("gather", 0):
+        raise OclgiError(f"{where}: gather (final gathering) is not offered here: its discs sit where the "
+                         "query points' rays hit, which a move changes; use gather = 0")
