@@ -47,6 +47,14 @@ VIEW_IDS = {"srgb": constants.VIEW_SRGB, "agx": constants.VIEW_AGX, "filmic": co
 LAYER_CHANNELS = {"irradiance": "RGB", "albedo": "RGB", "normal": "XYZ", "depth": "Z"}
 
 
+def gather_rays(options: dict) -> int:
+    """Final gathering's rays per point among an estimate's options (0:
+    none), for the memory check; an invalid value counts 0 here and is
+    refused with its reason when the estimator reads it."""
+    value = options.get("gather", 0)
+    return int(value) if params.integral(value) and int(value) > 0 else 0
+
+
 def render_layers(points, irradiance: np.ndarray, albedo: np.ndarray, camera, spp: int) -> dict:
     """A render's layers (compositing, denoisers): the irradiance E (W/m^2),
     the albedo and the normal (world space, towards the camera) of the
@@ -378,10 +386,8 @@ class Engine:
         points = as_query_points(points)
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         count_work = params.flag(count_work, "count_work")
-        # final gathering keeps a disc at each of the N hits of each point
-        rays = params.integral(options.get("gather", 0))
-        budget.check(budget.irradiance_need(len(points) * max(rays or 1, 1), r.method, r.photons, r.max_depth,
-                                            self.batch_bytes, options.get("k")), self.queue.device)
+        budget.check(budget.irradiance_need(len(points), r.method, r.photons, r.max_depth, self.batch_bytes,
+                                            options.get("k"), gather_rays(options)), self.queue.device)
         est = self.estimator(points, r, count_work=count_work, **options)
         return Run(self, est, r, paths)
 
@@ -525,7 +531,8 @@ class Engine:
         spp = params.samples_per_pixel(spp)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
         budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                        self.batch_bytes, estimate_args.get("k")), self.queue.device)
+                                        self.batch_bytes, estimate_args.get("k"), gather_rays(estimate_args)),
+                     self.queue.device)
         return cam, spp, self.camera_points(cam, spp=spp, lift=r.radius)
 
     def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False,

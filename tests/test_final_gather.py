@@ -197,3 +197,17 @@ def test_a_render_gathers(scenes_dir):
     assert np.isfinite(gathered.radiance).all()
     np.testing.assert_allclose(gathered.radiance.mean(), plain.radiance.mean(), rtol=0.1)
     assert not np.array_equal(gathered.radiance, plain.radiance)
+
+
+
+def test_memory_is_checked_before_gathering(shadow):
+    """N gather hits per point are N discs per point: a job whose hits
+    cannot fit is refused before any work, naming the gather rays, where
+    the same job without gathering is only checked for its points."""
+    engine, pts = shadow
+    many = np.tile(pts, (5000, 1))  # 120,000 points x 65,536 rays: 7.9e9 discs
+    with pytest.raises(OclgiError, match="with 65,536 gather rays each.*use fewer gather rays"):
+        engine.irradiance(many, photons=1000, direct="exact", gather=65536)
+    with pytest.raises(OclgiError, match="with 65,536 gather rays a pixel.*use fewer gather rays"):
+        engine.render(oclgi.Camera((0.0, 1.0, 4.0), (0.0, 0.0, 0.0)), width=640, height=480, photons=1000,
+                      direct="exact", gather=65536)
