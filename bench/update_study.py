@@ -16,8 +16,9 @@ hold), per f:
 - time: a camera session's median update time vs a full recomputation;
 - the static points' constants: counted work of an update per changed
   segment, disc indexing vs the sphere cache (the model's 2 vs 8.08);
-- the dynamic points (pixels on the moving object): disc indexing folded
-  into the find pass, disc indexing alone, the sphere cache;
+- the dynamic points (pixels on the moving object): disc indexing over
+  the paths near their discs after the update (the default), folded into
+  the find pass, over the whole store, the sphere cache;
 - the interactive rate on the Cornell box and on Sponza, each with the
   Stanford bunny (f = 0.1) going round: updates per second with the time
   split per stage, and the process' memory over the frames; and the rate
