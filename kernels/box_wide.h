@@ -48,36 +48,12 @@ inline void box_wide_start(BoxWideWalk *walk)
     walk->visited = 0;
 }
 
-/* Inlined into every walk: called as a function, the walk's state went
- * through memory, and each push below waited on the stack pointer's last
- * store (a fifth of the disc index's node time under perf). */
-#define BOX_WIDE_INLINE inline __attribute__((always_inline))
-
 /* box_slab (box.h) on the node's 8 child boxes at once: lane k is -1 when
  * the segment o + t w, tmin <= t <= tmax, meets child k's box. With tmin =
  * 0 the operations are box_slab's; a tmin > 0 only raises the entry (the
- * part of a segment a query can skip, detp_disc_index.h).
- *
- * `finite`: every 1/w is finite; then (lo - o) * inv and (hi - o) * inv
- * are never NaN for a used lane's finite planes and are ordered by the sign
- * of inv alone (rounding is monotone), so taking the near plane's product
- * as the entry and the far one's as the exit gives fmin's and fmax's
- * values, up to the sign of a zero, which no comparison below sees: the
- * same lanes meet, with half the min/max operations (bvh.h does the same).
- * An unused lane (child 0, planes +inf) may then give anything: the walk
- * masks it. Otherwise box_slab's NaN-dropping form is used. */
-BOX_WIDE_INLINE int8 box8_meets_segment(__global const BvhNode8 *n, int finite, int3 near, float3 o, float3 inv,
-                                        float tmin, float tmax)
+ * part of a segment a query can skip, detp_disc_index.h). */
+inline int8 box8_meets_segment(__global const BvhNode8 *n, float3 o, float3 inv, float tmin, float tmax)
 {
-    if (finite) {
-        __global const float8 *f = &n->lox;
-        float8 t0x = (f[near.x] - o.x) * inv.x, t1x = (f[3 - near.x] - o.x) * inv.x;
-        float8 t0y = (f[near.y] - o.y) * inv.y, t1y = (f[5 - near.y] - o.y) * inv.y;
-        float8 t0z = (f[near.z] - o.z) * inv.z, t1z = (f[7 - near.z] - o.z) * inv.z;
-        float8 e = max(max(t0x, t0y), max(t0z, (float8)(tmin)));
-        float8 leave = min(min(t1x, t1y), min(t1z, (float8)(tmax))) * 1.0000004f;
-        return e <= leave;
-    }
     float8 t0x = (n->lox - o.x) * inv.x, t1x = (n->hix - o.x) * inv.x;
     float8 t0y = (n->loy - o.y) * inv.y, t1y = (n->hiy - o.y) * inv.y;
     float8 t0z = (n->loz - o.z) * inv.z, t1z = (n->hiz - o.z) * inv.z;
@@ -87,27 +63,17 @@ BOX_WIDE_INLINE int8 box8_meets_segment(__global const BvhNode8 *n, int finite, 
 }
 
 /* The next leaf the segment (tmin <= t <= tmax) meets, as its lane value
- * ~(first << BITS | count - 1) (< 0); 0 when done. The stack pointer and
- * the count live in registers for the whole step. */
-BOX_WIDE_INLINE int box_wide_next_segment(BoxWideWalk *walk, __global const BvhNode8 *nodes, float3 o, float3 inv,
-                                          float tmin, float tmax)
+ * ~(first << BITS | count - 1) (< 0); 0 when done. */
+inline int box_wide_next_segment(BoxWideWalk *walk, __global const BvhNode8 *nodes, float3 o, float3 inv,
+                                 float tmin, float tmax)
 {
-    int finite = isfinite(inv.x) && isfinite(inv.y) && isfinite(inv.z);
-    /* the near planes' field indices (lo x..z = 0..2, hi x..z = 3..5) */
-    int3 near = (int3)(inv.x >= 0.0f ? 0 : 3, inv.y >= 0.0f ? 1 : 4, inv.z >= 0.0f ? 2 : 5);
-    int sp = walk->sp;
-    uint visited = walk->visited;
-    int found = 0;
-    while (sp > 0) {
-        int c = walk->stack[--sp];
-        if (c < 0) {
-            found = c;
-            break;
-        }
+    while (walk->sp > 0) {
+        int c = walk->stack[--walk->sp];
+        if (c < 0) return c;
         __global const BvhNode8 *n = &nodes[c];
-        visited++;
+        walk->visited++;
         int8 child = n->child;
-        int8 hit = box8_meets_segment(n, finite, near, o, inv, tmin, tmax) & (child != 0);
+        int8 hit = box8_meets_segment(n, o, inv, tmin, tmax) & (child != 0);
         if (!any(hit)) continue;
         int ch[OCLGI_LANES], h[OCLGI_LANES];
         vstore8(child, 0, ch);
@@ -115,13 +81,11 @@ BOX_WIDE_INLINE int box_wide_next_segment(BoxWideWalk *walk, __global const BvhN
         /* Branch-free compaction: every lane is written, the stack grows by
          * the lanes hit (h = -1); the host sizes the stack for 8 writes. */
         for (int k = 0; k < OCLGI_LANES; ++k) {
-            walk->stack[sp] = ch[k];
-            sp -= h[k];
+            walk->stack[walk->sp] = ch[k];
+            walk->sp -= h[k];
         }
     }
-    walk->sp = sp;
-    walk->visited = visited;
-    return found;
+    return 0;
 }
 
 #endif

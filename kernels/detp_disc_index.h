@@ -81,24 +81,15 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
         (n_visited) += walk_.visited;                                                             \
     } while (0)
 
-/* ON_HIT(id) for each lane k_ of block b_ where hit (an int8) is set, in
- * lane order. The lanes hit are gathered into a bit mask and visited set
- * bit by set bit: a branch per lane mispredicted on most blocks with a
- * hit (about one lane in seven is a crossing). */
+/* ON_HIT(id) for each lane of block b_ where hit (an int8) is set. */
 #define DISC_LANES(hit, b_, ON_HIT)                                                                \
     do {                                                                                          \
-        int8 bits_ = (hit) & (int8)(1, 2, 4, 8, 16, 32, 64, 128);                                 \
-        int4 b4_ = bits_.lo | bits_.hi;                                                           \
-        int2 b2_ = b4_.lo | b4_.hi;                                                               \
-        uint m_ = (uint)(b2_.x | b2_.y);                                                          \
-        if (m_) {                                                                                 \
-            int ids_[OCLGI_LANES];                                                                \
+        if (any(hit)) {                                                                           \
+            int ids_[OCLGI_LANES], h_[OCLGI_LANES];                                               \
             vstore8((b_)->id, 0, ids_);                                                           \
-            do {                                                                                  \
-                int k_ = 31 - (int)clz(m_ & (0u - m_)); /* the lowest lane left */                \
-                m_ &= m_ - 1u;                                                                    \
-                ON_HIT(ids_[k_]);                                                                 \
-            } while (m_);                                                                         \
+            vstore8((hit), 0, h_);                                                                \
+            for (int k_ = 0; k_ < OCLGI_LANES; ++k_)                                              \
+                if (h_[k_]) ON_HIT(ids_[k_]);                                                     \
         }                                                                                         \
     } while (0)
 
