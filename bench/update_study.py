@@ -16,8 +16,9 @@ hold), per f:
 - time: a camera session's median update time vs a full recomputation;
 - the static points' constants: counted work of an update per changed
   segment, disc indexing vs the sphere cache (the model's 2 vs 8.08);
-- the dynamic points (pixels on the moving object): disc indexing folded
-  into the find pass, disc indexing alone, the sphere cache;
+- the dynamic points (pixels on the moving object): disc indexing over
+  the paths near their discs after the update (the default), folded into
+  the find pass, over the whole store, the sphere cache;
 - the interactive rate on the Cornell box and on Sponza, each with the
   Stanford bunny (f = 0.1) going round: updates per second with the time
   split per stage, and the process' memory over the frames; and the rate
@@ -247,21 +248,23 @@ def static_constants(quick, rng):
 
 def dynamic_points(quick, frames=8):
     """Dynamic points (pixels on the moving bunny, Cornell box, f = 0.1):
-    disc indexing in the find pass (fused), disc indexing in a pass of its
-    own, and the sphere cache; counted work and time per update."""
+    disc indexing over the paths near the discs after the update (the
+    default), in the find pass (fused), in a pass over the whole store, and
+    the sphere cache; counted work and time per update."""
     side = 100 if quick else 316
     engine, base, path_r = scene_engine("cornell", side)
     engine.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, 0))
     photons = photons_for(engine, 1e5 if quick else 1e6)
     rows = []
-    for label, dynamic, fuse in (("disc index, fused with find", "detp_disc_index", True),
-                                 ("disc index, own pass", "detp_disc_index", False),
-                                 ("sphere cache, own pass", "detp_sphere_cache", False)):
+    for label, dynamic, mode in (("disc index, paths near the discs", "detp_disc_index", "listed"),
+                                 ("disc index, fused with find", "detp_disc_index", "find"),
+                                 ("disc index, own pass", "detp_disc_index", "store"),
+                                 ("sphere cache, own pass", "detp_sphere_cache", "store")):
         for count in (True, False):
             engine.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, 0))
             s = oclgi.Session(engine, method="detp_disc_index", photons=photons, radius=0.03, dynamic=dynamic,
                               count_work=count)
-            s.fuse_find = fuse
+            s.dynamic_pass = mode
             n_r = int(s.segments()[1].sum())
             dyn_work, times, n_d, n_rec = {"t": 0, "u": 0, "nodes": 0}, [], [], []
             for i in range(1, frames + 1):

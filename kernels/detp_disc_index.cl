@@ -24,6 +24,9 @@
  * detp_disc_index_change  (below) a move's subtraction and addition in one
  *                  pass, the common part of each suffix's first segment
  *                  skipped.
+ *
+ * detp_disc_index_listed  (below) detp_disc_index over the listed paths of
+ *                  a store only.
  */
 #include "oclgi_types.h"
 #include "segment.h"
@@ -85,6 +88,27 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
     }
     disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
     disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
+    WORK_U(tests);
+    WORK_NODE(visited);
+    WORK_FLUSH(work);
+}
+
+/* detp_disc_index over the store's paths list[0 .. n_list) only, one
+ * work-item each: a camera session's dynamic points summed over the paths
+ * whose cell masks meet their discs' box (update.cl update_candidates),
+ * which hold every segment that can cross one of them. */
+__kernel void detp_disc_index_listed(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                                     __global const Segment *segments, __global const int *list, int n_list,
+                                     int max_depth, int count_emitted, float ext,
+                                     __global long *acc, __global ulong *work)
+{
+    int i = get_global_id(0);
+    if (i >= n_list) return;
+    WORK_DECL;
+    uint visited = 0;
+    ulong tests = 0;
+    disc_index_path(nodes, discs, segments + (size_t)list[i] * max_depth, segment_first(count_emitted), max_depth,
+                    ext, acc, &visited, &tests);
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

@@ -186,7 +186,8 @@ def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
     part of each first segment skipped (Session.sum_changes, the default),
     against the plain subtraction and addition passes: the accumulators
     equal after every move, bit for bit, for the static points and the
-    dynamic ones (pixels on the bunny, summed in the find pass)."""
+    dynamic ones (pixels on the bunny, summed in the find pass, whose sums
+    the suffix passes then update)."""
     moves = _moves(rng, 12)
     for m in moves:
         m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # in view: dynamic points every frame
@@ -197,6 +198,7 @@ def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
         session = oclgi.Session(oclgi.Engine(scene), method="detp_disc_index", radius=0.05, photons=10_000,
                                 count_emitted=count_emitted, count_work=True)
         session.sum_changes = summed
+        session.dynamic_pass = "find"
         runs[summed] = [(session.move("bunny", m), session.accumulators().copy()) for m in moves]
         runs[summed].append((None, session.work()))
     for i, ((st_a, acc_a), (st_b, acc_b)) in enumerate(zip(runs[False][:-1], runs[True][:-1])):
@@ -205,6 +207,38 @@ def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
     assert sum(st.paths for st, _ in runs[True][:-1]) > 100 and sum(st.points for st, _ in runs[True][:-1]) > 20
     # the skipped common parts: fewer segment-disc tests in all
     assert runs[True][-1][1]["u"] < runs[False][-1][1]["u"], (runs[True][-1][1], runs[False][-1][1])
+
+
+def test_dynamic_passes_agree(scenes_dir, rng):
+    """A camera session's disc-indexed dynamic points summed after the
+    update over only the paths whose cell masks meet their discs' box
+    (``dynamic_pass = "listed"``, the default), in the find pass ("find")
+    and over every stored path ("store"): the same accumulators after every
+    move, bit for bit, and plain DETP's at the end. The listed pass tests
+    the same discs as the whole store's (a path it leaves out meets none)
+    and visits fewer nodes (it leaves those paths' root visits out)."""
+    moves = _moves(rng, 10)
+    for m in moves:
+        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # in view: dynamic points every frame
+    runs, work = {}, {}
+    for mode in ("store", "find", "listed"):
+        scene = _scene(scenes_dir)
+        scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
+        session = oclgi.Session(oclgi.Engine(scene), method="detp_disc_index", radius=0.05, photons=10_000,
+                                count_work=True)
+        session.dynamic_pass = mode
+        runs[mode] = [(session.move("bunny", m).points, session.accumulators().copy()) for m in moves]
+        work[mode] = session.dynamic_work
+    assert sum(points for points, _ in runs["listed"]) > 20
+    for mode in ("find", "listed"):
+        for i, ((pa, acc_a), (pb, acc_b)) in enumerate(zip(runs["store"], runs[mode])):
+            assert pa == pb
+            assert np.array_equal(acc_a, acc_b), f"{mode}, move {i}: {(acc_a != acc_b).any(axis=-1).sum()} differ"
+    at = session.engine
+    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
+    assert np.array_equal(runs["listed"][-1][1], plain.accumulators)
+    assert work["listed"]["u"] == work["store"]["u"], work
+    assert work["listed"]["nodes"] < work["store"]["nodes"], work
 
 
 def test_dynamic_must_be_a_detp_variant(engine):

@@ -83,7 +83,7 @@ from .base import DetpEstimator
 
 class DetpDiscIndex(DetpEstimator):
     name = "detp_disc_index"
-    fuses_with_find = True  # the find pass sums its discs (kernels/update.cl)
+    fuses_with_find = True  # the find pass sums its discs (kernels/update.cl), or accumulate_listed does
     radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
     def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide", **kw):
@@ -99,6 +99,7 @@ class DetpDiscIndex(DetpEstimator):
             self.defines = dict(self.defines, disc_tree_binary=1)
         prog = self.program("detp_disc_index")
         self.k_walk, self.k_change = prog.detp_disc_index, prog.detp_disc_index_change
+        self.k_listed = prog.detp_disc_index_listed
         self.build_index()
 
     def build_index(self):
@@ -156,6 +157,19 @@ class DetpDiscIndex(DetpEstimator):
             self.queue, self.k_change, len(affected),
             self.nodes, self.blocks, old.segments, store.segments, affected.paths_buf, affected.starts_buf,
             len(affected), store.max_depth, self.count_emitted, self.ext,
+            self.acc, self.work_buf,
+            local_size=self.local_size,
+        )
+
+    def accumulate_listed(self, store, listed, n: int):
+        """``accumulate`` over the paths ``listed[:n]`` (a device int32
+        buffer of path indices) of the batch ``store`` only."""
+        if self.nodes is None or not n:
+            return
+        launch(
+            self.queue, self.k_listed, n,
+            self.nodes, self.blocks, store.segments, listed, n, store.max_depth,
+            self.count_emitted, self.ext,
             self.acc, self.work_buf,
             local_size=self.local_size,
         )

@@ -64,9 +64,20 @@ class DynamicView:
         full = (0, 0, self.cam.width, self.cam.height)
         # a camera ray that can go on past its first surface (module doc)
         self.through = any(m.kind != "diffuse" for m in scene.materials)
-        self.static = engine.view_points(self.cam, full, self.static_instances)
-        self.points = engine.view_points(self.cam, full)
+        self._lift = None
+        self.static = engine.view_points(self.cam, full, self.static_instances, lift=self.lift())
+        self.points = engine.view_points(self.cam, full, lift=self.lift())
         self.dynamic = np.nonzero(self.is_dynamic(np.arange(len(self.points)), self.points))[0]
+
+    def lift(self) -> float:
+        """The scene's disc radius, which lifts points off tilted shading
+        normals (Engine.view_points): read once per scene, as a move does
+        not change it and its bounds pass over every vertex (milliseconds
+        per frame on a large scene)."""
+        scene = self.engine.scene
+        if self._lift is None or self._lift[0] is not scene:
+            self._lift = (scene, scene.radius)
+        return self._lift[1]
 
     def is_dynamic(self, pix: np.ndarray, sub) -> np.ndarray:
         """Which of the pixels ``pix``, whose composite points are ``sub``,
@@ -118,7 +129,7 @@ class DynamicView:
         w = self.cam.width
         ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
         pix = (y0 + ys) * w + x0 + xs
-        sub = self.engine.view_points(self.cam, rect)
+        sub = self.engine.view_points(self.cam, rect, lift=self.lift())
         dyn_new = pix[self.is_dynamic(pix, sub)]
         changed = np.union1d(self.dynamic, dyn_new)
         # composite: the re-traced point inside the rectangle, the static one outside

@@ -20,7 +20,10 @@ path-major, as one batch. After a movable object moves:
    disc-indexed estimator reads them from the store itself and sums the
    old and new suffixes in one pass (``DetpDiscIndex.accumulate_change``:
    a suffix's old and new first segments share origin, direction and
-   power, and the discs both cross cancel, so that part is skipped).
+   power, and the discs both cross cancel, so that part is skipped);
+5. ``sum_near(discs)`` sums the moved store into a camera session's
+   dynamic points, reading only the paths whose cell masks meet their
+   discs' box (the list of a ``find`` given them as ``near``).
 
 Sessions (oclgi/incremental/session.py) drive these steps for their estimators.
 """
@@ -111,6 +114,7 @@ class SegmentStore:
         self.first_host = np.empty(self.photons, np.int32)
         self.scratch = None  # grown on demand: gathered suffixes
         self.examined = 0  # paths the last find looked at
+        self._near = None  # (discs, listed paths, count) of the last find's ``near``
         # the cell grid: the scene as loaded, padded; the cells' pad is far
         # above float rounding, so a segment meeting a box inside a cell
         # always meets the padded cell
@@ -210,34 +214,71 @@ class SegmentStore:
                         bits |= 1 << int(x + dims[0] * (y + dims[1] * z))
         return np.array([bits & (2**64 - 1), bits >> 64], np.uint64)
 
-    def find(self, obj: int, discs=None) -> Affected:
+    def _list_candidates(self, boxes) -> tuple[cl.Buffer | None, int]:
+        """The paths whose cell masks meet the boxes' cells (``_region``),
+        listed on the device in any order, and their count; (None, 0) when
+        every path must be examined."""
+        region = self._region(boxes)
+        if region is None:
+            return None, 0
+        q = self.queue
+        count = np.zeros(1, np.int32)
+        cl.enqueue_copy(q, self.count, count)
+        launch(q, self.k_candidates, self.photons, self.cells, self.photons,
+               cltypes.make_ulong2(*(int(w) for w in region)), self.count, self.candidates)
+        cl.enqueue_copy(q, count, self.count)
+        return self.candidates, int(count[0])
+
+    def sum_near(self, discs) -> None:
+        """Sum the stored segments into the points of ``discs`` (a
+        DetpDiscIndex), reading only the paths whose cell masks meet the
+        discs' box: a segment that crosses a disc meets its box, inside
+        the root box, so its path's mask (current after ``retrace``) meets
+        the box's cells, or leaves the grid where the box does. When the
+        last ``find`` was given these discs as ``near``, its list serves:
+        it held every path whose mask met their box before the move, and
+        every path the move re-traced (so whatever its mask is now)."""
+        if discs.nodes is None:
+            return
+        if self._near is not None and self._near[0] is discs:
+            _, listed, n = self._near
+        else:
+            listed, n = self._list_candidates([discs.root_box])
+        self._near = None
+        if listed is None:
+            discs.accumulate(self.batch)
+        else:
+            discs.accumulate_listed(self.batch, listed, n)
+
+    def find(self, obj: int, discs=None, near=None) -> Affected:
         """Paths touched by the move of object ``obj`` (already placed at its
         new pose). With ``discs`` (a DetpDiscIndex) the same pass also sums
         the stored segments into its points' accumulators: every segment of
-        the paths examined, which holds every segment that can reach them."""
+        the paths examined, which holds every segment that can reach them.
+        ``near`` (a DetpDiscIndex): the paths examined also include those
+        near its discs, and the list is kept for ``sum_near(near)`` after
+        the update (one scan of the masks per move instead of two)."""
         engine, q = self.engine, self.queue
         inst = engine.compiled.instances_host
         new_box = (inst["lo"][obj].astype(np.float64), inst["hi"][obj].astype(np.float64))
         fused = discs is not None and discs.nodes is not None
-        boxes = [self.boxes[obj], new_box] + ([discs.root_box] if fused else [])
-        region = self._region(boxes)
+        near = near if near is not None and near.nodes is not None else None
+        boxes = [self.boxes[obj], new_box] + ([discs.root_box] if fused else []) + \
+            ([near.root_box] if near is not None else [])
         self.boxes[obj] = new_box
-        if region is None:
-            candidates, n, listed = None, self.photons, self.all_paths
+        listed, n = self._list_candidates(boxes)
+        candidates = None
+        if listed is None:
+            n, listed = self.photons, self.all_paths
         else:
-            count = np.zeros(1, np.int32)
-            cl.enqueue_copy(q, self.count, count)
-            launch(q, self.k_candidates, self.photons, self.cells, self.photons,
-                   cltypes.make_ulong2(*(int(w) for w in region)), self.count, self.candidates)
-            cl.enqueue_copy(q, count, self.count)
-            n = int(count[0])
             candidates = np.empty(n, np.int32)
             if n:
-                cl.enqueue_copy(q, candidates, self.candidates)
+                cl.enqueue_copy(q, candidates, listed)
             candidates.sort()  # appended in any order
             listed = cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                                hostbuf=candidates if n else np.zeros(1, np.int32))
         self.examined = n
+        self._near = None if near is None else (near, listed, n)
         if n:
             args = (*engine.compiled.scene_args, obj, self.batch.segments, listed, n, self.max_depth, self.first)
             if not fused:

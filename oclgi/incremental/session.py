@@ -64,7 +64,14 @@ class Session(SessionBase):
     that range's, in the scale of the whole run's ``photons``.
     """
 
-    fuse_find = True  # False: dynamic points summed over the new store in a pass of their own (benchmarks)
+    # How a camera session's disc-indexed dynamic points are summed over the
+    # moved store: "listed" (default), after the update, over only the paths
+    # whose cell masks meet the discs' box (SegmentStore.sum_near); "find",
+    # over the old store in the find pass, then brought to the new one by
+    # the suffix passes with the static points; "store", over every stored
+    # path after the update. All three give the same sums bit for bit; the
+    # other two are kept to measure against. Other DETP variants: "store".
+    dynamic_pass = "listed"
     # True: disc-indexed estimators sum a move's old and new suffixes in one
     # pass after the re-trace, skipping what the first segments share
     # (DetpDiscIndex.accumulate_change); False: a subtraction pass, then an
@@ -311,11 +318,13 @@ class Session(SessionBase):
         if self.view is not None:
             seconds["points"] = t1 - t0
         # A disc-indexed dynamic estimator takes its sums over the old store
-        # in the find pass; the suffix passes below then update them as they
-        # update the static points (update.cl). Any other variant sums over
-        # the new store at the end.
-        fused = self.fuse_find and self.dyn_est is not None and self.dyn_est.fuses_with_find
-        affected = self.store.find(obj, self.dyn_est if fused else None)
+        # in the find pass ("find", dynamic_pass); the suffix passes below
+        # then update them as they update the static points (update.cl).
+        # Otherwise they are summed over the new store at the end.
+        mode = self.dynamic_pass if self.dyn_est is not None and self.dyn_est.fuses_with_find else "store"
+        fused = self.dyn_est is not None and mode == "find"
+        affected = self.store.find(obj, self.dyn_est if fused else None,
+                                   near=self.dyn_est if mode == "listed" else None)
         t2 = time.perf_counter()
         seconds["find"] = t2 - t1
         stats = UpdateStats(paths=len(affected), segments_removed=0, segments_added=0, points=n_view)
@@ -347,7 +356,10 @@ class Session(SessionBase):
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
         if self.dyn_est is not None and not fused:
             t6 = time.perf_counter()
-            self.dyn_est.accumulate(self.store.batch)
+            if mode == "listed":
+                self.store.sum_near(self.dyn_est)
+            else:
+                self.dyn_est.accumulate(self.store.batch)
             q.finish()
             seconds["points"] += time.perf_counter() - t6
         if self.dyn_est is not None:
