@@ -28,6 +28,7 @@ from .cl.device import create_context
 from .cl.programs import launch, programs
 from .errors import OclgiError
 from .estimators import ESTIMATORS, check_options
+from .estimators.gather_options import requested_rays
 from .tracing.photon_trace import PhotonTracer
 from .tracing.run import Estimate, PathRange, Run, Stats  # noqa: F401 (Estimate, Stats: the engine's results)
 from .accel.bvh_build import QUALITIES
@@ -45,14 +46,6 @@ DEFAULT_BATCH_BYTES = 256 << 20
 VIEW_IDS = {"srgb": constants.VIEW_SRGB, "agx": constants.VIEW_AGX, "filmic": constants.VIEW_FILMIC}
 
 LAYER_CHANNELS = {"irradiance": "RGB", "albedo": "RGB", "normal": "XYZ", "depth": "Z"}
-
-
-def gather_rays(options: dict) -> int:
-    """Final gathering's rays per point among an estimate's options (0:
-    none), for the memory check; an invalid value counts 0 here and is
-    refused with its reason when the estimator reads it."""
-    value = options.get("gather", 0)
-    return int(value) if params.integral(value) and int(value) > 0 else 0
 
 
 def render_layers(points, irradiance: np.ndarray, albedo: np.ndarray, camera, spp: int) -> dict:
@@ -387,7 +380,7 @@ class Engine:
         r = self.run_params(method, photons, radius, seed, max_depth, extension, count_emitted)
         count_work = params.flag(count_work, "count_work")
         budget.check(budget.irradiance_need(len(points), r.method, r.photons, r.max_depth, self.batch_bytes,
-                                            options.get("k"), gather_rays(options)), self.queue.device)
+                                            options.get("k"), requested_rays(options)), self.queue.device)
         est = self.estimator(points, r, count_work=count_work, **options)
         return Run(self, est, r, paths)
 
@@ -531,7 +524,7 @@ class Engine:
         spp = params.samples_per_pixel(spp)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
         budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                        self.batch_bytes, estimate_args.get("k"), gather_rays(estimate_args)),
+                                        self.batch_bytes, estimate_args.get("k"), requested_rays(estimate_args)),
                      self.queue.device)
         return cam, spp, self.camera_points(cam, spp=spp, lift=r.radius)
 

@@ -174,6 +174,7 @@ class ProgramCache:
         self.ctx = ctx
         self.dir = kernel_dir()
         self._programs: dict[tuple, Program] = {}
+        self.exact_divide = correctly_rounded_divide_sqrt(ctx.devices[0])
 
     def get(self, stem: str, **defines) -> Program:
         key = (stem, tuple(sorted(defines.items())))
@@ -202,7 +203,7 @@ class ProgramCache:
         # that must agree bit for bit (light reuse at one position and the
         # ordinary run) would differ in the last place. CPU runtimes divide
         # exactly anyway: the flag changes nothing there.
-        if correctly_rounded_divide_sqrt(self.ctx.devices[0]):
+        if self.exact_divide:
             options.append("-cl-fp32-correctly-rounded-divide-sqrt")
         for name, value in build_defines(dict(defines)):  # the shared constants, then the program's own
             options.append(f"-DOCLGI_{name.upper()}={int(value) if isinstance(value, bool) else value}")

@@ -72,20 +72,21 @@ def gather_key(run_seed: int, gather_seed: int) -> tuple:
     return np.uint32(run_seed & 0xFFFFFFFF), np.uint32(run_seed >> 32), np.uint32(gather_seed)
 
 
-def gather_rays(queue, compiled, points, n_rays: int, key: tuple, local_size=None):
-    """The hits of ``n_rays`` cosine rays per point (kernels/final_gather.cl
-    final_gather_rays) with Philox key ``key`` (gather_key): (QueryPoints
-    of the hits, point-major, and their (n * n_rays, 4) float32 weights)."""
+def gather_rays(queue, compiled, pts: cl.Buffer, nrm: cl.Buffer, n_points: int, n_rays: int, key: tuple,
+                local_size=None):
+    """The hits of ``n_rays`` cosine rays from each of the ``n_points``
+    points (device buffers of float4 positions and normals;
+    kernels/final_gather.cl final_gather_rays) with Philox key ``key``
+    (gather_key): (QueryPoints of the hits, point-major, and their
+    (n * n_rays, 4) float32 weights)."""
     ctx = queue.context
-    n = len(points) * n_rays
+    n = n_points * n_rays
     mf = cl.mem_flags
-    pts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(points.positions))
-    nrm = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(points.normals))
     pos, hn, bary, wt = (cl.Buffer(ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8, 16))
     c = compiled
     k = programs(ctx).get("final_gather").final_gather_rays
     launch(queue, k, n, *c.scene_args, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
-           c.tri_normals, c.tri_material, c.materials, pts, nrm, len(points), int(n_rays), *key,
+           c.tri_normals, c.tri_material, c.materials, pts, nrm, int(n_points), int(n_rays), *key,
            np.float32(c.eps), pos, hn, bary, wt, local_size=local_size)
     host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
     for h, dev in zip(host, (pos, hn, bary, wt)):
@@ -115,15 +116,15 @@ class FinalGather(Estimator):
         self.gather_seed = int(gather_seed)  # checked integral by check()
         # The direct light at the points themselves (refuses area lights and skies, as direct 'exact' does).
         self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
-        hits, weights = gather_rays(queue, compiled, points, n_rays, gather_key(int(seed), self.gather_seed),
-                                    self.local_size)
+        self.positions = self.upload(points.positions)
+        self.normals = self.upload(points.normals)
+        hits, weights = gather_rays(queue, compiled, self.positions, self.normals, self.n, n_rays,
+                                    gather_key(int(seed), self.gather_seed), self.local_size)
         self.hits = hits
         self.hit_weights = weights
         # The variant's own discs at the hits, with their own exact direct light.
         self.inner = variant(queue, compiled, hits, radius, direct="exact", count_work=count_work, **kw)
         self.radius = self.inner.radius
-        self.positions = self.upload(points.positions)
-        self.normals = self.upload(points.normals)
         self.weights_buf = self.upload(weights)
         self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
         self.k_resolve = self.program("final_gather").final_gather_resolve

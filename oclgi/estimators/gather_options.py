@@ -23,8 +23,17 @@ def check(gather, gather_seed) -> int:
     return n
 
 
+def requested_rays(options: dict) -> int:
+    """The gather rays per point that ``options`` ask for (0: none), for a
+    memory check made before the estimator exists; a value ``check`` would
+    refuse counts 0 here (the estimator refuses it with its reason)."""
+    n = integral(options.get("gather", 0))
+    return n if n is not None and 0 < n <= MAX_RAYS else 0
+
+
 def refuse_incremental(options: dict, where: str) -> None:
-    """Sessions cannot keep a gathered estimate exact (light animations say so in their own words)."""
+    """Sessions cannot keep a gathered estimate exact (light animations, in
+    oclgi.tracing, which may not import estimators, say so in their own words)."""
     if options.get("gather", 0):
         raise OclgiError(f"{where}: gather (final gathering) is not offered here: its discs sit where the "
                          "query points' rays hit, which a move changes; use gather = 0")

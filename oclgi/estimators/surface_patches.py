@@ -96,6 +96,7 @@ class SurfacePatches:
         by = np.argsort(patch, kind="stable")
         self.edges, self.edge_patch = ends[by], patch[by]
         self.offsets = np.searchsorted(self.edge_patch, np.arange(self.n_patches + 1))
+        self._device = None  # (context, label, offsets, edges) buffers, made by boundary_distance
 
     def boundary_distance(self, queue, positions: np.ndarray, tri: np.ndarray, local_size=None) -> np.ndarray:
         """Distance from each point (``positions`` (n, 3 or 4) on triangle
@@ -111,7 +112,7 @@ class SurfacePatches:
             return np.zeros(0)
         ctx = queue.context
         mf = cl.mem_flags
-        if getattr(self, "_device", (None,))[0] is not ctx:  # the patches' tables, uploaded once per context
+        if self._device is None or self._device[0] is not ctx:  # the patches' tables, uploaded once per context
             ends = np.zeros((max(len(self.edges), 1), 2, 4), np.float32)
             ends[:len(self.edges), :, :3] = self.edges
             tables = (self.label.astype(np.int32), self.offsets.astype(np.int32), ends)
