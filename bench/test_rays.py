@@ -4,8 +4,9 @@ Photon tracing is one closest-hit query per segment, so rays/s of the BVH
 bounds the whole engine; Embree is the reference for what a CPU can do.
 
 Both sides run end to end from numpy arrays to numpy arrays:
-``oclgi.accel.bvh.closest_hits`` (buffers, kernel, read back) on the OpenCL
-device, and embreex's ``EmbreeScene.run`` (Embree 4, one ``rtcIntersect1``
+``oclgi.accel.bvh.closest_hits`` (the arrays wrapped as device buffers,
+read in place on a CPU device, the kernel, the hits mapped back) on the
+OpenCL device, and embreex's ``EmbreeScene.run`` (Embree 4, one ``rtcIntersect1``
 per ray). ``run`` releases the GIL, so Embree gets as many threads, each on
 a slice of the rays, as the OpenCL CPU device has compute units: both use the
 whole CPU (on a GPU device, one thread per core of the machine). Embree's BVH is built before timing, as oclgi's is.
