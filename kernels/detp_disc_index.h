@@ -167,10 +167,15 @@ inline void disc_index_shared_first(__global const DiscNode *nodes, __global con
 }
 
 /* A path's segments from bounce `from` to its end (holes skipped) against
- * the tree, as disc_index_segment. */
-inline void disc_index_path(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                            __global const Segment *path, int from, int max_depth, float ext,
-                            __global long *acc, uint *visited, ulong *tests)
+ * the tree, as disc_index_segment. With `cull`, a segment that misses the
+ * box (lo, hi), which holds every disc's box (the tree's root box), is
+ * skipped before the walk: box_slab is the walk's own test on a box that
+ * holds every box the walk would test, so it keeps every segment the walk
+ * could sum, and a rejected segment costs one scalar slab test instead of
+ * a node's load, its 8-lane test and the stack. */
+inline void disc_index_path_in(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                               __global const Segment *path, int from, int max_depth, float ext, int cull,
+                               float3 lo, float3 hi, __global long *acc, uint *visited, ulong *tests)
 {
     for (int b = from; b < max_depth; ++b) {
         SegmentView s;
@@ -178,8 +183,18 @@ inline void disc_index_path(__global const DiscNode *nodes, __global const DiscB
             if (segment_is_hole(path + b)) continue;
             break; /* the path's end */
         }
+        float enter;
+        if (cull && !box_slab(lo, hi, s.o, 1.0f / s.w, s.t_end + ext, &enter)) continue;
         disc_index_segment(nodes, discs, path + b, &s, ext, acc, visited, tests);
     }
+}
+
+inline void disc_index_path(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                            __global const Segment *path, int from, int max_depth, float ext,
+                            __global long *acc, uint *visited, ulong *tests)
+{
+    disc_index_path_in(nodes, discs, path, from, max_depth, ext, 0, (float3)(0.0f), (float3)(0.0f), acc, visited,
+                       tests);
 }
 
 #endif

@@ -124,6 +124,8 @@ class DetpDiscIndex(DetpEstimator):
             blocks["r2"][blk, lane] = self.radius2[ids[o]]
             blocks["id"][blk, lane] = ids[o]
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
+            # the same box as float4s: accumulate_listed culls segments by it
+            self.root_planes = tuple(np.append(nodes[k][0], np.float32(0)).astype(np.float32) for k in ("lo", "hi"))
             self.depth = bvh.depth
             if self.tree == "wide":
                 wide = collapse_boxes(nodes, "discs")
@@ -169,7 +171,7 @@ class DetpDiscIndex(DetpEstimator):
         launch(
             self.queue, self.k_listed, n,
             self.nodes, self.blocks, store.segments, listed, n, store.max_depth,
-            self.count_emitted, self.ext,
+            self.count_emitted, self.ext, *self.root_planes,
             self.acc, self.work_buf,
             local_size=self.local_size,
         )
