@@ -115,6 +115,33 @@ def test_any_hit_agrees_with_closest_hit(bunny, rng):
     assert (any_hits(bunny.queue, bunny.compiled, origins, dirs, full).astype(bool) == (tri >= 0)).all()
 
 
+def test_queries_take_any_layout_of_rays(bunny, rng):
+    """The queries read the caller's arrays in place when they are C-contiguous
+    float32 (n, 3), and copy anything else first: a strided float64 view, a
+    shared or per-ray tmax and no rays at all give what the packed arrays
+    give; a wrong shape is a clear error, not a device fault."""
+    from oclgi.errors import OclgiError
+
+    origins, dirs = _random_rays(bunny.scene, rng, 4_000)
+    packed = [np.ascontiguousarray(a, np.float32) for a in (origins, dirs)]
+    t, u, v, tri = closest_hits(bunny.queue, bunny.compiled, *packed)
+    wide = [np.hstack([a, np.zeros((len(a), 1))]).astype(np.float64)[:, :3] for a in (origins, dirs)]
+    assert not wide[0].flags.c_contiguous
+    t2, u2, v2, tri2 = closest_hits(bunny.queue, bunny.compiled, *wide)
+    hit = tri >= 0
+    assert hit.mean() > 0.3 and np.array_equal(tri, tri2)
+    assert all(np.array_equal(a[hit], b[hit]) for a, b in ((t, t2), (u, u2), (v, v2)))
+    limit = np.where(hit, t * 0.5, np.inf).astype(np.float32)
+    assert (closest_hits(bunny.queue, bunny.compiled, *packed, tmax=limit)[3] == -1).all()
+    assert np.array_equal(any_hits(bunny.queue, bunny.compiled, *packed, 1e30).astype(bool), hit)
+    empty = closest_hits(bunny.queue, bunny.compiled, np.zeros((0, 3)), np.zeros((0, 3)))
+    assert [len(a) for a in empty] == [0, 0, 0, 0]
+    with pytest.raises(OclgiError, match="shape"):
+        closest_hits(bunny.queue, bunny.compiled, packed[0], packed[1][:10])
+    with pytest.raises(OclgiError, match="shape"):
+        closest_hits(bunny.queue, bunny.compiled, *packed, tmax=limit[:10])
+
+
 def _check_structure(bvh, lo, hi, leaf_size=4):
     n = len(lo)
     nodes = bvh.nodes
