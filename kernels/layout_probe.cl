@@ -24,6 +24,8 @@ __kernel void layout_probe(__global int *out)
     SIZE(Tri); OFF(Tri, v0); OFF(Tri, id); OFF(Tri, v1); OFF(Tri, pad1); OFF(Tri, v2); OFF(Tri, pad2);
     SIZE(Instance); OFF(Instance, world_from_object); OFF(Instance, object_from_world); OFF(Instance, lo);
     OFF(Instance, root); OFF(Instance, hi); OFF(Instance, first_tri); OFF(Instance, n_tris); OFF(Instance, pad);
+    SIZE(InstanceBoxes); OFF(InstanceBoxes, lox); OFF(InstanceBoxes, loy); OFF(InstanceBoxes, loz);
+    OFF(InstanceBoxes, hix); OFF(InstanceBoxes, hiy); OFF(InstanceBoxes, hiz);
     SIZE(Segment); OFF(Segment, org); OFF(Segment, t_end); OFF(Segment, dir); OFF(Segment, tri);
     OFF(Segment, power); OFF(Segment, path);
     SIZE(Material); OFF(Material, albedo); OFF(Material, kind); OFF(Material, emission); OFF(Material, flags);
@@ -47,4 +49,5 @@ __kernel void layout_probe(__global int *out)
     /* after it, the alignment of the structs whose vector fields need more than 16 bytes */
     out[i++] = (int)__alignof__(BvhNode8);
     out[i++] = (int)__alignof__(BvhNode8Q);
+    out[i++] = (int)__alignof__(InstanceBoxes);
 }

@@ -122,6 +122,21 @@ typedef struct {
     int pad[3];
 } Instance;
 
+/* The world boxes of 8 consecutive instances as SoA lanes (instance 8 g + k
+ * in lane k of group g), stored after the Instance records in the same
+ * buffer, from the next 32-byte boundary (oclgi/scene/instance_boxes.py
+ * writes them): one float8 slab
+ * test culls 8 instances (bvh.h scene_traverse). Lanes past the last
+ * instance have lo = hi = +inf. 192 bytes, 32-byte aligned. */
+typedef struct {
+    float8 lox;
+    float8 loy;
+    float8 loz;
+    float8 hix;
+    float8 hiy;
+    float8 hiz;
+} InstanceBoxes;
+
 /* A material (bsdf.h scatters by it; oclgi/scene/materials.py writes it). */
 typedef struct {
     float albedo[3];   /* the diffuse part's reflectance; a dielectric's transmission tint */

@@ -148,3 +148,71 @@ def test_movable_emitter_is_refused():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
     with pytest.raises(oclgi.OclgiError, match="moving lights are not supported"):
         oclgi.load_dict({"mesh": [{"vertices": v, "faces": [[0, 1, 2]], "emission": [1, 1, 1], "movable": True}]})
+
+
+def test_many_instances_grouped_equal_one_by_one(rng):
+    """Past a few instances the top level tests their boxes 8 at a time
+    (kernels/bvh.h scene_traverse, oclgi/scene/instance_boxes.py). With 13
+    movable boxes (two groups, the second partial), some moved: the hits
+    equal brute force, and equal a build that tests the boxes one by one,
+    bit for bit, any-hit included; a static-only instance list (a camera
+    session's static layer) groups its own boxes."""
+    from oclgi.accel.bvh import _Rays, any_hits
+    from oclgi.cl.programs import programs
+
+    room_v, room_f = _box((-3, 0, -3), (3, 3, 3))
+    meshes = [{"vertices": room_v, "faces": room_f[:, ::-1], "albedo": [0.5, 0.5, 0.5]}]  # facing in
+    centres = rng.uniform([-2.5, 0.3, -2.5], [2.5, 2.4, 2.0], (13, 3))
+
+    def turned(k):  # a rigid move of box k about its own centre, staying in the room
+        m, c = _rigid(rng, 0.3), centres[k]
+        m[:3, 3] += c - m[:3, :3] @ c
+        return m
+
+    for k in range(13):
+        c = centres[k]
+        v, f = _box(c - 0.2, c + 0.2)
+        meshes.append({"vertices": v, "faces": f, "movable": True, "name": f"box{k}", "albedo": [0.5, 0.5, 0.5]})
+    engine = oclgi.Engine(oclgi.load_dict({
+        "mesh": meshes, "point_light": [{"position": [0, 2.9, 0], "intensity": [1, 1, 1]}],
+        "camera": {"position": [0, 1.5, 2.9], "look_at": [0, 1.2, 0], "fov": 80, "width": 32, "height": 32}}))
+    for k in (0, 7, 8, 12):  # both groups, the last lane of the first, the partial second
+        engine.move(f"box{k}", turned(k))
+    scene = engine.scene
+    tri_v = scene.vertices[scene.faces].astype(np.float64)
+    for name in (f"box{k}" for k in range(13)):
+        a, b = scene.object_ranges()[scene.object_id(name)]
+        m = engine.compiled.pose.matrix(scene.object_id(name))
+        tri_v[a:b] = tri_v[a:b] @ m[:3, :3].T + m[:3, 3]
+    n = 4000
+    origins = rng.uniform(-2.9, 2.9, (n, 3)) + [0, 1.5, 0]
+    origins[:, 1] = np.clip(origins[:, 1], 0.05, 2.95)
+    first_box = scene.object_ranges()[1][0]
+    pick = rng.integers(first_box, len(tri_v), n // 2)  # half the rays aimed at the boxes
+    targets = np.einsum("rk,rkc->rc", rng.dirichlet([1, 1, 1], n // 2), tri_v[pick])
+    dirs = np.concatenate([targets - origins[:n // 2], rng.normal(size=(n - n // 2, 3))])
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    t, u, v, tri = closest_hits(engine.queue, engine.compiled, origins, dirs)
+    t_ref, tri_ref = ray_triangle_brute(origins, dirs, tri_v)
+    assert (tri_ref >= first_box).sum() > 0.3 * n and (tri >= 0).all()
+    assert (np.abs(t - t_ref) / t_ref > 1e-4).sum() <= 2 and (tri == tri_ref).mean() > 0.995
+
+    rays = _Rays(engine.queue, origins, dirs, np.inf)
+    flat = programs(engine.ctx).get("bvh_query", scene_flat_instances=1000)
+    one_by_one = rays.run(flat.bvh_query_closest, engine.compiled, np.float32, (n, 4), None)
+    grouped = np.stack([t, u, v, tri.view(np.float32)], axis=1)
+    assert np.array_equal(one_by_one.view(np.int32), grouped.view(np.int32))
+    half = np.where(tri >= 0, t * 0.5, 1.0).astype(np.float32)
+    any_rays = _Rays(engine.queue, origins, dirs, half)
+    assert np.array_equal(any_rays.run(flat.bvh_query_any, engine.compiled, np.int32, (n,), None),
+                          any_hits(engine.queue, engine.compiled, origins, dirs, half))
+
+    # the static layer's instance list (incremental/dynamic_view.py) holds the room alone
+    s = oclgi.Session(engine, method="detp_disc_index", photons=4000, radius=0.2, count_emitted=True)
+    before = s.irradiance().copy()
+    assert (before > 0).any(axis=1).mean() > 0.5
+    m3 = turned(3)
+    s.move("box3", m3)
+    engine.move("box3", m3)  # a session owns its pose: the engine's moves apart
+    fresh = oclgi.Session(engine, method="detp_disc_index", photons=4000, radius=0.2, count_emitted=True)
+    assert np.array_equal(s.accumulators(), fresh.accumulators()) and not np.array_equal(before, s.irradiance())

@@ -59,6 +59,12 @@ Instance = np.dtype(
     ]
 )
 
+# The world boxes of 8 consecutive instances as SoA lanes, 192 bytes
+# (kernels/bvh.h scene_traverse; oclgi/scene/instance_boxes.py writes them
+# after the Instance records); lanes past the last instance lo = hi = +inf.
+InstanceBoxes = np.dtype([("lox", f4, LANES), ("loy", f4, LANES), ("loz", f4, LANES), ("hix", f4, LANES),
+                          ("hiy", f4, LANES), ("hiz", f4, LANES)])
+
 # One stored path segment, 48 bytes, at slot path * max_depth + bounce.
 # t_end is the distance to the hit (inf when the segment leaves the scene);
 # tri is the hit triangle (scene order) or -1; an empty slot is all zeros.
@@ -145,7 +151,7 @@ ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
     "BvhNode": BvhNode, "BvhNode8": BvhNode8, "BvhNode8Q": BvhNode8Q, "TriBlock4": TriBlock4, "Tri": Tri,
-    "Instance": Instance, "Segment": Segment,
+    "Instance": Instance, "InstanceBoxes": InstanceBoxes, "Segment": Segment,
     "Material": Material, "Texture": Texture, "Background": Background, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,
 }

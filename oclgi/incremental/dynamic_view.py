@@ -38,10 +38,10 @@ weight) differs from the static layer's, or lies on a movable object.
 from __future__ import annotations
 
 import numpy as np
-import pyopencl as cl
 
 from ..cl.layout import Instance
 from ..queries import QueryPoints
+from ..scene.instance_boxes import instance_buffer
 
 MARGIN = 2  # pixels around a projected box (float rounding of the rays)
 
@@ -57,8 +57,7 @@ class DynamicView:
         self.movable = [k for k, o in enumerate(scene.objects) if o.movable]
         static = [k for k, o in enumerate(scene.objects) if not o.movable]
         records = compiled.instances_host[static] if static else np.zeros(1, Instance)
-        self.static_instances = (cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                                           hostbuf=np.ascontiguousarray(records)), len(static))
+        self.static_instances = (instance_buffer(engine.ctx, np.ascontiguousarray(records)), len(static))
         ranges = scene.object_ranges()
         self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
         full = (0, 0, self.cam.width, self.cam.height)

@@ -23,6 +23,7 @@ from ..cl.layout import Instance
 from ..cl.programs import launch
 from ..errors import OclgiError
 from ..params import MAX_LENGTH
+from .instance_boxes import instance_buffer, upload_instance
 
 
 def as_transform(matrix) -> np.ndarray:
@@ -70,7 +71,8 @@ class Pose:
         self.compiled = compiled
         self.instances_host = np.array(records, dtype=Instance)
         mf = cl.mem_flags
-        self.instances = cl.Buffer(compiled.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=self.instances_host)
+        # the records, then their boxes in groups of 8 (oclgi/scene/instance_boxes.py)
+        self.instances = instance_buffer(compiled.ctx, self.instances_host, mf.READ_WRITE)
         if isinstance(normals, cl.Buffer):
             self.tri_normals = cl.Buffer(compiled.ctx, mf.READ_WRITE, normals.size)
             cl.enqueue_copy(queue, self.tri_normals, normals, byte_count=normals.size)
@@ -101,8 +103,7 @@ class Pose:
         if not obj_desc.movable:
             raise OclgiError(f"object {obj_desc.name!r} is static")
         place_record(self.instances_host[obj], compiled.object_boxes[obj], m, obj_desc.name)
-        item = self.instances_host.dtype.itemsize
-        cl.enqueue_copy(queue, self.instances, self.instances_host[obj:obj + 1], dst_offset=obj * item)
+        upload_instance(queue, self.instances, self.instances_host, obj)
         k = compiled.normals_kernel()
         launch(queue, k, int(self.instances_host[obj]["n_tris"]), compiled.object_normals, self.instances,
                obj, self.tri_normals)
