@@ -33,11 +33,20 @@ def main(path):
           "| same triangle | nearer hit missed | cores used |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for e in info:
-        if "n_rays" in e:
+        if "n_rays" in e and "boxes" not in e:
             print(f"| {e['scene']} ({e['triangles']:,} tris) | {e['rays']} | {e['hit_fraction']:.1%} "
                   f"| {e.get('oclgi_mrays_per_s', '-')} | {e.get('embree_mrays_per_s', '-')} "
                   f"| {e.get('ratio_oclgi_over_embree', '-')} | {e['hit_agreement']:.4%} "
                   f"| {e['same_triangle']:.4%} | {e['nearer_hit_missed']} | {e['cores_used']} |")
+
+    print("\n| movable boxes | instances | rays ending on a box | grouped Mrays/s | one at a time Mrays/s "
+          "| grouped / one at a time | cores used |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    for e in info:
+        if "boxes" in e:
+            print(f"| {e['boxes']} | {e['instances']} | {e['hit_boxes']:.1%} | {e.get('grouped_mrays_per_s', '-')} "
+                  f"| {e.get('one_by_one_mrays_per_s', '-')} | {e.get('grouped_over_one_by_one', '-')} "
+                  f"| {e['cores_used']} |")
 
     print("\n| triangles | oclgi build s | Mtriangles/s | nodes | depth | Embree build s |")
     print("|---:|---:|---:|---:|---:|---:|")
