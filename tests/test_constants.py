@@ -17,7 +17,8 @@ from oclgi.estimators.photon_map import DEFAULT_K
 
 SHARED = {f"OCLGI_{name.upper()}" for name in constants.DEFINES}
 # Defines a driver sets per program, and names that are no define of the host's.
-PER_PROGRAM = {"OCLGI_KNN_K", "OCLGI_COUNT_WORK", "OCLGI_BVH_COUNT", "OCLGI_CONSISTENT_SPAN", "OCLGI_DISC_TREE_BINARY"}
+PER_PROGRAM = {"OCLGI_KNN_K", "OCLGI_COUNT_WORK", "OCLGI_BVH_COUNT", "OCLGI_CONSISTENT_SPAN", "OCLGI_DISC_TREE_BINARY",
+               "OCLGI_SCENE_FLAT_INSTANCES"}
 KERNEL_ONLY = {"OCLGI_PI", "OCLGI_FIXED_ONE"}  # FIXED_ONE: derived from OCLGI_FIXED_BITS in constants.h
 
 
