@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 
 from conftest import _box, _engine
-from oclgi.accel.bvh import _Rays
-from oclgi.cl.programs import programs
+from oclgi.accel.bvh import closest_hits
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' ray sets
 from rays import RAYS as RAY_SETS  # noqa: E402
@@ -47,27 +46,27 @@ def test_top_level(benchmark, scale, cores_used, sponza, boxes):
     engine = sponza_with_boxes(boxes) if boxes else sponza
     n = scale(RAYS)
     origins, dirs = RAY_SETS["bounce"](sponza.scene, np.random.default_rng(7), n)
-    rays = _Rays(engine.queue, origins.astype(np.float32), dirs.astype(np.float32), np.inf)
-    ctx = engine.ctx
-    grouped = programs(ctx).get("bvh_query").bvh_query_closest
-    one_by_one = programs(ctx).get("bvh_query", scene_flat_instances=1 << 20).bvh_query_closest
+    origins, dirs = origins.astype(np.float32), dirs.astype(np.float32)
+    one_by_one = {"scene_flat_instances": 1 << 20}
     flat_seconds, flat_hits = [], []
 
     def run_flat():  # in pedantic's setup: the two alternate
         t0 = time.perf_counter()
-        flat_hits[:] = [rays.run(one_by_one, engine.compiled, np.float32, (n, 4), None)]
+        flat_hits[:] = [closest_hits(engine.queue, engine.compiled, origins, dirs, defines=one_by_one)]
         flat_seconds.append(time.perf_counter() - t0)
 
     benchmark.group = "top level: Sponza + N movable boxes"
     with cores_used():
-        hits = benchmark.pedantic(rays.run, args=(grouped, engine.compiled, np.float32, (n, 4), None),
+        hits = benchmark.pedantic(closest_hits, args=(engine.queue, engine.compiled, origins, dirs),
                                   setup=run_flat, rounds=ROUNDS, warmup_rounds=1)
-    assert np.array_equal(hits.view(np.int32)[:, 3], flat_hits[0].view(np.int32)[:, 3])
-    hit = hits.view(np.int32)[:, 3] >= 0
-    assert np.array_equal(hits[hit].view(np.int32), flat_hits[0][hit].view(np.int32))
+    tri, flat_tri = hits[3], flat_hits[0][3]
+    assert np.array_equal(tri, flat_tri)
+    hit = tri >= 0
+    for a, b in zip(hits[:3], flat_hits[0][:3]):  # t, u, v of every hit
+        assert np.array_equal(a[hit].view(np.int32), b[hit].view(np.int32))
     info = benchmark.extra_info
     info.update(boxes=boxes, instances=len(engine.compiled.instances_host), n_rays=n,
-                hit_boxes=round(float(np.mean(hits.view(np.int32)[:, 3] >= sponza.scene.n_triangles)), 4))
+                hit_boxes=round(float(np.mean(tri >= sponza.scene.n_triangles)), 4))
     if benchmark.stats:
         grouped_rate = n / benchmark.stats.stats.median
         flat_rate = n / float(np.median(flat_seconds[1:]))

@@ -344,15 +344,27 @@ inline int bvh_traverse(__global const void *nodes, __global const Tri *tris, in
 #define SCENE_FLAT_INSTANCES 4
 #endif
 
+/* The ray in instance k's object frame, traversed there; 1 when an any-hit
+ * query is answered. */
+inline int scene_visit(SCENE_ARGS, int k, float3 o, float3 d, int any_hit, Hit *hit)
+{
+    __global const Instance *in = &instances[k];
+    float3 lo = xform_point(in->object_from_world, o);
+    float3 ld = xform_vector(in->object_from_world, d);
+    return bvh_traverse(nodes, tris, in->root, lo, ld, any_hit, hit) >= 0 && any_hit;
+}
+
 /* The top level: every instance whose world box the ray meets before the
  * best hit so far, in index order, traversed in its object's frame. Past
- * SCENE_FLAT_INSTANCES, the boxes come 8 at a time (InstanceBoxes, after the records: one float8 slab
- * test, box_slab's operations lane by lane, culls a group against the best
- * hit when the group is reached); each instance kept is tested again when
- * its turn comes, against the best hit then, as box_entry tests it: the
- * same entry e and exit min(far, t) * (1 + slack), so it is visited exactly
- * when a one-by-one loop would visit it (the min of the exits is exact in
- * any order), and the hits are that loop's, bit for bit. */
+ * SCENE_FLAT_INSTANCES, the boxes come 8 at a time (InstanceBoxes, after
+ * the records, from the next 32-byte boundary): bvh8_slab's general form,
+ * box_slab's operations lane by lane, gives each lane's entry e and exit
+ * (without tmax) times the slack, and each instance is visited, in index
+ * order, when e <= min(exit, t * slack) and e is finite, t the best hit
+ * then. That is box_entry's own test: rounding is monotone, so min(a, b)
+ * times the slack is min(a times it, b times it), and min is exact in any
+ * order. So an instance is visited exactly when the one-by-one loop would
+ * visit it, and the hits are that loop's, bit for bit. */
 inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hit, Hit *hit)
 {
     hit->tri = -1;
@@ -362,37 +374,28 @@ inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hi
         for (int k = 0; k < n_instances; ++k) {
             __global const Instance *in = &instances[k];
             if (box_entry(in->lo, in->hi, o, inv, hit->t) == INFINITY) continue;
-            float3 lo = xform_point(in->object_from_world, o);
-            float3 ld = xform_vector(in->object_from_world, d);
-            if (bvh_traverse(nodes, tris, in->root, lo, ld, any_hit, hit) >= 0 && any_hit) break;
+            if (scene_visit(SCENE_PASS, k, o, d, any_hit, hit)) break;
         }
         return hit->tri;
     }
-    /* the groups start at the first 32-byte boundary after the records (144 bytes each) */
-    size_t at = ((size_t)n_instances * sizeof(Instance) + 31) & ~(size_t)31;
+    size_t at = ((size_t)n_instances * sizeof(Instance) + 31) & ~(size_t)31; /* instance_boxes.py groups_offset */
     __global const InstanceBoxes *groups = (__global const InstanceBoxes *)((__global const char *)instances + at);
     for (int g = 0; g * OCLGI_LANES < n_instances; ++g) {
         __global const InstanceBoxes *b = groups + g;
-        float8 t0x = (b->lox - o.x) * inv.x, t1x = (b->hix - o.x) * inv.x;
-        float8 t0y = (b->loy - o.y) * inv.y, t1y = (b->hiy - o.y) * inv.y;
-        float8 t0z = (b->loz - o.z) * inv.z, t1z = (b->hiz - o.z) * inv.z;
-        float8 e = fmax(fmax(fmin(t0x, t1x), fmin(t0y, t1y)), fmax(fmin(t0z, t1z), (float8)(0.0f)));
-        float8 far = fmin(fmin(fmax(t0x, t1x), fmax(t0y, t1y)), fmax(t0z, t1z));
-        int8 met = (e <= fmin(far, (float8)(hit->t)) * 1.0000004f) & (e != (float8)(INFINITY));
+        float8 enter, leave;
+        bvh8_slab(0, b->lox, b->loy, b->loz, b->hix, b->hiy, b->hiz, o, inv, INFINITY, &enter, &leave);
+        int8 met = (enter <= fmin(leave, (float8)(hit->t * 1.0000004f))) & (enter != (float8)(INFINITY));
         if (!any(met)) continue;
-        float es[OCLGI_LANES], fs[OCLGI_LANES];
+        float es[OCLGI_LANES], ls[OCLGI_LANES];
         int ms[OCLGI_LANES];
-        vstore8(e, 0, es);
-        vstore8(far, 0, fs);
+        vstore8(enter, 0, es);
+        vstore8(leave, 0, ls);
         vstore8(met, 0, ms);
         int n = min(OCLGI_LANES, n_instances - g * OCLGI_LANES);
         for (int j = 0; j < n; ++j) {
             /* box_entry against the best hit now (it only shrinks) */
-            if (!ms[j] || !(es[j] <= fmin(fs[j], hit->t) * 1.0000004f)) continue;
-            __global const Instance *in = &instances[g * OCLGI_LANES + j];
-            float3 lo = xform_point(in->object_from_world, o);
-            float3 ld = xform_vector(in->object_from_world, d);
-            if (bvh_traverse(nodes, tris, in->root, lo, ld, any_hit, hit) >= 0 && any_hit) return hit->tri;
+            if (!ms[j] || !(es[j] <= fmin(ls[j], hit->t * 1.0000004f))) continue;
+            if (scene_visit(SCENE_PASS, g * OCLGI_LANES + j, o, d, any_hit, hit)) return hit->tri;
         }
     }
     return hit->tri;

@@ -1,7 +1,8 @@
 /* detp_disc_index.cl: DETP with disc indexing (García 2006; DESIGN.md 3).
  *
  * detp_disc_index  one work-item per path of a batch (global size n_paths,
- *                  any local size), which walks its segments up to the
+ *                  any local size), or per path of `list` (when it is
+ *                  not NULL: list[i] is the i-th path), which walks its segments up to the
  *                  path's end (segment.h): reading only the stored
  *                  segments, not every slot, halves the cost of a pass over
  *                  a session's whole store. Each segment walks a BVH over the discs' boxes
@@ -25,8 +26,13 @@
  *                  pass, the common part of each suffix's first segment
  *                  skipped.
  *
- * detp_disc_index_listed  (below) detp_disc_index over the listed paths of
- *                  a store only.
+ * With `cull`, a segment that misses (root_lo, root_hi), the tree's root
+ * box, is skipped before the walk (disc_index_path_in): a camera session's
+ * dynamic points, summed over the paths whose cell masks meet their discs'
+ * box (update.cl update_candidates), whose segments mostly pass the cells
+ * but not the box (14.4 to 12.6 ms a move in Sponza, 4.8 to 3.6 in the
+ * Cornell box). A whole batch against the static points' tree, whose box
+ * is the scene's, passes cull = 0.
  */
 #include "oclgi_types.h"
 #include "segment.h"
@@ -36,17 +42,18 @@
 #include "detp_disc_index.h"
 
 __kernel void detp_disc_index(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                              __global const Segment *segments, int n_paths, int max_depth,
-                              int count_emitted, float ext,
-                              __global long *acc, __global ulong *work)
+                              __global const Segment *segments, __global const int *list, int n_paths,
+                              int max_depth, int count_emitted, float ext, int cull, float4 root_lo,
+                              float4 root_hi, __global long *acc, __global ulong *work)
 {
-    int p = get_global_id(0);
-    if (p >= n_paths) return;
+    int i = get_global_id(0);
+    if (i >= n_paths) return;
+    int p = list ? list[i] : i;
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
-    disc_index_path(nodes, discs, segments + (size_t)p * max_depth, segment_first(count_emitted), max_depth, ext,
-                    acc, &visited, &tests);
+    disc_index_path_in(nodes, discs, segments + (size_t)p * max_depth, segment_first(count_emitted), max_depth,
+                       ext, cull, root_lo.xyz, root_hi.xyz, acc, &visited, &tests);
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);
@@ -88,30 +95,6 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
     }
     disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
     disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
-    WORK_U(tests);
-    WORK_NODE(visited);
-    WORK_FLUSH(work);
-}
-
-/* detp_disc_index over the store's paths list[0 .. n_list) only, one
- * work-item each: a camera session's dynamic points summed over the paths
- * whose cell masks meet their discs' box (update.cl update_candidates),
- * which hold every segment that can cross one of them. Most of those
- * segments pass the cells but not the discs' box (root_lo, root_hi), and
- * are culled before the walk (disc_index_path_in): 14.4 to 12.6 ms a move
- * in Sponza, 4.8 to 3.6 in the Cornell box. */
-__kernel void detp_disc_index_listed(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                                     __global const Segment *segments, __global const int *list, int n_list,
-                                     int max_depth, int count_emitted, float ext, float4 root_lo, float4 root_hi,
-                                     __global long *acc, __global ulong *work)
-{
-    int i = get_global_id(0);
-    if (i >= n_list) return;
-    WORK_DECL;
-    uint visited = 0;
-    ulong tests = 0;
-    disc_index_path_in(nodes, discs, segments + (size_t)list[i] * max_depth, segment_first(count_emitted),
-                       max_depth, ext, 1, root_lo.xyz, root_hi.xyz, acc, &visited, &tests);
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

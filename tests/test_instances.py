@@ -157,8 +157,7 @@ def test_many_instances_grouped_equal_one_by_one(rng):
     equal brute force, and equal a build that tests the boxes one by one,
     bit for bit, any-hit included; a static-only instance list (a camera
     session's static layer) groups its own boxes."""
-    from oclgi.accel.bvh import _Rays, any_hits
-    from oclgi.cl.programs import programs
+    from oclgi.accel.bvh import any_hits
 
     room_v, room_f = _box((-3, 0, -3), (3, 3, 3))
     meshes = [{"vertices": room_v, "faces": room_f[:, ::-1], "albedo": [0.5, 0.5, 0.5]}]  # facing in
@@ -197,14 +196,13 @@ def test_many_instances_grouped_equal_one_by_one(rng):
     assert (tri_ref >= first_box).sum() > 0.3 * n and (tri >= 0).all()
     assert (np.abs(t - t_ref) / t_ref > 1e-4).sum() <= 2 and (tri == tri_ref).mean() > 0.995
 
-    rays = _Rays(engine.queue, origins, dirs, np.inf)
-    flat = programs(engine.ctx).get("bvh_query", scene_flat_instances=1000)
-    one_by_one = rays.run(flat.bvh_query_closest, engine.compiled, np.float32, (n, 4), None)
+    never = {"scene_flat_instances": 1000}  # a build that tests the boxes one by one
+    t1, u1, v1, tri1 = closest_hits(engine.queue, engine.compiled, origins, dirs, defines=never)
+    one_by_one = np.stack([t1, u1, v1, tri1.view(np.float32)], axis=1)
     grouped = np.stack([t, u, v, tri.view(np.float32)], axis=1)
     assert np.array_equal(one_by_one.view(np.int32), grouped.view(np.int32))
     half = np.where(tri >= 0, t * 0.5, 1.0).astype(np.float32)
-    any_rays = _Rays(engine.queue, origins, dirs, half)
-    assert np.array_equal(any_rays.run(flat.bvh_query_any, engine.compiled, np.int32, (n,), None),
+    assert np.array_equal(any_hits(engine.queue, engine.compiled, origins, dirs, half, defines=never),
                           any_hits(engine.queue, engine.compiled, origins, dirs, half))
 
     # the static layer's instance list (incremental/dynamic_view.py) holds the room alone

@@ -77,18 +77,20 @@ class _Rays:
         return out
 
 
-def closest_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
-    """(t, u, v, tri) for each ray: t = inf and tri = -1 on a miss."""
+def closest_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None, defines=None):
+    """(t, u, v, tri) for each ray: t = inf and tri = -1 on a miss.
+    ``defines``: the query program's own build defines (a test's or a
+    benchmark's variant of kernels/bvh.h, e.g. ``scene_flat_instances``)."""
     rays = _Rays(queue, origins, dirs, tmax)
-    k = programs(queue.context).get("bvh_query").bvh_query_closest
+    k = programs(queue.context).get("bvh_query", **(defines or {})).bvh_query_closest
     out = rays.run(k, compiled, np.float32, (rays.n, 4), local_size)
     return out[:, 0], out[:, 1], out[:, 2], out[:, 3].view(np.int32)
 
 
-def any_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None):
-    """1 for each ray that hits anything before tmax, else 0."""
+def any_hits(queue, compiled, origins, dirs, tmax=np.inf, local_size=None, defines=None):
+    """1 for each ray that hits anything before tmax, else 0 (``defines``: as closest_hits')."""
     rays = _Rays(queue, origins, dirs, tmax)
-    k = programs(queue.context).get("bvh_query").bvh_query_any
+    k = programs(queue.context).get("bvh_query", **(defines or {})).bvh_query_any
     return rays.run(k, compiled, np.int32, (rays.n,), local_size)
 
 

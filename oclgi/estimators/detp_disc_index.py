@@ -99,7 +99,6 @@ class DetpDiscIndex(DetpEstimator):
             self.defines = dict(self.defines, disc_tree_binary=1)
         prog = self.program("detp_disc_index")
         self.k_walk, self.k_change = prog.detp_disc_index, prog.detp_disc_index_change
-        self.k_listed = prog.detp_disc_index_listed
         self.build_index()
 
     def build_index(self):
@@ -124,8 +123,6 @@ class DetpDiscIndex(DetpEstimator):
             blocks["r2"][blk, lane] = self.radius2[ids[o]]
             blocks["id"][blk, lane] = ids[o]
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
-            # the same box as float4s: accumulate_listed culls segments by it
-            self.root_planes = tuple(np.append(nodes[k][0], np.float32(0)).astype(np.float32) for k in ("lo", "hi"))
             self.depth = bvh.depth
             if self.tree == "wide":
                 wide = collapse_boxes(nodes, "discs")
@@ -165,24 +162,24 @@ class DetpDiscIndex(DetpEstimator):
 
     def accumulate_listed(self, store, listed, n: int):
         """``accumulate`` over the paths ``listed[:n]`` (a device int32
-        buffer of path indices) of the batch ``store`` only."""
+        buffer of path indices) of the batch ``store`` only, each segment
+        culled by the tree's root box first (kernels/detp_disc_index.cl)."""
         if self.nodes is None or not n:
             return
-        launch(
-            self.queue, self.k_listed, n,
-            self.nodes, self.blocks, store.segments, listed, n, store.max_depth,
-            self.count_emitted, self.ext, *self.root_planes,
-            self.acc, self.work_buf,
-            local_size=self.local_size,
-        )
+        self._walk(store, listed, n, cull=True)
 
     def accumulate(self, batch):
         if self.nodes is None:
             return
+        self._walk(batch, None, batch.n_paths, cull=False)
+
+    def _walk(self, batch, listed, n: int, cull: bool):
+        """detp_disc_index over ``n`` paths of ``batch``: its first n, or those ``listed``."""
+        lo, hi = (np.append(b, 0.0).astype(np.float32) for b in self.root_box)  # float32 values: exact
         launch(
-            self.queue, self.k_walk, batch.n_paths,
-            self.nodes, self.blocks, batch.segments, batch.n_paths, batch.max_depth,
-            self.count_emitted, self.ext,
+            self.queue, self.k_walk, n,
+            self.nodes, self.blocks, batch.segments, listed, n, batch.max_depth,
+            self.count_emitted, self.ext, int(cull), lo, hi,
             self.acc, self.work_buf,
             local_size=self.local_size,
         )

@@ -3,8 +3,9 @@
 The top level of the scene's BVH is its instances (kernels/bvh.h): a ray
 tests each instance's world box, in index order, and traverses the object
 of each box it meets. One box at a time, the top level cost grew with the
-number of objects: 10^6 rays in Sponza took 1.5x as long with 32 small
-movable cubes, 2.1x with 64 (bench/README, "Closest hit"). So the device
+number of objects: 10^6 rays in Sponza took 1.35x as long with 32 small
+movable boxes, 2.1x with 64 (bench/README, "The top level with many
+movable objects"). So the device
 buffer holds, after the ``Instance`` records (from the next 32-byte
 boundary), their boxes as
 ``InstanceBoxes`` groups (``oclgi.cl.layout``): instance 8 g + k in lane k
@@ -45,9 +46,10 @@ def groups_offset(n: int) -> int:
 
 def instance_buffer_bytes(records: np.ndarray) -> np.ndarray:
     """What the device's instance buffer holds: the records, then their groups."""
-    out = np.zeros(groups_offset(len(records)) + len(box_groups(records)) * InstanceBoxes.itemsize, np.uint8)
+    at, groups = groups_offset(len(records)), box_groups(records)
+    out = np.zeros(at + groups.nbytes, np.uint8)
     out[:records.nbytes] = np.ascontiguousarray(records).view(np.uint8).ravel()
-    out[groups_offset(len(records)):] = box_groups(records).view(np.uint8).ravel()
+    out[at:] = groups.view(np.uint8)
     return out
 
 
