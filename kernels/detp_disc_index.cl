@@ -40,6 +40,7 @@
 #include "work.h"
 #include "detp_resolve.h"
 #include "detp_disc_index.h"
+#include "prefetch.h"
 
 __kernel void detp_disc_index(__global const DiscNode *nodes, __global const DiscBlock *discs,
                               __global const Segment *segments, __global const int *list, int n_paths,
@@ -49,6 +50,7 @@ __kernel void detp_disc_index(__global const DiscNode *nodes, __global const Dis
     int i = get_global_id(0);
     if (i >= n_paths) return;
     int p = list ? list[i] : i;
+    prefetch_listed_path(segments, list, i, n_paths, max_depth, 3);
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
@@ -77,6 +79,7 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
 {
     int k = get_global_id(0);
     if (k >= n_list) return;
+    prefetch_listed_path(store, paths, k, n_list, max_depth, 3);
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;

@@ -39,6 +39,7 @@
 #include "segment.h"
 #include "detp_disc_index.h"
 #include "work.h"
+#include "prefetch.h"
 
 /* Does segment (o, d, t_end, tri) of a path touch object `in` (triangles
  * lo..hi) at its old pose (it ended there) or at its new one (it meets it)? */
@@ -61,6 +62,7 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
     int i = get_global_id(0);
     if (i >= n_list) return;
     int p = list[i];
+    prefetch_listed_path(segments, list, i, n_list, max_depth, 3);
     ulong m[2] = {0, 0};
     int3 top = dims.xyz - 1;
     float3 g0 = grid_lo.xyz + pad, g1 = grid_lo.xyz + convert_float3(dims.xyz) * cell.xyz - pad; /* shrunk */
@@ -114,6 +116,7 @@ __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment 
     int i = get_global_id(0);
     if (i >= n_list) return;
     int p = list[i];
+    prefetch_listed_path(segments, list, i, n_list, max_depth, 3);
     __global const Instance *in = &instances[obj];
     int lo = in->first_tri, hi = in->first_tri + in->n_tris;
     int found = -1;
@@ -150,6 +153,7 @@ __kernel void update_gather(__global const Segment *segments, int max_depth,
 {
     int k = get_global_id(0);
     if (k >= n_list) return;
+    prefetch_listed_path(segments, paths, k, n_list, max_depth, max_depth);
     __global const Segment *src = &segments[(size_t)paths[k] * max_depth];
     __global Segment *dst = &out[(size_t)k * max_depth];
     int b0 = starts[k];

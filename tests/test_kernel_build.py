@@ -157,3 +157,25 @@ def test_scalar_arguments_are_declared_once(cl_env):
     assert np.array_equal(got[:, :3], (acc.reshape(2, 3) * 0.5).astype(np.float32))
     with pytest.raises(TypeError):
         k(queue, (2,), None, a, 2, out)
+
+
+def test_prefetch_is_on_for_cpu_devices_and_builds_off(cl_env):
+    """kernels/prefetch.h: the program cache turns software prefetch on for
+    a CPU device only; off, as on a GPU, the kernels that use it build
+    without a warning too (on a CPU they run on, prefetching, in every
+    exactness test)."""
+    import pyopencl as cl
+
+    from oclgi.cl.programs import PREFETCH_AHEAD
+
+    ctx, _queue = cl_env
+    cache = ProgramCache(ctx)
+    cpu = bool(ctx.devices[0].type & cl.device_type.CPU)
+    assert PREFETCH_AHEAD > 0
+    assert (f"-DOCLGI_PREFETCH_AHEAD={PREFETCH_AHEAD}" in cache.options(())) == cpu
+    assert "-DOCLGI_PREFETCH_AHEAD=0" in cache.options((("prefetch_ahead", 0),))
+    users = [p for p in _kernel_files() if '#include "prefetch.h"' in p.read_text()]
+    assert {p.stem for p in users} >= {"update", "detp_disc_index", "photon_trace"}
+    for path in users:
+        log = cache.get(path.stem, prefetch_ahead=0).log
+        assert "warning" not in log.lower(), f"{path.name} without prefetch:\n{log}"

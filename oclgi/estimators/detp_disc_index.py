@@ -50,6 +50,9 @@ option          default    meaning
 ``tree``        ``wide``   ``wide`` (8 children per node) or ``binary`` (the
                            tree as built, kernels/box_bvh.h; kept to measure
                            one against the other)
+``builder``     ``lbvh``   ``lbvh`` (Morton order, fast to build) or ``sah``
+                           (binned SAH, oclgi/accel/bvh_sah.py: slower to build,
+                           fewer nodes visited per segment)
 ==============  =========  ====================================================
 
 plus the DETP parameters of :class:`oclgi.estimators.base.DetpEstimator`.
@@ -57,6 +60,13 @@ plus the DETP parameters of :class:`oclgi.estimators.base.DetpEstimator`.
 Why 32: in float8 lanes a segment-disc test costs a few ns, a node visit
 (scalar slab test and stack) tens of ns (measured on PoCL, Cornell box,
 10^5 discs), so fewer, fuller leaves win although they raise u.
+
+A session (oclgi/incremental/session.py) builds its static points' tree
+once and walks it on every move: it asks for ``SESSION_TREE`` instead, a
+SAH tree with 64 discs a leaf, which the build costs more for and every
+move gains from (Sponza, 10^5 discs, a move's change pass, alternating in
+one run: Morton/32 27.5 ms, SAH/32 25.6 ms, SAH/64 24.3 ms; the build 0.05
+s against 0.19 s). One pass over a whole batch does not repay it.
 
 Scaling (counted, tests/test_detp_disc_index.py): with discs spread through
 the volume, u per segment grows as n_P^0.33; with discs on the surfaces it
@@ -74,27 +84,37 @@ import numpy as np
 
 from ..accel.box_wide import MAX_LEAF, collapse_boxes
 from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
-from ..accel.bvh_build import build_bvh
+from ..accel.bvh_build import BUILDERS, build_bvh
 from ..cl.layout import DiscBlock
 from ..cl.programs import launch
 from ..errors import OclgiError
 from .adaptive_radius import AdaptiveRadii
 from .base import DetpEstimator
 
+# The static points' tree of a session: built once, walked on every move
+SESSION_TREE = {"builder": "sah", "leaf_size": 64}
+
+
 class DetpDiscIndex(DetpEstimator):
     name = "detp_disc_index"
     fuses_with_find = True  # the find pass sums its discs (kernels/update.cl), or accumulate_listed does
     radii_maker = AdaptiveRadii  # each disc block carries its discs' d^2
 
-    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide", **kw):
+    session_tree = SESSION_TREE  # what a session's static points are built with (module doc)
+
+    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide",
+                 builder: str = "lbvh", **kw):
         super().__init__(queue, compiled, points, radius, **kw)
         if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
                 or not 1 <= leaf_size <= MAX_LEAF):
             raise OclgiError(f"leaf_size must be an integer from 1 to {MAX_LEAF}, got {leaf_size!r}")
         if tree not in ("wide", "binary"):
             raise OclgiError(f"tree must be 'wide' or 'binary', got {tree!r}")
+        if builder not in BUILDERS:
+            raise OclgiError(f"builder must be one of {', '.join(map(repr, BUILDERS))}, got {builder!r}")
         self.leaf_size = int(leaf_size)
         self.tree = tree
+        self.builder = builder
         if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
             self.defines = dict(self.defines, disc_tree_binary=1)
         prog = self.program("detp_disc_index")
@@ -112,7 +132,7 @@ class DetpDiscIndex(DetpEstimator):
             pos, nrm = points.positions[ids, :3], points.normals[ids, :3]
             pad = PAD * coordinate_scale(self.compiled, pos)
             lo, hi = disc_boxes(pos, nrm, self.radii[ids], pad)
-            bvh = build_bvh(lo, hi, self.leaf_size)
+            bvh = build_bvh(lo, hi, self.leaf_size, quality=self.builder, queue=self.queue)
             check_depth(bvh.depth, "discs")
             nodes, blk, lane, n_blocks = leaf_blocks(bvh.nodes, self.n_active)
             blocks = np.zeros(n_blocks, DiscBlock)  # padding lanes: zero normal

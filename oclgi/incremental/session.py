@@ -165,7 +165,9 @@ class Session(SessionBase):
             # whichever point each pixel sees.
             est_points = self.view.static if cls.sums_per_point else self.view.points.copy()
         self.dynamic = self.dynamic_choice or ("detp_disc_index" if cls.family == "detp" else p.method)
-        self.estimator = self.engine.estimator(est_points, p, **self.options)
+        # the static points' index is walked on every move: built for that
+        # (DetpDiscIndex.session_tree), unless the options say otherwise
+        self.estimator = self.engine.estimator(est_points, p, **{**getattr(cls, "session_tree", {}), **self.options})
         self.estimator.accumulate(self.store.batch)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:
