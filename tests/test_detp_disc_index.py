@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 import oclgi
+from oclgi.estimators.detp_disc_index import DetpDiscIndex
 from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_camera_misses, check_replace_points,
                        check_same, check_variant_same_as_plain, run_on_batch)
 
@@ -63,6 +64,22 @@ def test_wide_and_binary_trees(engines, points, plain, scene):
     assert work["wide"]["nodes"] < work["binary"]["nodes"] / 2, work
 
 
+@pytest.mark.parametrize("scene", ["cornell", "bunny"])
+def test_sah_tree(engines, points, plain, scene):
+    """The SAH-built tree (a session's static points) sums what plain DETP
+    sums, and with its 64-disc leaves visits fewer nodes than the default."""
+    e = engines[scene]
+    frac = RADIUS_FRACTIONS[1]
+    work = {}
+    for name, opts in (("default", {}), ("session", DetpDiscIndex.session_tree)):
+        est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
+                           count_work=True, **opts)
+        check_same(plain(scene, frac, True), est, f"{scene} {name} tree")
+        work[name] = est.work
+    assert DetpDiscIndex.session_tree["builder"] == "sah"
+    assert work["session"]["nodes"] < work["default"]["nodes"], work
+
+
 @pytest.mark.parametrize("local_size", [1, 7, 64])
 def test_work_group_sizes(engines, points, plain, local_size):
     e = oclgi.Engine(engines["cornell"].scene, local_size=local_size)
@@ -81,10 +98,12 @@ def test_adversarial_segments(engines, count_emitted):
     pts, d, batch = adversarial_batch(e, np.random.default_rng(7))
     ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
     assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
-    for leaf_size, tree in ((1, "wide"), (8, "wide"), (1, "binary"), (8, "binary")):
-        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, tree=tree)
+    for leaf_size, tree, builder in ((1, "wide", "lbvh"), (8, "wide", "lbvh"), (1, "binary", "lbvh"),
+                                     (8, "binary", "lbvh"), (1, "wide", "sah"), (64, "wide", "sah")):
+        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, tree=tree,
+                           builder=builder)
         assert np.array_equal(got, ref), \
-            f"leaf_size {leaf_size}, {tree}: {(got != ref).any(axis=1).sum()} discs differ"
+            f"leaf_size {leaf_size}, {tree}, {builder}: {(got != ref).any(axis=1).sum()} discs differ"
 
 
 def test_u_grows_like_cube_root_of_points(engines):
@@ -114,7 +133,7 @@ def test_u_grows_like_cube_root_of_points(engines):
 
 
 @pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 2.5}, {"leaf_size": True}, {"leaf_size": 257},
-                                 {"tree": "quad"}, {"piece": 0.1}])
+                                 {"tree": "quad"}, {"builder": "octree"}, {"piece": 0.1}])
 def test_bad_options(engines, points, bad):
     from oclgi.errors import OclgiError
 

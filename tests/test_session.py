@@ -216,7 +216,9 @@ def test_dynamic_passes_agree(scenes_dir, rng):
     and over every stored path ("store"): the same accumulators after every
     move, bit for bit, and plain DETP's at the end. The listed pass tests
     the same discs as the whole store's (a path it leaves out meets none)
-    and visits fewer nodes (it leaves those paths' root visits out)."""
+    and visits fewer nodes (it leaves those paths' root visits out); its
+    index is built while the device re-traces, the paths listed by the
+    find in a box around the points, the one scan of the masks a move."""
     moves = _moves(rng, 10)
     for m in moves:
         m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # in view: dynamic points every frame
@@ -227,8 +229,14 @@ def test_dynamic_passes_agree(scenes_dir, rng):
         session = oclgi.Session(oclgi.Engine(scene), method="detp_disc_index", radius=0.05, photons=10_000,
                                 count_work=True)
         session.dynamic_pass = mode
+        listings = []
+        list_candidates = session.store._list_candidates
+        session.store._list_candidates = lambda boxes: listings.append(boxes) or list_candidates(boxes)
         runs[mode] = [(session.move("bunny", m).points, session.accumulators().copy()) for m in moves]
         work[mode] = session.dynamic_work
+        # one scan of the masks per move: the find's list, made in a box
+        # around the points before their index, holds the index's box
+        assert len(listings) == len(moves), (mode, len(listings))
     assert sum(points for points, _ in runs["listed"]) > 20
     for mode in ("find", "listed"):
         for i, ((pa, acc_a), (pb, acc_b)) in enumerate(zip(runs["store"], runs[mode])):

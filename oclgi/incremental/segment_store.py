@@ -23,7 +23,7 @@ path-major, as one batch. After a movable object moves:
    power, and the discs both cross cancel, so that part is skipped);
 5. ``sum_near(discs)`` sums the moved store into a camera session's
    dynamic points, reading only the paths whose cell masks meet their
-   discs' box (the list of a ``find`` given them as ``near``).
+   discs' box (the list of a ``find`` given a ``near`` box that holds it).
 
 Sessions (oclgi/incremental/session.py) drive these steps for their estimators.
 """
@@ -73,6 +73,11 @@ class Affected:
         return len(self.paths)
 
 
+def _holds(outer, inner) -> bool:
+    """Does box ``outer`` (lo, hi) hold box ``inner``?"""
+    return bool((np.asarray(outer[0]) <= inner[0]).all() and (np.asarray(inner[1]) <= outer[1]).all())
+
+
 class SegmentStore:
     """``photons`` paths traced with ``seed`` and ``max_depth`` on the engine's scene.
 
@@ -114,7 +119,7 @@ class SegmentStore:
         self.first_host = np.empty(self.photons, np.int32)
         self.scratch = None  # grown on demand: gathered suffixes
         self.examined = 0  # paths the last find looked at
-        self._near = None  # (discs, listed paths, count) of the last find's ``near``
+        self._near = None  # (box, listed paths, count) of the last find's ``near``
         # the cell grid: the scene as loaded, padded; the cells' pad is far
         # above float rounding, so a segment meeting a box inside a cell
         # always meets the padded cell
@@ -235,12 +240,13 @@ class SegmentStore:
         discs' box: a segment that crosses a disc meets its box, inside
         the root box, so its path's mask (current after ``retrace``) meets
         the box's cells, or leaves the grid where the box does. When the
-        last ``find`` was given these discs as ``near``, its list serves:
-        it held every path whose mask met their box before the move, and
-        every path the move re-traced (so whatever its mask is now)."""
+        last ``find`` was given a ``near`` box holding the discs' box, its
+        list serves: it held every path whose mask met that box before the
+        move, and every path the move re-traced (so whatever its mask is
+        now). Otherwise the paths are listed here."""
         if discs.nodes is None:
             return
-        if self._near is not None and self._near[0] is discs:
+        if self._near is not None and _holds(self._near[0], discs.root_box):
             _, listed, n = self._near
         else:
             listed, n = self._list_candidates([discs.root_box])
@@ -255,16 +261,16 @@ class SegmentStore:
         new pose). With ``discs`` (a DetpDiscIndex) the same pass also sums
         the stored segments into its points' accumulators: every segment of
         the paths examined, which holds every segment that can reach them.
-        ``near`` (a DetpDiscIndex): the paths examined also include those
-        near its discs, and the list is kept for ``sum_near(near)`` after
-        the update (one scan of the masks per move instead of two)."""
+        ``near`` (a box (lo, hi), float64): the paths examined also include
+        those whose masks meet it, and the list is kept for a ``sum_near``
+        after the update over discs inside it (one scan of the masks per
+        move instead of two; the discs need not exist yet)."""
         engine, q = self.engine, self.queue
         inst = engine.compiled.instances_host
         new_box = (inst["lo"][obj].astype(np.float64), inst["hi"][obj].astype(np.float64))
         fused = discs is not None and discs.nodes is not None
-        near = near if near is not None and near.nodes is not None else None
         boxes = [self.boxes[obj], new_box] + ([discs.root_box] if fused else []) + \
-            ([near.root_box] if near is not None else [])
+            ([near] if near is not None else [])
         self.boxes[obj] = new_box
         listed, n = self._list_candidates(boxes)
         candidates = None

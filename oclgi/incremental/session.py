@@ -315,18 +315,21 @@ class Session(SessionBase):
         t0 = time.perf_counter()
         engine.place(name, matrix)
         seconds = {}
-        n_view = self._refresh_view() if self.view is not None else 0
-        t1 = time.perf_counter()
-        if self.view is not None:
-            seconds["points"] = t1 - t0
         # A disc-indexed dynamic estimator takes its sums over the old store
         # in the find pass ("find", dynamic_pass); the suffix passes below
         # then update them as they update the static points (update.cl).
-        # Otherwise they are summed over the new store at the end.
-        mode = self.dynamic_pass if self.dyn_est is not None and self.dyn_est.fuses_with_find else "store"
+        # Otherwise they are summed over the new store at the end; "listed"
+        # builds their index on the host while the device re-traces, and
+        # its paths are listed by the find, in a box known before the index.
+        mode = self._dynamic_mode()
+        deferred = mode == "listed"
+        n_view = self._refresh_view(build=not deferred) if self.view is not None else 0
+        near = self._near_box() if deferred and len(self.dyn_index) else None
+        t1 = time.perf_counter()
+        if self.view is not None:
+            seconds["points"] = t1 - t0
         fused = self.dyn_est is not None and mode == "find"
-        affected = self.store.find(obj, self.dyn_est if fused else None,
-                                   near=self.dyn_est if mode == "listed" else None)
+        affected = self.store.find(obj, self.dyn_est if fused else None, near=near)
         t2 = time.perf_counter()
         seconds["find"] = t2 - t1
         stats = UpdateStats(paths=len(affected), segments_removed=0, segments_added=0, points=n_view)
@@ -343,6 +346,9 @@ class Session(SessionBase):
             q.finish()  # honest per-stage times
             t3 = time.perf_counter()
             self.store.retrace(affected)
+            if deferred:  # host work while the device re-traces: in the re-trace's time
+                self._new_dynamic()
+                deferred = False
             q.finish()
             t4 = time.perf_counter()
             if change:
@@ -356,6 +362,10 @@ class Session(SessionBase):
             stats.segments_added = self.store.suffix_segments(affected)
             t5 = time.perf_counter()
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
+        if deferred:  # nothing was re-traced
+            t6 = time.perf_counter()
+            self._new_dynamic()
+            seconds["points"] += time.perf_counter() - t6
         if self.dyn_est is not None and not fused:
             t6 = time.perf_counter()
             if mode == "listed":
@@ -370,18 +380,41 @@ class Session(SessionBase):
         stats.seconds = seconds
         return stats
 
-    def _refresh_view(self) -> int:
+    def _dynamic_mode(self) -> str | None:
+        """How a move sums the dynamic points (``dynamic_pass``; "store"
+        for a variant that cannot sum in the find pass); None: the session
+        keeps no sums per dynamic point."""
+        from ..estimators import ESTIMATORS
+
+        if self.view is None or not self.estimator.sums_per_point:
+            return None
+        return self.dynamic_pass if ESTIMATORS[self.dynamic].fuses_with_find else "store"
+
+    def _refresh_view(self, build: bool = True) -> int:
         """Re-trace the pixels that may see a movable object. Impact Count:
         the changed pixels are re-pointed (its sums are per triangle). DETP:
-        a fresh estimator over the dynamic points, its sums still empty
-        (``move`` fills them)."""
+        the dynamic points, and (``build``) a fresh estimator over them, its
+        sums still empty (``move`` fills them); else ``_new_dynamic`` later."""
         changed, dynamic = self.view.update()
         if not self.estimator.sums_per_point:
             if len(changed):
                 self.estimator.replace_points(changed, self.view.subset(changed))
             return len(changed)
-        self._new_dynamic()
+        self.dyn_index, self.dyn_est = self.view.dynamic, None
+        if build:
+            self._new_dynamic()
         return len(dynamic)
+
+    def _near_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """A box around the dynamic points holding every disc box their
+        index will have (``disc_boxes``: at most the radius and the pad from
+        each centre): what the find lists paths in for them before the index
+        exists. SegmentStore.sum_near checks that it holds the index's box."""
+        from ..accel.boxes import PAD, coordinate_scale
+
+        pos = self.view.points.positions[self.dyn_index, :3].astype(np.float64)
+        margin = 1.001 * self.params.radius + 2.0 * PAD * coordinate_scale(self.engine.compiled, pos)
+        return pos.min(axis=0) - margin, pos.max(axis=0) + margin
 
     def _new_dynamic(self):
         """An estimator of the ``dynamic`` variant over the view's dynamic points."""
