@@ -83,15 +83,34 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
         }
         if (out) m[1] |= (ulong)1 << (OCLGI_CELL_OUTSIDE_BIT - 64);
         float3 inv = 1.0f / d;
-        for (int z = c0.z; z <= c1.z; ++z)
-            for (int y = c0.y; y <= c1.y; ++y)
-                for (int x = c0.x; x <= c1.x; ++x) {
-                    float3 lo = grid_lo.xyz + (float3)(x, y, z) * cell.xyz - pad;
-                    if (box_entry3(lo, lo + cell.xyz + 2.0f * pad, o, inv, t_end) != INFINITY) {
-                        int c = x + dims.x * (y + dims.y * z);
+        /* box_slab (box.h) on each padded cell, its per-axis parts made once
+         * per column, row and layer: a cell's slab times are its x column's,
+         * y row's and z layer's, the same operations on the same values, and
+         * fmin / fmax are exact, so a cell is marked exactly when box_slab
+         * on its box says so. */
+        float tnx[OCLGI_CELL_OUTSIDE_BIT], tfx[OCLGI_CELL_OUTSIDE_BIT];
+        for (int x = c0.x; x <= c1.x; ++x) {
+            float lo = grid_lo.x + (float)x * cell.x - pad;
+            float t0 = (lo - o.x) * inv.x, t1 = (lo + cell.x + 2.0f * pad - o.x) * inv.x;
+            tnx[x] = fmin(t0, t1);
+            tfx[x] = fmax(t0, t1);
+        }
+        for (int z = c0.z; z <= c1.z; ++z) {
+            float loz = grid_lo.z + (float)z * cell.z - pad;
+            float t0z = (loz - o.z) * inv.z, t1z = (loz + cell.z + 2.0f * pad - o.z) * inv.z;
+            float nz = fmax(fmin(t0z, t1z), 0.0f), fz = fmin(fmax(t0z, t1z), t_end);
+            for (int y = c0.y; y <= c1.y; ++y) {
+                float loy = grid_lo.y + (float)y * cell.y - pad;
+                float t0y = (loy - o.y) * inv.y, t1y = (loy + cell.y + 2.0f * pad - o.y) * inv.y;
+                float ny = fmax(fmin(t0y, t1y), nz), fy = fmin(fmax(t0y, t1y), fz);
+                int row = dims.x * (y + dims.y * z);
+                for (int x = c0.x; x <= c1.x; ++x)
+                    if (fmax(tnx[x], ny) <= fmin(tfx[x], fy) * 1.0000004f) {
+                        int c = x + row;
                         m[c >> 6] |= (ulong)1 << (c & 63);
                     }
-                }
+            }
+        }
     }
     cells[p] = (ulong2)(m[0], m[1]);
 }
