@@ -12,8 +12,8 @@
  *     meets it inside some cell, which is in both masks, or outside the
  *     grid, which it then leaves. The host keeps the masks current: all
  *     paths after the trace, re-traced paths after each update.
- * update_candidates  one work-item per path: lists those whose mask meets
- *     the region's.
+ * update_candidates  one work-item per `chunk` paths: lists those whose
+ *     mask meets the region's.
  * update_first_affected  one work-item per listed path (first[i] for list[i]):
  *     the first bounce b whose segment hit the moved object before the move (its triangle is
  *     in the object's range) or meets the object at its new pose before its
@@ -116,14 +116,27 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
 }
 
 /* The paths whose mask meets `region`, appended to `list` in any order (the
- * host sorts them): only a few percent of the store is read again. */
-__kernel void update_candidates(__global const ulong2 *cells, int n_paths, ulong2 region,
+ * host sorts them): only a few percent of the store is read again. A
+ * work-item counts its chunk's, takes their places with one atomic, then
+ * writes them: an atomic per listed path, on one counter both cores
+ * share, cost about a sixth of the scan (Sponza, 336,032 paths, 52,871
+ * listed: 1.31 -> 1.10 ms). */
+__kernel void update_candidates(__global const ulong2 *cells, int n_paths, int chunk, ulong2 region,
                                 volatile __global int *count, __global int *list)
 {
-    int p = get_global_id(0);
-    if (p >= n_paths) return;
-    ulong2 m = cells[p] & region;
-    if (m.x | m.y) list[atomic_inc(count)] = p;
+    int p0 = get_global_id(0) * chunk;
+    if (p0 >= n_paths) return;
+    int p1 = min(p0 + chunk, n_paths), k = 0;
+    for (int p = p0; p < p1; ++p) {
+        ulong2 m = cells[p] & region;
+        k += (m.x | m.y) != 0;
+    }
+    if (k == 0) return;
+    int at = atomic_add(count, k);
+    for (int p = p0; p < p1; ++p) {
+        ulong2 m = cells[p] & region;
+        if (m.x | m.y) list[at++] = p;
+    }
 }
 
 __kernel void update_first_affected(SCENE_ARGS, int obj, __global const Segment *segments, __global const int *list,

@@ -43,6 +43,7 @@ from ..errors import OclgiError
 from ..tracing.photon_trace import PathBatch, PhotonTracer
 
 MAX_CELLS = OUTSIDE_BIT  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
+CANDIDATE_CHUNK = 64  # paths per work-item of the mask scan (kernels/update.cl update_candidates)
 
 
 def grid_dims(extent) -> np.ndarray:
@@ -229,7 +230,8 @@ class SegmentStore:
         q = self.queue
         count = np.zeros(1, np.int32)
         cl.enqueue_copy(q, self.count, count)
-        launch(q, self.k_candidates, self.photons, self.cells, self.photons,
+        chunk = CANDIDATE_CHUNK
+        launch(q, self.k_candidates, -(-self.photons // chunk), self.cells, self.photons, chunk,
                cltypes.make_ulong2(*(int(w) for w in region)), self.count, self.candidates)
         cl.enqueue_copy(q, count, self.count)
         return self.candidates, int(count[0])

@@ -422,7 +422,11 @@ class Session(SessionBase):
         self.dyn_est = None
         if len(self.dyn_index) == 0:
             return
+        from ..estimators import ESTIMATORS
+
         p = self.params
         options = self.options if self.dynamic == p.method else {"count_work": self.options["count_work"]}
+        # an index built on every move, walked once (DetpDiscIndex.dynamic_tree)
+        options = {**getattr(ESTIMATORS[self.dynamic], "dynamic_tree", {}), **options}
         self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
                                              **options)
