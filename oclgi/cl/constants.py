@@ -39,7 +39,7 @@ BOX_BVH_STACK = 64
 # The same trees collapsed into 8-wide nodes (kernels/box_wide.h,
 # oclgi/accel/box_wide.py): a leaf lane holds ~(first << BOX_LEAF_BITS |
 # count - 1), so a leaf has at most 2^BOX_LEAF_BITS primitives. A visit
-# pops one entry and writes 8 (every child met is pushed, leaves too), and a
+# pops one entry and pushes up to 8 (every child met, leaves too), and a
 # wide tree is no deeper than its binary one (each level goes down at least
 # one binary level), so 7 entries per binary level above the leaves and 8
 # for the last visit always suffice for a tree the binary walk accepts.
