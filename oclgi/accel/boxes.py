@@ -15,12 +15,22 @@ from ..errors import OclgiError
 PAD = 2e-5
 
 
+def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each column's min and max of an (n, k) array (n > 0). numpy reduces
+    an (n, 3) array along axis 0 with a 3-wide inner loop per row: 30x
+    slower than reducing the transposed copy's rows (260 against 9 us for
+    4,000 rows). min and max are exact, so the values are the same."""
+    t = np.ascontiguousarray(np.asarray(a).T)
+    return t.min(axis=1), t.max(axis=1)
+
+
 def coordinate_scale(compiled, positions: np.ndarray) -> float:
     """Largest of the scene's diagonal and its (and the points') coordinates:
     float32 rounding is relative to the coordinates, not to the extent."""
     lo, hi = compiled.bounds
-    lo = np.minimum(lo, positions.min(axis=0)) if len(positions) else lo
-    hi = np.maximum(hi, positions.max(axis=0)) if len(positions) else hi
+    if len(positions):
+        p_lo, p_hi = column_bounds(positions)
+        lo, hi = np.minimum(lo, p_lo), np.maximum(hi, p_hi)
     return float(max(np.linalg.norm(hi - lo), np.abs(lo).max(), np.abs(hi).max(), 1e-30))
 
 

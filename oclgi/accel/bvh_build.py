@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .boxes import column_bounds
 from .bvh_sah import build_sah
 from .bvh_sah_device import DEVICE_MIN_PRIMITIVES, build_sah_device
 from .bvh_tree import BvhData, flatten
@@ -93,8 +94,7 @@ def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, qualit
     if len(box_lo) == 0:
         raise ValueError("cannot build a BVH over no primitives")
     centres = 0.5 * (box_lo.astype(np.float64) + box_hi)
-    return build_from_codes(morton_codes(centres, centres.min(axis=0), centres.max(axis=0)), box_lo, box_hi,
-                            leaf_size)
+    return build_from_codes(morton_codes(centres, *column_bounds(centres)), box_lo, box_hi, leaf_size)
 
 
 def build_from_codes(codes: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int) -> BvhData:

@@ -410,11 +410,11 @@ class Session(SessionBase):
         index will have (``disc_boxes``: at most the radius and the pad from
         each centre): what the find lists paths in for them before the index
         exists. SegmentStore.sum_near checks that it holds the index's box."""
-        from ..accel.boxes import PAD, coordinate_scale
+        from ..accel.boxes import PAD, column_bounds, coordinate_scale
 
-        pos = self.view.points.positions[self.dyn_index, :3].astype(np.float64)
-        margin = 1.001 * self.params.radius + 2.0 * PAD * coordinate_scale(self.engine.compiled, pos)
-        return pos.min(axis=0) - margin, pos.max(axis=0) + margin
+        lo, hi = (b.astype(np.float64) for b in column_bounds(self.view.points.positions[self.dyn_index, :3]))
+        margin = 1.001 * self.params.radius + 2.0 * PAD * coordinate_scale(self.engine.compiled, np.stack([lo, hi]))
+        return lo - margin, hi + margin
 
     def _new_dynamic(self):
         """An estimator of the ``dynamic`` variant over the view's dynamic points."""

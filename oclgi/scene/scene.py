@@ -16,6 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..accel.boxes import column_bounds
 from ..errors import OclgiError, OclgiWarning  # noqa: F401  (oclgi.scene.scene.OclgiWarning, as it always was)
 from ..params import MAX_LENGTH, RunParams
 from . import lights as lights_mod
@@ -149,7 +150,7 @@ class Scene:
         return len(self.faces)
 
     def bounds(self):
-        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+        return column_bounds(self.vertices)
 
     @property
     def diagonal(self) -> float:
