@@ -34,6 +34,7 @@
 
 #include "oclgi_types.h"
 #include "box.h"
+#include "lane_bits.h"
 
 typedef struct {
     int stack[OCLGI_BOX_WIDE_STACK]; /* node indices (>= 0) and leaves (< 0) */
@@ -77,17 +78,14 @@ inline int box_wide_next_segment(BoxWideWalk *walk, __global const BvhNode8 *nod
         if (!any(hit)) continue;
         int ch[OCLGI_LANES];
         vstore8(child, 0, ch);
-        /* The lanes hit as a bit mask, pushed lowest lane first (the order
-         * of the branch-free compaction this replaced, which wrote all 8
-         * lanes through a chain of stack-pointer updates: Sponza's change
-         * pass 22.0 -> 21.1 ms, its listed pass 9.4 -> 8.7 ms). */
-        int8 bits = hit & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
-        int4 b4 = bits.lo | bits.hi;
-        int2 b2 = b4.lo | b4.hi;
-        uint m = (uint)(b2.x | b2.y);
+        /* The lanes hit pushed lowest first (lane_bits.h; the order of the
+         * branch-free compaction this replaced, which wrote all 8 lanes
+         * through a chain of stack-pointer updates: Sponza's change pass
+         * 22.0 -> 21.1 ms, its listed pass 9.4 -> 8.7 ms). */
+        uint m = lane_bits8(hit);
         int sp = walk->sp;
         do {
-            walk->stack[sp++] = ch[31 - clz(m & (0u - m))];
+            walk->stack[sp++] = ch[lowest_bit(m)];
             m &= m - 1u;
         } while (m);
         walk->sp = sp;

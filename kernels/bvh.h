@@ -364,22 +364,14 @@ inline int scene_visit(SCENE_ARGS, int k, float3 o, float3 d, int any_hit, Hit *
  * then. That is box_entry's own test: rounding is monotone, so min(a, b)
  * times the slack is min(a times it, b times it), and min is exact in any
  * order. So an instance is visited exactly when the one-by-one loop would
- * visit it, and the hits are that loop's, bit for bit. */
-inline int scene_traverse_from(SCENE_ARGS, float3 o, float3 d, int any_hit, Hit *hit);
-
-inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hit, Hit *hit)
-{
-    hit->tri = -1;
-    hit->t = tmax;
-    return scene_traverse_from(SCENE_PASS, o, d, any_hit, hit);
-}
-
-/* scene_traverse from the best hit `hit` holds (tri -1 and t = tmax when
- * none yet): the instances given go on from where others left it. A ray
- * through instances A then B, in one buffer, finds what the ray through A
- * alone, then through B from A's hit, finds: each instance's test and walk
- * read the best hit so far, nothing else (a camera session's view: the
- * static layer's hits, then the movable objects'). */
+ * visit it, and the hits are that loop's, bit for bit.
+ *
+ * The walk starts from the best hit `hit` already holds (none, for
+ * scene_traverse below), so a ray through instances A then B in one buffer
+ * finds what a ray through A alone, then through B from A's hit, finds:
+ * each instance's test and walk read the best hit so far, nothing else (a
+ * camera session's view: the static layer's hits, then the movable
+ * objects', kernels/camera.cl first_in). */
 inline int scene_traverse_from(SCENE_ARGS, float3 o, float3 d, int any_hit, Hit *hit)
 {
     float3 inv = 1.0f / d;
@@ -412,6 +404,14 @@ inline int scene_traverse_from(SCENE_ARGS, float3 o, float3 d, int any_hit, Hit 
         }
     }
     return hit->tri;
+}
+
+/* The top level from no hit, up to tmax. */
+inline int scene_traverse(SCENE_ARGS, float3 o, float3 d, float tmax, int any_hit, Hit *hit)
+{
+    hit->tri = -1;
+    hit->t = tmax;
+    return scene_traverse_from(SCENE_PASS, o, d, any_hit, hit);
 }
 
 inline int scene_closest_hit(SCENE_ARGS, float3 o, float3 d, float tmax, Hit *hit)

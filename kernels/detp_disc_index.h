@@ -14,6 +14,7 @@
 #include "oclgi_types.h"
 #include "segment.h"
 #include "detp.h"
+#include "lane_bits.h"
 
 #ifdef OCLGI_DISC_TREE_BINARY
 #include "box_bvh.h"
@@ -82,20 +83,16 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
     } while (0)
 
 /* ON_HIT(id) for each lane of block b_ where hit (an int8) is set, lowest
- * lane first: the set lanes as a bit mask, taken lowest bit first, so a
- * block costs one unpredictable branch per crossing instead of one per
- * lane (the listed pass in Sponza: 10.8 -> 10.4 ms). */
+ * lane first (lane_bits.h: one unpredictable branch per crossing instead
+ * of one per lane; the listed pass in Sponza: 10.8 -> 10.4 ms). */
 #define DISC_LANES(hit, b_, ON_HIT)                                                                \
     do {                                                                                          \
-        int8 bits_ = (hit) & (int8)(1, 2, 4, 8, 16, 32, 64, 128);                                  \
-        int4 b4_ = bits_.lo | bits_.hi;                                                           \
-        int2 b2_ = b4_.lo | b4_.hi;                                                               \
-        uint m_ = (uint)(b2_.x | b2_.y);                                                          \
+        uint m_ = lane_bits8(hit);                                                                \
         if (m_) {                                                                                 \
             int ids_[OCLGI_LANES];                                                                \
             vstore8((b_)->id, 0, ids_);                                                           \
             do {                                                                                  \
-                int k_ = 31 - clz(m_ & (0u - m_));                                                \
+                int k_ = lowest_bit(m_);                                                          \
                 m_ &= m_ - 1u;                                                                    \
                 ON_HIT(ids_[k_]);                                                                 \
             } while (m_);                                                                         \

@@ -52,6 +52,7 @@
 #include "detp.h"
 #include "work.h"
 #include "detp_resolve.h"
+#include "lane_bits.h"
 
 /* OCLGI_SC_MAX_LEVELS and OCLGI_SC_MU: oclgi/cl/constants.py. */
 #define SC_MU ((float)OCLGI_SC_MU)
@@ -146,7 +147,7 @@ inline int sc_rebuild(float cx, float cy, float cz, float r, __global const ScRe
         for (int l = 0; l < n; ++l)
             m |= (uint)sc_meets(cx, cy, cz, r, prec[i0 + l].org_tmax, prec[i0 + l].dir_inv2) << l;
         while (m) {
-            int i = i0 + 31 - clz(m & (0u - m)); /* lowest set bit */
+            int i = i0 + lowest_bit(m);
             m &= m - 1u;
             int j = min(top++, cap);
             rec[j] = prec[i];

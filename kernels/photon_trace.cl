@@ -124,9 +124,7 @@ __kernel void photon_retrace(SCENE_ARGS, TRACE_ARGS, int path_offset,
     int k = get_global_id(0);
     if (k >= n_list) return;
     int i = paths[k], b = starts[k];
-    int ahead = k + OCLGI_PREFETCH_AHEAD; /* the slot that work-item resumes from (prefetch.h) */
-    if (OCLGI_PREFETCH_AHEAD > 0 && ahead < n_list)
-        prefetch_lines(segments + (size_t)paths[ahead] * max_depth + max(starts[ahead] - 1, 0), 2);
+    prefetch_resumed_path(segments, paths, starts, k, n_list, max_depth);
     uint path = (uint)(path_offset + i);
     __global Segment *out = &segments[(size_t)i * max_depth];
     PathState s;

@@ -44,4 +44,18 @@ inline void prefetch_listed_path(__global const Segment *segments, __global cons
 #endif
 }
 
+/* Work-item k of a re-trace over paths[0 .. n), path paths[k] resuming
+ * at bounce starts[k]: the slot that path paths[k + OCLGI_PREFETCH_AHEAD]
+ * resumes from (the one before its start; two lines hold a 48-byte slot). */
+inline void prefetch_resumed_path(__global const Segment *segments, __global const int *paths,
+                                  __global const int *starts, int k, int n, int max_depth)
+{
+#if OCLGI_PREFETCH_AHEAD > 0
+    int j = k + OCLGI_PREFETCH_AHEAD;
+    if (j < n) prefetch_lines(segments + (size_t)paths[j] * max_depth + max(starts[j] - 1, 0), 2);
+#else
+    (void)segments, (void)paths, (void)starts, (void)k, (void)n, (void)max_depth;
+#endif
+}
+
 #endif

@@ -41,6 +41,7 @@ import pyopencl as cl
 from ..cl.constants import LANES, RADIX_BITS
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
+from .boxes import column_bounds
 
 METHODS = ("hilbert", "morton", "none")
 _METHOD_ID = {"hilbert": 1, "morton": 2}
@@ -77,9 +78,7 @@ def bounding_cube(xyz: np.ndarray) -> tuple[np.ndarray, float]:
     same along every axis (a flat set of points then uses one layer of cells
     rather than being stretched over all of them).
     """
-    # column by column: 8x faster than numpy's axis-0 reduction of (n, 3)
-    lo = np.array([xyz[:, c].min() for c in range(3)], np.float64)
-    hi = np.array([xyz[:, c].max() for c in range(3)], np.float64)
+    lo, hi = (b.astype(np.float64) for b in column_bounds(xyz))
     return lo, float((hi - lo).max())
 
 

@@ -51,7 +51,7 @@ import pyopencl as cl
 
 from ..cl.layout import Instance
 from ..queries import QueryPoints
-from ..scene.instance_boxes import instance_buffer
+from ..scene.instance_boxes import instance_buffer, instance_buffer_bytes
 
 MARGIN = 2  # pixels around a projected box (float rounding of the rays)
 
@@ -68,20 +68,27 @@ class DynamicView:
         static = [k for k, o in enumerate(scene.objects) if not o.movable]
         records = compiled.instances_host[static] if static else np.zeros(1, Instance)
         self.static_instances = (instance_buffer(engine.ctx, np.ascontiguousarray(records)), len(static))
-        # re-traced pixels go on from the static layer's first hits (module
-        # doc) when every static object comes before every movable one
-        self.from_static = not static or not self.movable or max(static) < min(self.movable)
         ranges = scene.object_ranges()
         self.movable_ranges = ranges[self.movable] if self.movable else np.zeros((0, 2), np.int64)
         full = (0, 0, self.cam.width, self.cam.height)
         # a camera ray that can go on past its first surface (module doc)
         self.through = any(m.kind != "diffuse" for m in scene.materials)
+        # The rectangle's rays go on from the static layer's first hits
+        # through the movable objects' records alone (module doc): a ray
+        # that stops at its first surface, every static object before
+        # every movable one. The records are brought up to date each move.
+        self.movable_instances = self.first_hits = None
+        if self.movable and not self.through and (not static or max(static) < min(self.movable)):
+            self.movable_instances = instance_buffer(engine.ctx, self._movable_records(), cl.mem_flags.READ_WRITE)
+            self.first_hits = cl.Buffer(engine.ctx, cl.mem_flags.READ_WRITE, 16 * self.cam.width * self.cam.height)
         self._lift = None
-        self.first_hits = cl.Buffer(engine.ctx, cl.mem_flags.READ_WRITE, 16 * max(self.cam.width * self.cam.height, 1))
         self.static = engine.view_points(self.cam, full, self.static_instances, lift=self.lift(),
                                          first_out=self.first_hits)
         self.points = engine.view_points(self.cam, full, lift=self.lift())
         self.dynamic = np.nonzero(self.is_dynamic(np.arange(len(self.points)), self.points))[0]
+
+    def _movable_records(self) -> np.ndarray:
+        return np.ascontiguousarray(self.engine.compiled.instances_host[self.movable])
 
     def lift(self) -> float:
         """The scene's disc radius, which lifts points off tilted shading
@@ -143,10 +150,11 @@ class DynamicView:
         w = self.cam.width
         ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
         pix = (y0 + ys) * w + x0 + xs
-        if self.from_static and not self.through and self.movable:
-            records = np.ascontiguousarray(self.engine.compiled.instances_host[self.movable])
-            movable = (instance_buffer(self.engine.ctx, records), len(self.movable))
-            sub = self.engine.view_points(self.cam, rect, movable, lift=self.lift(), first_in=self.first_hits)
+        if self.movable_instances is not None:
+            self._records = instance_buffer_bytes(self._movable_records())  # kept until the copy is done
+            cl.enqueue_copy(self.engine.queue, self.movable_instances, self._records, is_blocking=False)
+            sub = self.engine.view_points(self.cam, rect, (self.movable_instances, len(self.movable)),
+                                          lift=self.lift(), first_in=self.first_hits)
         else:
             sub = self.engine.view_points(self.cam, rect, lift=self.lift())
         dyn_new = pix[self.is_dynamic(pix, sub)]

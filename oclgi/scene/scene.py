@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 
@@ -48,25 +47,15 @@ class Camera:
 
     def frame(self):
         """(eye, forward, right, up), right/up scaled to the image plane's half-extents."""
-        # made once per set of values: a session asks for it twice a move
-        key = (*map(float, self.position), *map(float, self.look_at), *map(float, self.up), float(self.fov),
-               int(self.width), int(self.height))
-        return tuple(v.copy() for v in _camera_frame(key))
-
-
-@lru_cache(maxsize=64)
-def _camera_frame(key: tuple):
-    """Camera.frame of the camera's values ``key`` (arrays shared: callers get copies)."""
-    position, look_at, up_hint, (fov, width, height) = key[0:3], key[3:6], key[6:9], key[9:]
-    eye = np.asarray(position, dtype=np.float64)
-    fwd = np.asarray(look_at, dtype=np.float64) - eye
-    fwd /= np.linalg.norm(fwd)
-    right = np.cross(fwd, np.asarray(up_hint, dtype=np.float64))
-    right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
-    half_h = math.tan(math.radians(fov) / 2.0)
-    half_w = half_h * width / height
-    return eye, fwd, right * half_w, up * half_h
+        eye = np.asarray(self.position, dtype=np.float64)
+        fwd = np.asarray(self.look_at, dtype=np.float64) - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, np.asarray(self.up, dtype=np.float64))
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        half_h = math.tan(math.radians(self.fov) / 2.0)
+        half_w = half_h * self.width / self.height
+        return eye, fwd, right * half_w, up * half_h
 
 
 MAX_COORDINATE = MAX_LENGTH  # squared lengths stay finite in float32 (params.MAX_LENGTH)
