@@ -316,6 +316,92 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
     engine.move("bunny", np.eye(4))
 
 
+def _reference_cells(store) -> np.ndarray:
+    """Each path's cell mask (two uint64), in numpy float32 with the
+    kernel's operations in its order (kernels/update.cl update_path_cells):
+    box_slab on every padded cell within the segment's box, one cell at a
+    time (the slow, obvious form of the kernel's 8 columns at once)."""
+    from oclgi.cl.constants import CELL_OUTSIDE_BIT
+
+    f32 = np.float32
+    seg = store.segments().reshape(store.photons, store.max_depth)
+    plen = store.path_len()
+    valid = np.arange(store.max_depth)[None] < plen[:, None]
+    path = np.nonzero(valid)[0]
+    s = seg[valid]
+    o, w, t = s["org"], s["dir"], s["t_end"]
+    g, cell, pad = store.grid_lo.astype(f32), store.cell.astype(f32), f32(store.pad)
+    dims = store.dims.astype(np.int64)
+    top = dims - 1
+    escape = t == np.inf
+    with np.errstate(all="ignore"):
+        e = o + t[:, None] * w
+        lo, hi = np.fmin(o, e), np.fmax(o, e)
+        c0 = np.clip(np.floor((lo - pad - g) / cell), 0, top).astype(np.int64)
+        c1 = np.clip(np.floor((hi + pad - g) / cell), 0, top).astype(np.int64)
+        c0[escape], c1[escape] = 0, top
+        g1 = g + dims.astype(f32) * cell - pad
+        out = escape | (lo < g + pad).any(axis=1) | (hi > g1).any(axis=1)
+        inv = f32(1.0) / w
+        slab = []
+        for a in range(3):
+            ks = np.arange(dims[a])
+            lo_a = g[a] + ks.astype(f32) * cell[a] - pad  # (cells,)
+            t0 = (lo_a[None] - o[:, a:a + 1]) * inv[:, a:a + 1]
+            t1 = (lo_a[None] + cell[a] + f32(2.0) * pad - o[:, a:a + 1]) * inv[:, a:a + 1]
+            slab.append((np.fmin(t0, t1), np.fmax(t0, t1)))
+        bits = np.zeros((len(s), 2), np.uint64)
+        for z in range(dims[2]):
+            nz = np.fmax(slab[2][0][:, z], f32(0.0))
+            fz = np.fmin(slab[2][1][:, z], t)
+            for y in range(dims[1]):
+                ny, fy = np.fmax(slab[1][0][:, y], nz), np.fmin(slab[1][1][:, y], fz)
+                for x in range(dims[0]):
+                    met = np.fmax(slab[0][0][:, x], ny) <= np.fmin(slab[0][1][:, x], fy) * f32(1.0000004)
+                    cube = np.array([x, y, z])
+                    met &= ((c0 <= cube) & (cube <= c1)).all(axis=1)
+                    c = x + dims[0] * (y + dims[1] * z)
+                    bits[met, c >> 6] |= np.uint64(1 << (c & 63))
+    bits[out, 1] |= np.uint64(1 << (CELL_OUTSIDE_BIT - 64))
+    masks = np.zeros((store.photons, 2), np.uint64)
+    np.bitwise_or.at(masks, path, bits)
+    return masks
+
+
+def test_cell_masks_equal_a_cell_by_cell_reference(engine):
+    """The kernel's masks (8 columns at a time) equal a float32 reference
+    that tests each cell alone, bit for bit, after the trace and after
+    re-traces (the re-traced paths' masks are made again)."""
+    import pyopencl as cl
+
+    from oclgi.incremental.segment_store import SegmentStore
+
+    engine.move("bunny", np.eye(4))
+    store = SegmentStore(engine, 4_000, 9, 10)
+    obj = engine.scene.object_id("bunny")
+    for m in [None] + _moves(np.random.default_rng(5), 4):
+        if m is not None:
+            engine.move("bunny", m)
+            a = store.find(obj)
+            if len(a):
+                store.retrace(a)
+        got = np.empty((store.photons, 2), np.uint64)
+        cl.enqueue_copy(store.queue, got, store.cells)
+        want = _reference_cells(store)
+        assert np.array_equal(got, want), f"{int((got != want).any(axis=1).sum())} paths differ"
+        assert (got[:, 0] != 0).sum() > store.photons // 2  # cells were marked, not only the outside bit
+    # rows of more than 8 columns (two float8 runs) and of 1 (a long scene's grids)
+    extent = store.dims * store.cell
+    for dims in ([15, 4, 2], [127, 1, 1], [1, 1, 127]):
+        store.dims = np.array(dims)
+        store.cell = extent / store.dims
+        store._mark_cells(store.all_paths, store.photons)
+        got = np.empty((store.photons, 2), np.uint64)
+        cl.enqueue_copy(store.queue, got, store.cells)
+        assert np.array_equal(got, _reference_cells(store)), dims
+    engine.move("bunny", np.eye(4))
+
+
 def test_grid_dims_fit_the_mask_and_follow_the_scene():
     from oclgi.incremental.segment_store import MAX_CELLS, grid_dims
 

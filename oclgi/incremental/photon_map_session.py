@@ -360,16 +360,17 @@ class PhotonMapSession(SessionBase):
         exact = self.mode == "exact"
         if len(affected):
             cl.enqueue_fill_buffer(q, self.n_listed, np.int32(0), 0, 4)
-            stats.segments_removed = self.store.suffix_segments(affected)
+            removed = self.store.suffix_count(affected)
             self._update_balls(affected, -1.0, exact)
             q.finish()
             t2 = time.perf_counter()
             self.store.retrace(affected)
             q.finish()
             t3 = time.perf_counter()
+            added = self.store.suffix_count(affected)
             self._update_balls(affected, 1.0, exact)
-            stats.segments_added = self.store.suffix_segments(affected)
             q.finish()
+            stats.segments_removed, stats.segments_added = int(removed), int(added)
             t4 = time.perf_counter()
             seconds.update(retrace=t3 - t2, balls=(t2 - t1) + (t4 - t3))
             self.map_current = False

@@ -74,6 +74,18 @@ class Affected:
         return len(self.paths)
 
 
+class SuffixCount:
+    """A count of segments on its way from the device: ``int()`` waits for it."""
+
+    def __init__(self, lengths: np.ndarray, event):
+        self.lengths, self.event = lengths, event
+
+    def __int__(self) -> int:
+        if self.event is not None:
+            self.event.wait()
+        return int(self.lengths.sum())
+
+
 def _holds(outer, inner) -> bool:
     """Does box ``outer`` (lo, hi) hold box ``inner``?"""
     return bool((np.asarray(outer[0]) <= inner[0]).all() and (np.asarray(inner[1]) <= outer[1]).all())
@@ -115,6 +127,7 @@ class SegmentStore:
         prog = programs(engine.ctx).get("update")
         self.k_first, self.k_gather = prog.update_first_affected, prog.update_gather
         self.k_cells, self.k_candidates = prog.update_path_cells, prog.update_candidates
+        self.k_lengths = prog.update_suffix_lengths
         mf = cl.mem_flags
         self.first = cl.Buffer(engine.ctx, mf.READ_WRITE, self.photons * 4)
         self.first_host = np.empty(self.photons, np.int32)
@@ -279,12 +292,7 @@ class SegmentStore:
         if listed is None:
             n, listed = self.photons, self.all_paths
         else:
-            candidates = np.empty(n, np.int32)
-            if n:
-                cl.enqueue_copy(q, candidates, listed)
-            candidates.sort()  # appended in any order
-            listed = cl.Buffer(engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                               hostbuf=candidates if n else np.zeros(1, np.int32))
+            candidates = np.empty(n, np.int32)  # read with the results below
         self.examined = n
         self._near = None if near is None else (near, listed, n)
         if n:
@@ -297,21 +305,33 @@ class SegmentStore:
                 launch(q, k, n, *args, discs.nodes, discs.blocks, discs.count_emitted,
                        discs.ext, discs.acc,
                        discs.work_buf, local_size=engine.local_size)
+            if candidates is not None:
+                cl.enqueue_copy(q, candidates, listed, is_blocking=False)
             cl.enqueue_copy(q, self.first_host[:n], self.first)
         hit = np.nonzero(self.first_host[:n] >= 0)[0]
-        paths = (hit if candidates is None else candidates[hit]).astype(np.int32)
-        affected = Affected(paths, self.first_host[hit].copy())
+        paths, starts = (hit if candidates is None else candidates[hit]).astype(np.int32), self.first_host[hit]
+        if candidates is not None:  # listed in any order: the affected paths in order of their ids
+            order = np.argsort(paths, kind="stable")
+            paths, starts = paths[order], starts[order]
+        affected = Affected(paths, starts.copy())
         if len(paths):
             mf = cl.mem_flags
             affected.paths_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=affected.paths)
             affected.starts_buf = cl.Buffer(engine.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=affected.starts)
         return affected
 
-    def suffix_segments(self, affected: Affected) -> int:
-        """Stored segments in the affected suffixes (n_Rec of this update)."""
-        if not len(affected):
-            return 0
-        return int((self.path_len()[affected.paths] - affected.starts).sum())
+    def suffix_count(self, affected: Affected) -> "SuffixCount":
+        """Stored segments in the affected suffixes (n_Rec of this update)
+        as the store holds them when the device gets here: enqueued, read
+        without waiting, summed by ``int()`` (a move's statistics stay off
+        its critical path)."""
+        n = len(affected)
+        if not n:
+            return SuffixCount(np.zeros(0, np.int32), None)
+        out = cl.Buffer(self.engine.ctx, cl.mem_flags.WRITE_ONLY, n * 4)
+        launch(self.queue, self.k_lengths, n, self.batch.path_len, affected.paths_buf, affected.starts_buf, n, out)
+        host = np.empty(n, np.int32)
+        return SuffixCount(host, cl.enqueue_copy(self.queue, host, out, is_blocking=False))
 
     def suffixes(self, affected: Affected, sign: float) -> PathBatch:
         """The affected suffixes, power times ``sign``, as a batch of

@@ -335,7 +335,7 @@ class Session(SessionBase):
         stats = UpdateStats(paths=len(affected), segments_removed=0, segments_added=0, points=n_view)
         estimators = [self.estimator] + ([self.dyn_est] if fused else [])
         if len(affected):
-            stats.segments_removed = self.store.suffix_segments(affected)
+            removed = self.store.suffix_count(affected)
             # One pass after the re-trace (then "subtract" is the gather alone)
             # or a pass on each side of it.
             change = self.sum_changes and all(est.sums_changes for est in estimators)
@@ -346,6 +346,7 @@ class Session(SessionBase):
             q.finish()  # honest per-stage times
             t3 = time.perf_counter()
             self.store.retrace(affected)
+            added = self.store.suffix_count(affected)
             if deferred:  # host work while the device re-traces: in the re-trace's time
                 self._new_dynamic()
                 deferred = False
@@ -359,7 +360,7 @@ class Session(SessionBase):
                 for est in estimators:
                     est.accumulate(new)
             q.finish()
-            stats.segments_added = self.store.suffix_segments(affected)
+            stats.segments_removed, stats.segments_added = int(removed), int(added)
             t5 = time.perf_counter()
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
         if deferred:  # nothing was re-traced
