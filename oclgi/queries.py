@@ -171,9 +171,14 @@ class QueryPoints:
                            None if self.weights is None else self.weights.copy())
 
     def subset(self, index) -> "QueryPoints":
-        """The points ``index`` (copies), as a flat set of the same kind."""
-        return QueryPoints(self.positions[index], self.normals[index], self.barys[index], self.kind, None,
-                           None if self.weights is None else self.weights[index])
+        """The points ``index`` (copies), as a flat set of the same kind.
+        Rows of checked points: not checked again (a camera session takes
+        one on every move)."""
+        out = object.__new__(QueryPoints)
+        out.positions, out.normals, out.barys = self.positions[index], self.normals[index], self.barys[index]
+        out.kind, out.shape = self.kind, None
+        out.weights = None if self.weights is None else self.weights[index]
+        return out
 
     def reshaped(self, shape) -> "QueryPoints":
         """These points (not copied) as an image of ``shape`` = (height, width)."""

@@ -26,6 +26,10 @@ from ..params import MAX_LENGTH
 from .instance_boxes import instance_buffer, upload_instance
 
 
+_AFFINE_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+_AFFINE_TOL = 1e-8 + 1e-5 * _AFFINE_ROW
+
+
 def as_transform(matrix) -> np.ndarray:
     """A validated affine 4x4 float64 matrix from a 4x4 or 3x4 one."""
     try:
@@ -34,7 +38,8 @@ def as_transform(matrix) -> np.ndarray:
         raise OclgiError(f"a transform must be a 4x4 or 3x4 array of numbers, got {matrix!r}") from None
     if m.shape == (3, 4):
         m = np.vstack([m, [0, 0, 0, 1]])
-    if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
+    # np.allclose's test on the last row, |a - b| <= 1e-8 + 1e-5 |b|, without its overhead (every move)
+    if m.shape != (4, 4) or not np.isfinite(m).all() or not (np.abs(m[3] - _AFFINE_ROW) <= _AFFINE_TOL).all():
         raise OclgiError(f"a transform must be a finite affine 4x4 or 3x4 matrix, got shape {m.shape}")
     if abs(np.linalg.det(m[:3, :3])) < 1e-12:
         raise OclgiError("the transform is singular (it flattens the object)")
