@@ -148,8 +148,9 @@ class DynamicView:
         ys, xs = np.divmod(np.arange(rw * rh), max(rw, 1))
         pix = (y0 + ys) * w + x0 + xs
         if self.movable_instances is not None:
-            self._records = instance_buffer_bytes(self._movable_records())  # kept until the copy is done
-            cl.enqueue_copy(self.engine.queue, self.movable_instances, self._records, is_blocking=False)
+            # the event holds the host array; kept, as pyopencl waits for a dropped one
+            self._records = cl.enqueue_copy(self.engine.queue, self.movable_instances,
+                                            instance_buffer_bytes(self._movable_records()), is_blocking=False)
             sub = self.engine.view_points(self.cam, rect, (self.movable_instances, len(self.movable)),
                                           lift=self.lift(), first_in=self.first_hits)
         else:

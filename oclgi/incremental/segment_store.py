@@ -305,9 +305,10 @@ class SegmentStore:
                 launch(q, k, n, *args, discs.nodes, discs.blocks, discs.count_emitted,
                        discs.ext, discs.acc,
                        discs.work_buf, local_size=engine.local_size)
-            if candidates is not None:
-                cl.enqueue_copy(q, candidates, listed, is_blocking=False)
+            # the list with the results (pyopencl waits for a dropped event: held until then)
+            pending = None if candidates is None else cl.enqueue_copy(q, candidates, listed, is_blocking=False)
             cl.enqueue_copy(q, self.first_host[:n], self.first)
+            del pending
         hit = np.nonzero(self.first_host[:n] >= 0)[0]
         paths, starts = (hit if candidates is None else candidates[hit]).astype(np.int32), self.first_host[hit]
         if candidates is not None:  # listed in any order: the affected paths in order of their ids

@@ -85,6 +85,7 @@ class Pose:
             self.tri_normals = cl.Buffer(compiled.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
                                          hostbuf=np.ascontiguousarray(normals, np.float32))
         self.released = False
+        self._uploads = ()  # the last move's record uploads (upload_instance)
 
     def copy(self, queue) -> "Pose":
         """An independent pose, equal to this one (the device normals copied, not recomputed)."""
@@ -108,7 +109,7 @@ class Pose:
         if not obj_desc.movable:
             raise OclgiError(f"object {obj_desc.name!r} is static")
         place_record(self.instances_host[obj], compiled.object_boxes[obj], m, obj_desc.name)
-        upload_instance(queue, self.instances, self.instances_host, obj)
+        self._uploads = upload_instance(queue, self.instances, self.instances_host, obj)  # kept: not waited for
         k = compiled.normals_kernel()
         launch(queue, k, int(self.instances_host[obj]["n_tris"]), compiled.object_normals, self.instances,
                obj, self.tri_normals)
