@@ -70,12 +70,30 @@ __kernel void detp_disc_index(__global const DiscNode *nodes, __global const Dis
  * so they share origin, direction and power and differ in length only;
  * when the bits say so, disc_index_shared_first adds just their
  * difference. The sums equal a subtraction pass plus an addition pass bit
- * for bit (tests/test_session.py compares the two). */
+ * for bit (tests/test_session.py compares the two).
+ *
+ * With generation >= 0 (the store's re-trace count, after this move's),
+ * the discs each new segment crosses are listed for the next move: run
+ * (offset into ids, count) per slot k * max_depth + b, the ids in the
+ * path's own `cap` entries of `ids` (a segment whose discs do not fit, or
+ * the shared first segment, gets count -1: not listed), and
+ * crossed_at[path] = (generation, k). A path the last move re-traced
+ * (crossed_at = (generation - 1, k')) finds the segments its old suffix
+ * holds listed in prev_runs / prev_ids and sums them from the lists: a
+ * walk would find the same discs (the segment has not changed since),
+ * and the old power is exactly the negated new one. Most of a small
+ * object's re-traced paths are re-traced again on the next move (Sponza:
+ * 78% of the old suffixes' segments). replayed[0] counts the segments
+ * summed from lists. */
 __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global const DiscBlock *discs,
                                      __global const Segment *old_suffixes, __global const Segment *store,
                                      __global const int *paths, __global const int *starts, int n_list,
                                      int max_depth, int count_emitted, float ext,
-                                     __global long *acc, __global ulong *work)
+                                     __global long *acc, __global ulong *work,
+                                     __global int2 *crossed_at, int generation,
+                                     __global const int2 *prev_runs, __global const int *prev_ids,
+                                     __global int2 *runs, __global int *ids, int cap,
+                                     __global ulong *replayed)
 {
     int k = get_global_id(0);
     if (k >= n_list) return;
@@ -83,10 +101,16 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
     WORK_DECL;
     uint visited = 0;
     ulong tests = 0;
+    int p = paths[k];
     __global const Segment *old = old_suffixes + (size_t)k * max_depth;
-    __global const Segment *cur = store + (size_t)paths[k] * max_depth;
+    __global const Segment *cur = store + (size_t)p * max_depth;
     int b0 = starts[k];
     int from = max(b0, segment_first(count_emitted));
+    int last = -1; /* the path's entry of the last move, if it listed this path */
+    if (generation >= 0) {
+        int2 at = crossed_at[p];
+        if (at.x == generation - 1) last = at.y;
+    }
     SegmentView so, sn;
     if (from == b0 && segment_read(old + b0, &so) && segment_read(cur + b0, &sn) &&
         all(as_uint3(so.o) == as_uint3(sn.o)) && all(as_uint3(so.w) == as_uint3(sn.w))) {
@@ -96,8 +120,52 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
             from = b0 + 1;
         }
     }
-    disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
-    disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
+    if (generation < 0) {
+        disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
+        disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
+    } else {
+        /* the old suffix, from the last move's lists where it has them */
+        uint n_replayed = 0;
+        for (int b = from; b < max_depth; ++b) {
+            SegmentView s;
+            if (!segment_read(old + b, &s)) {
+                if (segment_is_hole(old + b)) continue;
+                break; /* the path's end */
+            }
+            int2 run = last >= 0 ? prev_runs[(size_t)last * max_depth + b] : (int2)(0, -1);
+            if (run.y >= 0) {
+                disc_index_replay(old + b, prev_ids + run.x, run.y, acc);
+                ++n_replayed;
+            } else
+                disc_index_segment(nodes, discs, old + b, &s, ext, acc, &visited, &tests);
+        }
+        /* the new suffix, walked and listed */
+        __global int2 *mine = runs + (size_t)k * max_depth;
+        size_t base = (size_t)k * cap;
+        int used = 0, b = 0;
+        for (; b < from; ++b) mine[b] = (int2)(0, -1);
+        for (; b < max_depth; ++b) {
+            SegmentView s;
+            if (!segment_read(cur + b, &s)) {
+                mine[b] = (int2)(0, -1);
+                if (segment_is_hole(cur + b)) continue;
+                break;
+            }
+            int n = 0;
+            disc_index_segment_listed(nodes, discs, cur + b, &s, ext, acc, ids + base + used, cap - used, &n,
+                                      &visited, &tests);
+            if (n <= cap - used) {
+                mine[b] = (int2)((int)(base + used), n);
+                used += n;
+            } else { /* did not fit: this segment and the path's later ones go unlisted */
+                mine[b] = (int2)(0, -1);
+                used = cap;
+            }
+        }
+        for (; b < max_depth; ++b) mine[b] = (int2)(0, -1);
+        crossed_at[p] = (int2)(generation, k);
+        if (n_replayed) atom_add(replayed, (ulong)n_replayed); /* segments summed from lists (a count) */
+    }
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

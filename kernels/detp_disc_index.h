@@ -125,6 +125,50 @@ inline void disc_index_segment(__global const DiscNode *nodes, __global const Di
 #undef DISC_INDEX_ADD
 }
 
+/* disc_index_segment that also lists the discs crossed: the first `cap`
+ * of them go to rec[0 ..], and *n counts them all (more than cap: the
+ * list is incomplete, the caller does not keep it). */
+inline void disc_index_segment_listed(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                                      __global const Segment *slot, const SegmentView *s, float ext,
+                                      __global long *acc, __global int *rec, int cap, int *n, uint *visited,
+                                      ulong *tests)
+{
+    float3 o = s->o, w = s->w;
+    float tmax = s->t_end + ext; /* exactly as disc_index_segment */
+    long3 q = 0;
+    int have_q = 0;
+#define DISC_INDEX_ADD_LISTED(id)                        \
+    do {                                                 \
+        if (!have_q) {                                   \
+            q = segment_fixed_power(slot);               \
+            have_q = 1;                                  \
+        }                                                \
+        __global long *a_ = acc + 3 * (size_t)(id);      \
+        atom_add(a_ + 0, q.x);                           \
+        atom_add(a_ + 1, q.y);                           \
+        atom_add(a_ + 2, q.z);                           \
+        if (*n < cap) rec[*n] = (id);                    \
+        ++*n;                                            \
+    } while (0)
+    DISC_INDEX_WALK(nodes, discs, o, w, tmax, *visited, *tests, DISC_INDEX_ADD_LISTED);
+#undef DISC_INDEX_ADD_LISTED
+}
+
+/* A segment's listed crossings (disc_index_segment_listed, from an
+ * earlier move) summed again with the segment's power as stored now: the
+ * same discs a walk finds, without the walk. */
+inline void disc_index_replay(__global const Segment *slot, __global const int *ids, int n, __global long *acc)
+{
+    if (n <= 0) return;
+    long3 q = segment_fixed_power(slot);
+    for (int j = 0; j < n; ++j) {
+        __global long *a_ = acc + 3 * (size_t)ids[j];
+        atom_add(a_ + 0, q.x);
+        atom_add(a_ + 1, q.y);
+        atom_add(a_ + 2, q.z);
+    }
+}
+
 /* An update's old and new first segment of a re-traced suffix (so, sn),
  * which the caller found to share the origin and direction bit for bit,
  * with fixed-point powers q_old = -q_new (the subtraction's and the

@@ -209,6 +209,40 @@ def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
     assert runs[True][-1][1]["u"] < runs[False][-1][1]["u"], (runs[True][-1][1], runs[False][-1][1])
 
 
+def test_listed_crossings_equal_walks(engine, rng, monkeypatch):
+    """A session's static points sum a re-traced path's old suffix from the
+    discs its segments crossed when the last move added them
+    (DetpDiscIndex.list_crossings): over small steps, where most paths are
+    re-traced again, the accumulators equal walking every segment, bit for
+    bit, after every move; lists that overflow are left out; after a move
+    with the plain passes (no lists made) the older lists are not used."""
+    import oclgi.estimators.detp_disc_index as ddi
+
+    pts = _points(engine, rng, 2000)
+    engine.move("bunny", np.eye(4))
+    for per_path in (ddi.LISTED_PER_PATH, 4):
+        monkeypatch.setattr(ddi, "LISTED_PER_PATH", per_path)
+        listed = oclgi.Session(engine, pts, method="detp_disc_index", photons=100_000, radius=0.05)
+        walked = oclgi.Session(engine, pts, method="detp_disc_index", photons=100_000, radius=0.05)
+        walked.estimator.list_crossings = False
+        assert listed.estimator.list_crossings
+        counts = []
+        for i in range(10):
+            m = np.eye(4)
+            m[:3, 3] = [0.03 * i - 0.1, 0.0, 0.02 * i]
+            plain = i == 5  # one move by the plain passes: its new segments get no lists
+            listed.sum_changes = walked.sum_changes = not plain
+            a, b = listed.move("bunny", m), walked.move("bunny", m)
+            assert a.paths == b.paths and a.paths > 100
+            assert np.array_equal(listed.accumulators(), walked.accumulators()), (per_path, i)
+            counts.append(listed.estimator.replayed())
+        assert walked.estimator.replayed() == 0
+        assert counts[1] > 100, counts  # the second move already sums most old suffixes from lists
+        assert counts[6] == counts[5], counts  # after the plain move: nothing to replay
+        assert counts[9] > counts[6], counts
+    engine.move("bunny", np.eye(4))
+
+
 def test_dynamic_passes_agree(scenes_dir, rng):
     """A camera session's disc-indexed dynamic points summed after the
     update over only the paths whose cell masks meet their discs' box

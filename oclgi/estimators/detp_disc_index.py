@@ -85,6 +85,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pyopencl as cl
 
 from ..accel.box_wide import MAX_LEAF, collapse_boxes
 from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, disc_boxes, leaf_blocks
@@ -99,6 +100,10 @@ from .base import DetpEstimator
 SESSION_TREE = {"builder": "sah", "leaf_size": 64}
 # Its dynamic points' tree: built on the host on every move, walked once
 DYNAMIC_TREE = {"leaf_size": 64}
+# A move's crossing lists (accumulate_change): at most this many disc ids
+# per re-traced path, and in all (a move of every path gets fewer each)
+LISTED_PER_PATH = 192
+LISTED_IDS = 1 << 24
 
 
 class DetpDiscIndex(DetpEstimator):
@@ -108,6 +113,10 @@ class DetpDiscIndex(DetpEstimator):
 
     session_tree = SESSION_TREE  # what a session's static points are built with (module doc)
     dynamic_tree = DYNAMIC_TREE  # and its dynamic points
+    # accumulate_change lists the discs each new segment crosses, and sums
+    # the next move's old suffixes from the lists (a session's static
+    # points, which live as long as it; Session sets it)
+    list_crossings = False
 
     def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide",
                  builder: str = "lbvh", **kw):
@@ -120,6 +129,7 @@ class DetpDiscIndex(DetpEstimator):
         if builder not in BUILDERS:
             raise OclgiError(f"builder must be one of {', '.join(map(repr, BUILDERS))}, got {builder!r}")
         self.leaf_size = int(leaf_size)
+        self._crossings, self._no_list = None, None
         self.tree = tree
         self.builder = builder
         if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
@@ -131,6 +141,7 @@ class DetpDiscIndex(DetpEstimator):
     def build_index(self):
         """The BVH over the discs and their blocks (host numpy, then uploaded)."""
         t0 = time.perf_counter()
+        self._crossings = None  # lists of crossings belong to the discs they were made with
         points = self.points
         ids = active_discs(points)
         self.n_active = len(ids)
@@ -179,13 +190,40 @@ class DetpDiscIndex(DetpEstimator):
         of the new suffixes bit for bit."""
         if self.nodes is None or not len(affected):
             return
+        n = len(affected)
+        if self._no_list is None:
+            self._no_list = self.zeros(8)
+        none = self._no_list
+        if self.list_crossings and not self.count_work:  # work counts measure the walks
+            c = self._crossings
+            if c is None or c["batch"] is not store:  # a new store: nothing listed yet
+                at = self.upload(np.full(2 * store.n_paths, -2, np.int32))  # (generation, entry) per path
+                c = self._crossings = {"batch": store, "at": at, "runs": none, "ids": none,
+                                       "replayed": self.zeros(8)}
+            cap = int(min(LISTED_PER_PATH, LISTED_IDS // n))
+            mf = cl.mem_flags  # written by the kernel before any read
+            runs = cl.Buffer(self.ctx, mf.READ_WRITE, 8 * n * store.max_depth)
+            ids = cl.Buffer(self.ctx, mf.READ_WRITE, 4 * max(n * cap, 1))
+            args = (c["at"], store.retraced, c["runs"], c["ids"], runs, ids, cap, c["replayed"])
+            c["runs"], c["ids"] = runs, ids  # the next move's lists (kept until then)
+        else:
+            args = (none, -1, none, none, none, none, 0, none)
         launch(
-            self.queue, self.k_change, len(affected),
+            self.queue, self.k_change, n,
             self.nodes, self.blocks, old.segments, store.segments, affected.paths_buf, affected.starts_buf,
-            len(affected), store.max_depth, self.count_emitted, self.ext,
-            self.acc, self.work_buf,
+            n, store.max_depth, self.count_emitted, self.ext,
+            self.acc, self.work_buf, *args,
             local_size=self.local_size,
         )
+
+    def replayed(self) -> int:
+        """Segments ``accumulate_change`` has summed from lists so far (for
+        the current store; 0 without lists)."""
+        if self._crossings is None:
+            return 0
+        out = np.zeros(1, np.uint64)
+        cl.enqueue_copy(self.queue, out, self._crossings["replayed"])
+        return int(out[0])
 
     def accumulate_listed(self, store, listed, n: int):
         """``accumulate`` over the paths ``listed[:n]`` (a device int32

@@ -34,6 +34,7 @@ import pyopencl as cl
 
 from ..engine import as_query_points
 from ..errors import OclgiError
+from ..estimators.detp_disc_index import DetpDiscIndex
 from .protocol import SessionBase, UpdateStats  # noqa: F401 (UpdateStats: the sessions' result)
 from .segment_store import SegmentStore
 
@@ -168,6 +169,8 @@ class Session(SessionBase):
         # the static points' index is walked on every move: built for that
         # (DetpDiscIndex.session_tree), unless the options say otherwise
         self.estimator = self.engine.estimator(est_points, p, **{**getattr(cls, "session_tree", {}), **self.options})
+        if isinstance(self.estimator, DetpDiscIndex):
+            self.estimator.list_crossings = True  # it lives as long as the store (DetpDiscIndex.accumulate_change)
         self.estimator.accumulate(self.store.batch)
         self.dyn_est, self.dyn_index, self.dynamic_work = None, np.zeros(0, np.int64), None
         if self.view is not None and cls.sums_per_point:

@@ -25,6 +25,7 @@ class PathBatch:
     path_offset: int  # global id of the batch's first path
     n_paths: int
     max_depth: int
+    retraced: int = 0  # suffix re-traces so far (PhotonTracer.retrace): a version of the segments
 
     @property
     def n_slots(self) -> int:
@@ -78,6 +79,7 @@ class PhotonTracer:
         """Re-trace the suffixes of listed paths of ``batch`` in place: path
         ``paths[k]`` (an index into the batch) from bounce ``starts[k]`` on."""
         self.launches += 1
+        batch.retraced += 1
         launch(self.queue, self.k_retrace, n_list, *self.compiled.scene_args, *self._trace_args(),
                batch.path_offset, paths, starts, n_list, batch.segments, batch.path_len,
                local_size=self.local_size)
