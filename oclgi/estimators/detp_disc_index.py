@@ -72,12 +72,24 @@ and walked once, keeps the Morton order with 64 discs a leaf (Sponza's
 3,836 dynamic points, alternating in one run: the walk 8.54 -> 8.28 ms,
 the build 3.19 -> 2.87 ms against 32 a leaf).
 
+A session's static points also keep, from each move to the next, the
+discs every new segment crossed (``list_crossings``, kernels/
+detp_disc_index.cl ``detp_disc_index_change``): a small object's moves
+re-trace mostly the same paths again, and the next move takes their old
+suffixes away by these lists instead of walking the tree (Sponza, a bunny
+going round: 60% of the old suffixes' segments; the change pass 26.0 ->
+23.7 ms). The lists hold at most ``LISTED_PER_PATH`` ids a path and
+``LISTED_IDS`` in all (a segment that does not fit is walked next time);
+they are dropped with the store or the discs, and not made when work is
+counted (the counts measure the walks).
+
 Scaling (counted, tests/test_detp_disc_index.py): with discs spread through
 the volume, u per segment grows as n_P^0.33; with discs on the surfaces it
 stays flat (a segment only meets the discs near its two ends), so cbrt(n_P)
 is the volume case's law and an upper trend for surfaces.
 
-Memory: the tree and the disc blocks, O(n_P); nothing of size n_R x n_P.
+Memory: the tree and the disc blocks, O(n_P); a session's lists, the
+crossings of one move's new segments; nothing of size n_R x n_P.
 """
 
 from __future__ import annotations

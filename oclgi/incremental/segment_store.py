@@ -20,7 +20,9 @@ path-major, as one batch. After a movable object moves:
    disc-indexed estimator reads them from the store itself and sums the
    old and new suffixes in one pass (``DetpDiscIndex.accumulate_change``:
    a suffix's old and new first segments share origin, direction and
-   power, and the discs both cross cancel, so that part is skipped);
+   power, and the discs both cross cancel, so that part is skipped; a
+   path the last move re-traced has its old segments' discs listed, and
+   they are summed from the lists);
 5. ``sum_near(discs)`` sums the moved store into a camera session's
    dynamic points, reading only the paths whose cell masks meet their
    discs' box (the list of a ``find`` given a ``near`` box that holds it).
