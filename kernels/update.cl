@@ -1,16 +1,16 @@
 /* update.cl: finding and gathering the paths a move changes (DESIGN.md 4).
  *
  * update_path_cells  one work-item per listed path: a 128-bit mask of the
- *     cells of a grid over the scene (at most 127 cells, about cubic: 5 x 5
- *     x 5 for the Cornell box, 7 x 4 x 4 for Sponza) that the path's segments
+ *     cells of a grid over the scene (at most 122 cells, about cubic: 5 x 5
+ *     x 4 for the Cornell box, 7 x 4 x 4 for Sponza) that the path's segments
  *     meet (each segment against each padded cell its box can reach, the
- *     same slab test as below), and bit OCLGI_CELL_OUTSIDE_BIT (127) when a
- *     segment leaves the grid.
+ *     same slab test as below), and, from bit OCLGI_CELL_OUTSIDE_BIT (122),
+ *     one bit per face of the grid a segment leaves it through.
  *     A move need only look at the paths whose mask meets the cells of the
  *     object's old and new boxes (and of the dynamic points' discs), plus
- *     bit 127 when a box reaches out of the grid: a segment meeting a box
+ *     the bit of each face a box reaches past: a segment meeting a box
  *     meets it inside some cell, which is in both masks, or outside the
- *     grid, which it then leaves. The host keeps the masks current: all
+ *     grid, past a face which both reach past. The host keeps the masks current: all
  *     paths after the trace, re-traced paths after each update.
  * update_candidates  one work-item per `chunk` paths: lists those whose
  *     mask meets the region's.
@@ -59,6 +59,39 @@ inline int update_touches(__global const BvhNode *nodes, __global const Tri *tri
                         xform_vector(in->object_from_world, d), 1, &h) >= 0;
 }
 
+/* The faces of the (convex, shrunk) grid [g0, g1] past which the segment
+ * o + t d, 0 <= t <= t_end (box [lo, hi], inv = 1 / d), has points: bit 2
+ * axis + side (side 1: the high face). A segment that passes through the
+ * grid has its points outside after it leaves, all past the face it
+ * leaves by (a line crosses a plane once), and before it enters, all past
+ * the face it enters by; the faces whose crossing is within 1e-5 of the
+ * leaving (entering) one are taken too, far above float rounding. Any
+ * other segment: every face its box reaches past. So a box out of the
+ * grid below the floor lists the paths that leave downwards, not every
+ * path that leaves the grid (by an open front or roof). */
+inline uint cell_faces(float3 o, float3 inv, float t_end, float3 lo, float3 hi, float3 g0, float3 g1)
+{
+    int3 below = lo < g0, above = hi > g1;
+    uint faces = (below.x & 1) | (above.x & 2) | (below.y & 4) | (above.y & 8) | (below.z & 16) | (above.z & 32);
+    if (!faces) return 0;
+    float3 t0 = (g0 - o) * inv, t1 = (g1 - o) * inv;
+    float3 tin = fmin(t0, t1), tout = fmax(t0, t1);
+    float t_in = fmax(fmax(tin.x, tin.y), tin.z), t_out = fmin(fmin(tout.x, tout.y), tout.z);
+    if (!(t_in <= t_out && t_out >= 0.0f && t_in <= t_end)) return faces; /* does not pass through */
+    uint crossed = 0;
+    int3 up = inv > 0.0f; /* the side a segment leaves by; it enters by the other */
+    if (t_out <= t_end + t_end * 1e-5f) { /* it leaves */
+        int3 by = tout <= t_out + fabs(t_out) * 1e-5f;
+        crossed |= ((by.x & 1) << (up.x & 1)) | ((by.y & 1) << (2 + (up.y & 1))) | ((by.z & 1) << (4 + (up.z & 1)));
+    }
+    if (any(o < g0) || any(o > g1)) { /* it starts outside: it enters */
+        int3 by = tin >= t_in - fabs(t_in) * 1e-5f;
+        crossed |= ((by.x & 1) << (1 - (up.x & 1))) | ((by.y & 1) << (3 - (up.y & 1))) |
+                   ((by.z & 1) << (5 - (up.z & 1)));
+    }
+    return crossed;
+}
+
 __kernel void update_path_cells(__global const Segment *segments, __global const int *path_len, int max_depth,
                                 __global const int *list, int n_list, float4 grid_lo, float4 cell, int4 dims,
                                 float pad, __global ulong2 *cells)
@@ -75,18 +108,19 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
         segment_load(&segments[(size_t)p * max_depth + b], &s);
         float3 o = s.o, d = s.w;
         float t_end = s.t_end;
-        /* the cells the segment's box reaches (all, for an escaping one) */
+        /* the cells the segment's box reaches (all, for an escaping one,
+         * whose box reaches infinity along its direction) */
         int3 c0 = (int3)(0), c1 = top;
-        int out = 1;
+        float3 lo = select(o, (float3)(-INFINITY), d < 0.0f), hi = select(o, (float3)(INFINITY), d > 0.0f);
         if (t_end != INFINITY) {
             float3 e = segment_end(&s);
-            float3 lo = fmin(o, e), hi = fmax(o, e);
+            lo = fmin(o, e);
+            hi = fmax(o, e);
             c0 = clamp(convert_int3_rtn((lo - pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
             c1 = clamp(convert_int3_rtn((hi + pad - grid_lo.xyz) / cell.xyz), (int3)(0), top);
-            out = any(lo < g0) || any(hi > g1); /* a segment leaves the (convex) grid at an end */
         }
-        if (out) m[1] |= (ulong)1 << (OCLGI_CELL_OUTSIDE_BIT - 64);
         float3 inv = 1.0f / d;
+        m[1] |= (ulong)cell_faces(o, inv, t_end, lo, hi, g0, g1) << (OCLGI_CELL_OUTSIDE_BIT - 64);
         /* box_slab (box.h) on each padded cell, its per-axis parts made once
          * per column, row and layer: a cell's slab times are its x column's,
          * y row's and z layer's, the same operations on the same values, and

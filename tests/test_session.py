@@ -350,6 +350,63 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
     engine.move("bunny", np.eye(4))
 
 
+def test_a_box_past_one_face_lists_only_the_paths_leaving_through_it(engine):
+    """A box out of the grid below the Cornell box's floor, or behind its
+    back wall, examines beside the old box's paths only those that leave
+    the grid through that face (none: the box is closed but for its front),
+    not every path that leaves it: a mask has a bit per face, set for the
+    faces its segments leave and enter by. Most of the paths that leave by
+    the open front go on downwards, below the floor's plane, outside: a
+    bit for every face a segment's box reaches past would list them. The
+    find still equals a full scan."""
+    from oclgi.incremental.segment_store import SegmentStore
+
+    engine.move("bunny", np.eye(4))
+    seg = None
+    for shift in ([0.0, -30.0, 0.0], [0.0, 0.0, -30.0]):
+        masked, full = (SegmentStore(engine, 20_000, 5, 10) for _ in range(2))
+        full._region = lambda boxes: None
+        obj = engine.scene.object_id("bunny")
+        n_old = masked._list_candidates([masked.boxes[obj]])[1]
+        if seg is None:
+            seg = masked.segments().reshape(masked.photons, masked.max_depth)
+            escaping = (seg["t_end"] == np.inf) & (np.abs(seg["dir"]).sum(axis=2) > 0)
+            down = (escaping & (seg["dir"][:, :, 1] < 0)).any(axis=1).sum()
+            assert down > 2000  # leave by the front, going down
+        m = np.eye(4)
+        m[:3, 3] = shift
+        engine.move("bunny", m)
+        a, b = masked.find(obj), full.find(obj)
+        assert np.array_equal(a.paths, b.paths) and np.array_equal(a.starts, b.starts)
+        assert masked.examined <= n_old + 20, (shift, masked.examined, n_old)
+        engine.move("bunny", np.eye(4))
+
+
+def _reference_faces(o, w, t_end, lo, hi, g0, g1) -> np.ndarray:
+    """kernels/update.cl cell_faces in numpy float32, segment by segment."""
+    f32 = np.float32
+    inv = f32(1.0) / w
+    box = np.zeros(len(o), np.uint64)
+    for a in range(3):
+        box |= (lo[:, a] < g0[a]).astype(np.uint64) << np.uint64(2 * a)
+        box |= (hi[:, a] > g1[a]).astype(np.uint64) << np.uint64(2 * a + 1)
+    t0, t1 = (g0[None] - o) * inv, (g1[None] - o) * inv
+    tin, tout = np.fmin(t0, t1), np.fmax(t0, t1)
+    t_in = np.fmax(np.fmax(tin[:, 0], tin[:, 1]), tin[:, 2])
+    t_out = np.fmin(np.fmin(tout[:, 0], tout[:, 1]), tout[:, 2])
+    through = (t_in <= t_out) & (t_out >= 0) & (t_in <= t_end)
+    up = inv > 0
+    crossed = np.zeros(len(o), np.uint64)
+    leaves = t_out <= t_end + t_end * f32(1e-5)
+    enters = (o < g0[None]).any(axis=1) | (o > g1[None]).any(axis=1)
+    for a in range(3):
+        by_out = leaves & (tout[:, a] <= t_out + np.abs(t_out) * f32(1e-5))
+        crossed |= by_out.astype(np.uint64) << (2 * a + up[:, a]).astype(np.uint64)
+        by_in = enters & (tin[:, a] >= t_in - np.abs(t_in) * f32(1e-5))
+        crossed |= by_in.astype(np.uint64) << (2 * a + 1 - up[:, a]).astype(np.uint64)
+    return np.where(box == 0, np.uint64(0), np.where(through, crossed, box))
+
+
 def _reference_cells(store) -> np.ndarray:
     """Each path's cell mask (two uint64), in numpy float32 with the
     kernel's operations in its order (kernels/update.cl update_path_cells):
@@ -375,7 +432,10 @@ def _reference_cells(store) -> np.ndarray:
         c1 = np.clip(np.floor((hi + pad - g) / cell), 0, top).astype(np.int64)
         c0[escape], c1[escape] = 0, top
         g1 = g + dims.astype(f32) * cell - pad
-        out = escape | (lo < g + pad).any(axis=1) | (hi > g1).any(axis=1)
+        # an escaping segment's box reaches infinity along its direction
+        lo = np.where(escape[:, None], np.where(w < 0, -np.inf, o), lo)
+        hi = np.where(escape[:, None], np.where(w > 0, np.inf, o), hi)
+        faces = _reference_faces(o, w, t, lo, hi, g + pad, g1)
         inv = f32(1.0) / w
         slab = []
         for a in range(3):
@@ -396,7 +456,7 @@ def _reference_cells(store) -> np.ndarray:
                     met &= ((c0 <= cube) & (cube <= c1)).all(axis=1)
                     c = x + dims[0] * (y + dims[1] * z)
                     bits[met, c >> 6] |= np.uint64(1 << (c & 63))
-    bits[out, 1] |= np.uint64(1 << (CELL_OUTSIDE_BIT - 64))
+    bits[:, 1] |= faces << np.uint64(CELL_OUTSIDE_BIT - 64)
     masks = np.zeros((store.photons, 2), np.uint64)
     np.bitwise_or.at(masks, path, bits)
     return masks
@@ -426,7 +486,7 @@ def test_cell_masks_equal_a_cell_by_cell_reference(engine):
         assert (got[:, 0] != 0).sum() > store.photons // 2  # cells were marked, not only the outside bit
     # rows of more than 8 columns (two float8 runs) and of 1 (a long scene's grids)
     extent = store.dims * store.cell
-    for dims in ([15, 4, 2], [127, 1, 1], [1, 1, 127]):
+    for dims in ([15, 4, 2], [122, 1, 1], [1, 1, 122]):
         store.dims = np.array(dims)
         store.cell = extent / store.dims
         store._mark_cells(store.all_paths, store.photons)
@@ -434,12 +494,29 @@ def test_cell_masks_equal_a_cell_by_cell_reference(engine):
         cl.enqueue_copy(store.queue, got, store.cells)
         assert np.array_equal(got, _reference_cells(store)), dims
     engine.move("bunny", np.eye(4))
+    # under a sun, whose paths start outside the grid and enter it from above
+    quad = lambda y, h, name, movable: {  # noqa: E731
+        "name": name, "vertices": [[-h, y, -h], [h, y, -h], [h, y, h], [-h, y, h]], "faces": [[0, 2, 1], [0, 3, 2]],
+        "albedo": [0.7] * 3, "movable": movable}
+    sunlit = oclgi.Engine(oclgi.load_dict({"mesh": [quad(0.0, 3.0, "ground", False), quad(0.5, 0.5, "roof", True)],
+                                           "sun": {"direction": [0.3, -1.0, 0.2], "irradiance": [1.0] * 3},
+                                           "photons": {"count": 4_000, "seed": 2, "max_depth": 4}}))
+    store = SegmentStore(sunlit, 4_000, 2, 4)
+    got = np.empty((store.photons, 2), np.uint64)
+    cl.enqueue_copy(store.queue, got, store.cells)
+    want = _reference_cells(store)
+    assert np.array_equal(got, want)
+    from oclgi.cl.constants import CELL_OUTSIDE_BIT
+    faces = (got[:, 1] >> np.uint64(CELL_OUTSIDE_BIT - 64)) & np.uint64(63)
+    assert (faces != 0).all()  # every sun path starts outside the grid
+    top = (faces & np.uint64(8)) != 0
+    assert top.sum() > len(faces) // 2 and (faces == 8).sum() > 100  # most enter by the top, some only so
 
 
 def test_grid_dims_fit_the_mask_and_follow_the_scene():
     from oclgi.incremental.segment_store import MAX_CELLS, grid_dims
 
-    for extent, expect in (([2, 2, 2], [5, 5, 5]), ([35.5, 17.4, 16.3], [7, 4, 4]), ([1, 1, 0], [11, 11, 1]),
-                           ([1e6, 1, 1], [127, 1, 1])):
+    for extent, expect in (([2, 2, 2], [5, 5, 4]), ([35.5, 17.4, 16.3], [7, 4, 4]), ([1, 1, 0], [11, 11, 1]),
+                           ([1e6, 1, 1], [122, 1, 1])):
         dims = grid_dims(extent)
         assert dims.tolist() == expect and np.prod(dims) <= MAX_CELLS

@@ -84,9 +84,10 @@ GRID_EMPTY = 0xFFFFFFFFFFFFFFFF
 GRID_HASH_MUL = 0x9E3779B97F4A7C15
 
 # A session's path masks (kernels/update.cl) are 128 bits: one per cell of
-# the grid over the scene, and the last for "leaves the grid", so grids
+# the grid over the scene, then six for "leaves the grid" through each face
+# (bit CELL_OUTSIDE_BIT + 2 axis + side, side 1 the high one), so grids
 # have at most CELL_OUTSIDE_BIT cells.
-CELL_OUTSIDE_BIT = 127
+CELL_OUTSIDE_BIT = 122
 
 # Emitter.kind (oclgi/cl/layout.py Emitter; kernels/light.h samples each,
 # oclgi/scene/lights.py writes their records).

@@ -7,8 +7,8 @@ path-major, as one batch. After a movable object moves:
 1. ``find`` lists, per path, the first segment that hit the object at its
    old pose or meets it at its new pose (the earlier segments are the same
    in the moved scene). Only paths whose cell mask (kernels/update.cl: the
-   cells of a grid of at most 127 cells over the scene that the path crosses, and
-   whether it leaves the grid) meets the cells of the object's old and new
+   cells of a grid of at most 122 cells over the scene that the path crosses, and
+   the faces it leaves the grid through) meets the cells of the object's old and new
    boxes are examined: a few percent of the store for a small object,
    instead of every stored segment;
 2. ``suffixes(affected, -1)`` gathers the affected suffixes with negated
@@ -44,13 +44,13 @@ from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from ..tracing.photon_trace import PathBatch, PhotonTracer
 
-MAX_CELLS = OUTSIDE_BIT  # cells of the paths' masks (kernels/update.cl: 128 bits, the last one for "outside")
+MAX_CELLS = OUTSIDE_BIT  # cells of the paths' masks (kernels/update.cl: 128 bits, the last six for the faces)
 CANDIDATE_CHUNK = 64  # paths per work-item of the mask scan (kernels/update.cl update_candidates)
 
 
 def grid_dims(extent) -> np.ndarray:
     """Cells per axis, at most MAX_CELLS in all, as near cubic as they go
-    (5 x 5 x 5 for a cube, 7 x 4 x 4 for Sponza's atrium): the axis with the
+    (5 x 5 x 4 for a cube, 7 x 4 x 4 for Sponza's atrium): the axis with the
     longest cells is split once more while the cells still fit."""
     e = np.asarray(extent, np.float64)
     dims = np.ones(3, np.int64)
@@ -213,7 +213,7 @@ class SegmentStore:
 
     def _region(self, boxes) -> np.ndarray | None:
         """The 128-bit mask (two uint64) of the cells the boxes meet, padded,
-        with the outside bit when a box reaches out of the grid; None to
+        with the bit of each face of the grid a box reaches past; None to
         examine every path (a box that is not finite)."""
         dims = self.dims
         grid_hi = self.grid_lo + dims * self.cell
@@ -222,8 +222,11 @@ class SegmentStore:
             lo, hi = lo - self.pad, hi + self.pad
             if not np.isfinite([lo, hi]).all():
                 return None
-            if (lo < self.grid_lo).any() or (hi > grid_hi).any():
-                bits |= 1 << OUTSIDE_BIT
+            for axis in range(3):
+                if lo[axis] < self.grid_lo[axis]:
+                    bits |= 1 << (OUTSIDE_BIT + 2 * axis)
+                if hi[axis] > grid_hi[axis]:
+                    bits |= 1 << (OUTSIDE_BIT + 2 * axis + 1)
             c0 = np.floor((lo - self.grid_lo) / self.cell).astype(np.int64)
             c1 = np.floor((hi - self.grid_lo) / self.cell).astype(np.int64)
             if (c1 < 0).any() or (c0 >= dims).any():
