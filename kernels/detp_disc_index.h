@@ -99,12 +99,24 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
         }                                                                                         \
     } while (0)
 
+/* The fixed-point power q added to disc `id`'s three sums. */
+inline void disc_add(__global long *acc, int id, long3 q)
+{
+    __global long *a = acc + 3 * (size_t)id;
+    atom_add(a + 0, q.x);
+    atom_add(a + 1, q.y);
+    atom_add(a + 2, q.z);
+}
+
 /* One segment (s, read from `slot`) against the tree, its fixed-point
  * power added to every disc it crosses (quantised once per segment that
- * crosses one, as detp_plain does). */
-inline void disc_index_segment(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                               __global const Segment *slot, const SegmentView *s, float ext,
-                               __global long *acc, uint *visited, ulong *tests)
+ * crosses one, as detp_plain does), the first `cap` of those discs listed
+ * in rec[0 ..] and all of them counted in *n (more than cap: the list is
+ * incomplete, the caller does not keep it). */
+inline void disc_index_segment_listed(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                                      __global const Segment *slot, const SegmentView *s, float ext,
+                                      __global long *acc, __global int *rec, int cap, int *n, uint *visited,
+                                      ulong *tests)
 {
     float3 o = s->o, w = s->w;
     float tmax = s->t_end + ext; /* exactly as detp_plain */
@@ -116,42 +128,21 @@ inline void disc_index_segment(__global const DiscNode *nodes, __global const Di
             q = segment_fixed_power(slot);               \
             have_q = 1;                                  \
         }                                                \
-        __global long *a_ = acc + 3 * (size_t)(id);      \
-        atom_add(a_ + 0, q.x);                           \
-        atom_add(a_ + 1, q.y);                           \
-        atom_add(a_ + 2, q.z);                           \
+        disc_add(acc, (id), q);                          \
+        if (*n < cap) rec[*n] = (id);                    \
+        ++*n;                                            \
     } while (0)
     DISC_INDEX_WALK(nodes, discs, o, w, tmax, *visited, *tests, DISC_INDEX_ADD);
 #undef DISC_INDEX_ADD
 }
 
-/* disc_index_segment that also lists the discs crossed: the first `cap`
- * of them go to rec[0 ..], and *n counts them all (more than cap: the
- * list is incomplete, the caller does not keep it). */
-inline void disc_index_segment_listed(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                                      __global const Segment *slot, const SegmentView *s, float ext,
-                                      __global long *acc, __global int *rec, int cap, int *n, uint *visited,
-                                      ulong *tests)
+/* The same, listing nothing. */
+inline void disc_index_segment(__global const DiscNode *nodes, __global const DiscBlock *discs,
+                               __global const Segment *slot, const SegmentView *s, float ext,
+                               __global long *acc, uint *visited, ulong *tests)
 {
-    float3 o = s->o, w = s->w;
-    float tmax = s->t_end + ext; /* exactly as disc_index_segment */
-    long3 q = 0;
-    int have_q = 0;
-#define DISC_INDEX_ADD_LISTED(id)                        \
-    do {                                                 \
-        if (!have_q) {                                   \
-            q = segment_fixed_power(slot);               \
-            have_q = 1;                                  \
-        }                                                \
-        __global long *a_ = acc + 3 * (size_t)(id);      \
-        atom_add(a_ + 0, q.x);                           \
-        atom_add(a_ + 1, q.y);                           \
-        atom_add(a_ + 2, q.z);                           \
-        if (*n < cap) rec[*n] = (id);                    \
-        ++*n;                                            \
-    } while (0)
-    DISC_INDEX_WALK(nodes, discs, o, w, tmax, *visited, *tests, DISC_INDEX_ADD_LISTED);
-#undef DISC_INDEX_ADD_LISTED
+    int n = 0;
+    disc_index_segment_listed(nodes, discs, slot, s, ext, acc, 0, 0, &n, visited, tests);
 }
 
 /* A segment's listed crossings (disc_index_segment_listed, from an
@@ -161,12 +152,7 @@ inline void disc_index_replay(__global const Segment *slot, __global const int *
 {
     if (n <= 0) return;
     long3 q = segment_fixed_power(slot);
-    for (int j = 0; j < n; ++j) {
-        __global long *a_ = acc + 3 * (size_t)ids[j];
-        atom_add(a_ + 0, q.x);
-        atom_add(a_ + 1, q.y);
-        atom_add(a_ + 2, q.z);
-    }
+    for (int j = 0; j < n; ++j) disc_add(acc, ids[j], q);
 }
 
 /* An update's old and new first segment of a re-traced suffix (so, sn),
@@ -192,14 +178,7 @@ inline void disc_index_shared_first(__global const DiscNode *nodes, __global con
     float tmax_old = so->t_end + ext, tmax_new = sn->t_end + ext; /* exactly as the two walks */
     float tmax_hi = fmax(tmax_old, tmax_new);
     float tmin = fmin(tmax_old, tmax_new) * 0.9999f;
-#define DISC_INDEX_ONE(id)                                    \
-    do {                                                      \
-        long3 q_ = ho_[k_] ? q_old : q_new;                   \
-        __global long *a_ = acc + 3 * (size_t)(id);           \
-        atom_add(a_ + 0, q_.x);                               \
-        atom_add(a_ + 1, q_.y);                               \
-        atom_add(a_ + 2, q_.z);                               \
-    } while (0)
+#define DISC_INDEX_ONE(id) disc_add(acc, (id), ho_[k_] ? q_old : q_new)
     DISC_INDEX_BLOCKS(nodes, discs, o, w, tmin, tmax_hi, *visited, *tests,
                       int8 hit_old_;
                       int8 hit_new_;
