@@ -160,7 +160,7 @@ __kernel void update_path_cells(__global const Segment *segments, __global const
 }
 
 /* The paths whose mask meets `region`, appended to `list` in any order (the
- * host sorts them): only a few percent of the store is read again. A
+ * host sorts the affected ones): only a few percent of the store is read again. A
  * work-item counts its chunk's, takes their places with one atomic, then
  * writes them: an atomic per listed path, on one counter both cores
  * share, cost about a sixth of the scan (Sponza, 336,032 paths, 52,871

@@ -24,6 +24,16 @@ def column_bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t.min(axis=1), t.max(axis=1)
 
 
+# which of a box's 8 corners take hi on each axis (x slowest, z fastest)
+_CORNER_HI = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)
+
+
+def box_corners(lo, hi) -> np.ndarray:
+    """The 8 corners (float64, (..., 8, 3)) of boxes lo, hi of shape (..., 3)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    return np.where(_CORNER_HI, hi[..., None, :], lo[..., None, :])
+
+
 def coordinate_scale(compiled, positions: np.ndarray) -> float:
     """Largest of the scene's diagonal and its (and the points') coordinates:
     float32 rounding is relative to the coordinates, not to the extent."""

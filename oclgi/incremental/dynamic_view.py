@@ -49,12 +49,12 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..accel.boxes import box_corners
 from ..cl.layout import Instance
 from ..queries import QueryPoints
 from ..scene.instance_boxes import instance_buffer, instance_buffer_bytes
 
 MARGIN = 2  # pixels around a projected box (float rounding of the rays)
-CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], bool)  # a box's: hi where set
 
 
 class DynamicView:
@@ -126,9 +126,7 @@ class DynamicView:
         inst = self.engine.compiled.instances_host[self.movable]
         if not len(inst):
             return 0, 0, 0, 0
-        lo, hi = inst["lo"].astype(np.float64), inst["hi"].astype(np.float64)
-        corners = np.where(CORNERS[None], hi[:, None], lo[:, None]).reshape(-1, 3)  # every box's 8 corners
-        v = corners - eye
+        v = box_corners(inst["lo"], inst["hi"]).reshape(-1, 3) - eye  # every box's 8 corners
         depth = v @ fwd
         if (depth <= 1e-9 * np.maximum(np.abs(v).reshape(len(inst), -1).max(axis=1), 1.0).repeat(8)).any():
             return 0, 0, cam.width, cam.height  # a box reaches behind the eye: every pixel
@@ -149,7 +147,7 @@ class DynamicView:
         pix = (y0 + ys) * w + x0 + xs
         if self.movable_instances is not None:
             # the event holds the host array; kept, as pyopencl waits for a dropped one
-            self._records = cl.enqueue_copy(self.engine.queue, self.movable_instances,
+            self._records_copy = cl.enqueue_copy(self.engine.queue, self.movable_instances,
                                             instance_buffer_bytes(self._movable_records()), is_blocking=False)
             sub = self.engine.view_points(self.cam, rect, (self.movable_instances, len(self.movable)),
                                           lift=self.lift(), first_in=self.first_hits)
@@ -169,13 +167,10 @@ class DynamicView:
                  (p.barys, s.barys, sub.barys)]
         if p.weights is not None:
             pairs.append((p.weights, s.weights4(), sub.weights4()))
-        for dst, static, new in pairs:
+        for dst, static, new in pairs:  # the view's own arrays (view_points'): C-contiguous, reshaped as views
             dst[old] = static[old]
-            if dst.flags.c_contiguous:  # reshape is then a view
-                k = dst.shape[1]
-                dst.reshape(self.cam.height, w, k)[y0:y0 + rh, x0:x0 + rw] = new.reshape(rh, rw, k)
-            else:
-                dst[pix] = new
+            k = dst.shape[1]
+            dst.reshape(self.cam.height, w, k)[y0:y0 + rh, x0:x0 + rw] = new.reshape(rh, rw, k)
         self.dynamic = dyn_new
         return changed, dyn_new
 

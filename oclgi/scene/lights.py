@@ -83,6 +83,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..accel.boxes import box_corners
 from ..cl.constants import (EMITTER_ENVMAP, EMITTER_IES, EMITTER_POINT, EMITTER_SKY, EMITTER_SPOT, EMITTER_SUN,
                             EMITTER_TRIANGLE)
 from ..errors import OclgiError
@@ -925,8 +926,7 @@ def escaping_area_lights(scene) -> np.ndarray:
     offset = np.einsum("ij,ij->i", n, v0)
     tol = 1e-6 * max(scene.diagonal, 1e-30)
     lo, hi = scene.bounds()
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    box_front = (corners @ n.T - offset).max(axis=0) > tol
+    box_front = (box_corners(lo, hi) @ n.T - offset).max(axis=0) > tol
     suspects = np.nonzero(~box_front)[0]
     # A box with nothing in front already proves it; the others need the vertices.
     escaping = list(suspects)

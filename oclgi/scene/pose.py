@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
+from ..accel.boxes import box_corners
 from ..cl.layout import Instance
 from ..cl.programs import launch
 from ..errors import OclgiError
@@ -51,8 +52,7 @@ def place_record(record, box, m: np.ndarray, name: str) -> None:
     box as loaded is ``box`` = (lo, hi); refused, the record untouched, when
     the object would leave float32's range."""
     lo, hi = box
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    world = corners @ m[:3, :3].T + m[:3, 3]
+    world = box_corners(lo, hi) @ m[:3, :3].T + m[:3, 3]
     if not np.isfinite(world).all() or np.abs(world).max() > MAX_LENGTH:  # checked before any change
         raise OclgiError(f"the transform places object {name!r} beyond {MAX_LENGTH:.0e} of the origin, past what "
                          "the device's float32 coordinates hold")
