@@ -120,52 +120,52 @@ __kernel void detp_disc_index_change(__global const DiscNode *nodes, __global co
             from = b0 + 1;
         }
     }
-    if (generation < 0) {
-        disc_index_path(nodes, discs, old, from, max_depth, ext, acc, &visited, &tests);
-        disc_index_path(nodes, discs, cur, from, max_depth, ext, acc, &visited, &tests);
-    } else {
-        /* the old suffix, from the last move's lists where it has them */
-        uint n_replayed = 0;
-        for (int b = from; b < max_depth; ++b) {
-            SegmentView s;
-            if (!segment_read(old + b, &s)) {
-                if (segment_is_hole(old + b)) continue;
-                break; /* the path's end */
-            }
-            int2 run = last >= 0 ? prev_runs[(size_t)last * max_depth + b] : (int2)(0, -1);
-            if (run.y >= 0) {
-                disc_index_replay(old + b, prev_ids + run.x, run.y, acc);
-                ++n_replayed;
-            } else
-                disc_index_segment(nodes, discs, old + b, &s, ext, acc, &visited, &tests);
+    /* the old suffix, from the last move's lists where it has them (none
+     * without generation), else walked */
+    uint n_replayed = 0;
+    for (int b = from; b < max_depth; ++b) {
+        SegmentView s;
+        if (!segment_read(old + b, &s)) {
+            if (segment_is_hole(old + b)) continue;
+            break; /* the path's end */
         }
-        /* the new suffix, walked and listed */
-        __global int2 *mine = runs + (size_t)k * max_depth;
-        size_t base = (size_t)k * cap;
-        int used = 0, b = 0;
-        for (; b < from; ++b) mine[b] = (int2)(0, -1);
-        for (; b < max_depth; ++b) {
-            SegmentView s;
-            if (!segment_read(cur + b, &s)) {
-                mine[b] = (int2)(0, -1);
-                if (segment_is_hole(cur + b)) continue;
-                break;
-            }
-            int n = 0;
-            disc_index_segment_listed(nodes, discs, cur + b, &s, ext, acc, ids + base + used, cap - used, &n,
-                                      &visited, &tests);
-            if (n <= cap - used) {
-                mine[b] = (int2)((int)(base + used), n);
-                used += n;
-            } else { /* did not fit: this segment and the path's later ones go unlisted */
-                mine[b] = (int2)(0, -1);
-                used = cap;
-            }
+        int2 run = last >= 0 ? prev_runs[(size_t)last * max_depth + b] : (int2)(0, -1);
+        if (run.y >= 0) {
+            disc_index_replay(old + b, prev_ids + run.x, run.y, acc);
+            ++n_replayed;
+        } else {
+            disc_index_segment(nodes, discs, old + b, &s, ext, acc, &visited, &tests);
         }
+    }
+    /* the new suffix, walked, and listed with generation (cap is 0 without) */
+    __global int2 *mine = generation >= 0 ? runs + (size_t)k * max_depth : 0;
+    size_t base = (size_t)k * cap;
+    int used = 0, b = 0;
+    for (; mine && b < from; ++b) mine[b] = (int2)(0, -1);
+    for (b = from; b < max_depth; ++b) {
+        SegmentView s;
+        if (!segment_read(cur + b, &s)) {
+            if (mine) mine[b] = (int2)(0, -1);
+            if (segment_is_hole(cur + b)) continue;
+            break;
+        }
+        int n = 0;
+        disc_index_segment_listed(nodes, discs, cur + b, &s, ext, acc, ids + base + used, cap - used, &n,
+                                  &visited, &tests);
+        if (!mine) continue;
+        if (n <= cap - used) {
+            mine[b] = (int2)((int)(base + used), n);
+            used += n;
+        } else { /* did not fit: this segment and the path's later ones go unlisted */
+            mine[b] = (int2)(0, -1);
+            used = cap;
+        }
+    }
+    if (mine) {
         for (; b < max_depth; ++b) mine[b] = (int2)(0, -1);
         crossed_at[p] = (int2)(generation, k);
-        if (n_replayed) atom_add(replayed, (ulong)n_replayed); /* segments summed from lists (a count) */
     }
+    if (n_replayed) atom_add(replayed, (ulong)n_replayed); /* segments summed from lists (a count) */
     WORK_U(tests);
     WORK_NODE(visited);
     WORK_FLUSH(work);

@@ -218,12 +218,4 @@ inline void disc_index_path_in(__global const DiscNode *nodes, __global const Di
     }
 }
 
-inline void disc_index_path(__global const DiscNode *nodes, __global const DiscBlock *discs,
-                            __global const Segment *path, int from, int max_depth, float ext,
-                            __global long *acc, uint *visited, ulong *tests)
-{
-    disc_index_path_in(nodes, discs, path, from, max_depth, ext, 0, (float3)(0.0f), (float3)(0.0f), acc, visited,
-                       tests);
-}
-
 #endif
