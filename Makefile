@@ -1,6 +1,7 @@
 # Two commands do everything on a fresh Debian/Ubuntu machine:
 #   make render   set up (OpenCL, venv, package) and render the default scene to out/
-#   make test     set up and run the test suite
+#   make test     set up and run the test suite (every property; about 5 minutes on 2 cores)
+#   make test-full  the suite with its long campaigns, then the fuzzing campaign
 #   make fuzz     the long fuzzing campaign (bench/fuzz.py; CASES=2000 SEED=0)
 # Every step is idempotent: a second run only does what is missing.
 
@@ -12,13 +13,22 @@ SCENE  ?= scenes/cornell_box.toml
 CASES  ?= 2000
 SEED   ?= 0
 
-.PHONY: render test bench fuzz setup opencl browser warm clean
+# Tests run on every core (pytest-xdist); a file's tests stay on one worker,
+# so that its module fixtures (engines, studies) are made once.
+PYTEST := $(PY) -m pytest -q -n auto --dist loadfile
+
+.PHONY: render test test-full bench fuzz setup opencl browser warm clean
 
 render: setup $(VENV)/.warm
 	$(VENV)/bin/oclgi render $(SCENE) -o out/$(basename $(notdir $(SCENE))).exr
 
 test: setup browser
-	$(PY) -m pytest -q
+	$(PYTEST)
+
+# The tests marked `full` too (README.md, Tests), then the fuzzing campaign.
+test-full: setup browser $(VENV)/.warm
+	$(PYTEST) --full
+	$(PY) bench/fuzz.py --cases $(CASES) --seed $(SEED) -o out/fuzz
 
 bench: setup browser $(VENV)/.bench
 	$(PY) -m pytest bench -q --benchmark-json=bench/results/latest.json

@@ -9,7 +9,10 @@ the estimator's sums) and what the state is the state *of*:
 - ``points``: a hash of the query points (for a render: the camera, its
   size and what the camera sees);
 - ``params``: the run's parameters and the estimator's options;
-- ``version``: oclgi's version and the file format's.
+- ``version``: oclgi's version and the file format's;
+- ``command``: the command line's own settings (image size, samples,
+  outputs, ...; oclgi/resumable.py), which ``--resume`` takes where the
+  command line names none.
 
 Resuming from a checkpoint whose record differs from the resumed run's is
 refused with what differs (exit status 2 on the command line), never run:
@@ -81,12 +84,15 @@ def record(run, options: dict | None = None) -> dict:
     }
 
 
-def save(path: Path, run, options: dict | None = None) -> None:
-    """Write the run's state to ``path`` atomically (whole or not at all)."""
+def save(path: Path, run, options: dict | None = None, command: dict | None = None) -> None:
+    """Write the run's state to ``path`` atomically (whole or not at all);
+    ``command``: the command line's settings to keep with it (JSON values)."""
     from .io import atomic_path
 
     state = run.state()
     meta = record(run, options)
+    if command:
+        meta["command"] = command
     meta.update(first=state.paths.first, count=state.paths.count, next_path=state.next_path,
                 segments=state.segments)
     arrays = {SUMS_PREFIX + k: v for k, v in state.sums.items()}
@@ -96,10 +102,8 @@ def save(path: Path, run, options: dict | None = None) -> None:
             np.savez(f, **arrays)
 
 
-def load(path: Path) -> tuple:
-    """The record and the state of the checkpoint at ``path``."""
-    from .tracing.run import PathRange, RunState  # pyopencl: not at the command line's start
-
+def _read(path: Path, sums: bool) -> tuple:
+    """(record, sums or None) of the checkpoint file at ``path``, refused as one line."""
     path = Path(path)
     if not path.is_file():
         raise OclgiError(f"{path}: no such checkpoint file")
@@ -109,11 +113,24 @@ def load(path: Path) -> tuple:
             if META_KEY not in files:
                 raise ValueError("no record")
             meta = json.loads(bytes(z[META_KEY]).decode())
-            sums = {k[len(SUMS_PREFIX):]: z[k] for k in files if k.startswith(SUMS_PREFIX)}
+            arrays = {k[len(SUMS_PREFIX):]: z[k] for k in files if k.startswith(SUMS_PREFIX)} if sums else None
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
         raise OclgiError(f"{path}: not an oclgi checkpoint ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise OclgiError(f"{path}: not an oclgi checkpoint of format {FORMAT}")
+    return meta, arrays
+
+
+def read_record(path: Path) -> dict:
+    """The record of the checkpoint at ``path``, without its sums."""
+    return _read(path, sums=False)[0]
+
+
+def load(path: Path) -> tuple:
+    """The record and the state of the checkpoint at ``path``."""
+    from .tracing.run import PathRange, RunState  # pyopencl: not at the command line's start
+
+    meta, sums = _read(path, sums=True)
     try:
         paths = PathRange(int(meta["first"]), int(meta["count"]))
         state = RunState(paths, int(meta["next_path"]), int(meta["segments"]), sums)
@@ -156,15 +173,17 @@ class Saver:
     """Saves a run to ``path`` every ``every`` seconds of work (``on_batch``
     is the run loop's hook) and on request (``save``)."""
 
-    def __init__(self, path: Path, options: dict | None = None, every: float = DEFAULT_EVERY):
+    def __init__(self, path: Path, options: dict | None = None, every: float = DEFAULT_EVERY,
+                 command: dict | None = None):
         self.path = Path(path)
         self.options = options
+        self.command = command
         self.every = float(every)
         self.last = time.monotonic()
         self.saves = 0
 
     def save(self, run) -> None:
-        save(self.path, run, self.options)
+        save(self.path, run, self.options, self.command)
         self.saves += 1
         self.last = time.monotonic()
 

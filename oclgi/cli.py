@@ -170,40 +170,41 @@ def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="oclgi", description="Global illumination by density estimation on OpenCL.")
     ap.add_argument("--version", action="version", version=f"oclgi {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
+    ap.commands = sub.choices  # name -> the command's parser (resumable.settle reads its argument types)
 
     r = sub.add_parser("render", help="render the scene's camera to EXR (linear) and PNG (sRGB)")
     _estimate_args(r)
     r.add_argument("-o", "--output", type=Path,
                    help="output path, .exr or .png; the other format is written beside it with the same stem "
                         "(-o x.exr writes x.exr and x.png) unless --no-png or --no-exr (default: out/SCENE.exr)")
-    r.add_argument("--no-png", action="store_true", help="write only the EXR")
-    r.add_argument("--no-exr", action="store_true", help="write only the PNG")
+    r.add_argument("--no-png", action="store_true", default=None, help="write only the EXR")
+    r.add_argument("--no-exr", action="store_true", default=None, help="write only the PNG")
     r.add_argument("--force", action="store_true",
                    help="replace an existing file of the name not given with -o even when oclgi did not write it")
     r.add_argument("--width", type=_param(params.image_size, "--width"),
                    help="image width (default: the scene camera's)")
     r.add_argument("--height", type=_param(params.image_size, "--height"),
                    help="image height (default: the scene camera's)")
-    r.add_argument("--exposure", type=_param(params.exposure, "--exposure", _auto_or_number), default=1.0,
+    r.add_argument("--exposure", type=_param(params.exposure, "--exposure", _auto_or_number),
                    help="PNG exposure multiplier, or 'auto' (the image's log-average luminance to middle grey)")
-    r.add_argument("--view", type=_param(params.view, "--view", str), default="srgb", metavar="|".join(params.VIEWS),
+    r.add_argument("--view", type=_param(params.view, "--view", str), metavar="|".join(params.VIEWS),
                    help="the PNG's view transform: srgb (the default: clamp and sRGB encoding, the same pixels as "
                         "before the option existed; highlights clip), agx (Sobotka's AgX: highlights roll off and "
                         "desaturate) or filmic (an ACES fit); the EXR stays linear radiance, and the PNG and EXR "
                         "record the view (oclgi:view)")
-    r.add_argument("--layers", action="store_true",
+    r.add_argument("--layers", action="store_true", default=None,
                    help="also write the irradiance, albedo, normal and depth layers into the EXR "
                         "(irradiance.R, albedo.R, normal.X, depth.Z, ...; for compositing and denoisers)")
-    r.add_argument("--spp", type=_param(params.samples_per_pixel, "--spp"), default=1,
+    r.add_argument("--spp", type=_param(params.samples_per_pixel, "--spp"),
                    help="samples per pixel, each a query point (default 1, the pixel's centre); the photons are "
                         "shared, so 4 costs far less than 4 renders")
     resumable.add_arguments(r, progressive=True)
 
     i = sub.add_parser("irradiance", help="irradiance at given points (sensors)")
     _estimate_args(i)
-    i.add_argument("--points", type=Path, required=True, help=".npy (n, 6) or .csv: x,y,z,nx,ny,nz")
-    i.add_argument("-o", "--output", type=Path, required=True, help=".npy (n, 3) or .csv output")
-    i.add_argument("--units", choices=("radiometric", "photometric"), default="radiometric",
+    i.add_argument("--points", type=Path, help=".npy (n, 6) or .csv: x,y,z,nx,ny,nz (required unless --resume)")
+    i.add_argument("-o", "--output", type=Path, help=".npy (n, 3) or .csv output (required unless --resume)")
+    i.add_argument("--units", choices=("radiometric", "photometric"),
                    help="radiometric: irradiance E_r, E_g, E_b in W/m^2 (default); photometric: illuminance in "
                         "lux, one column (RGB as linear Rec. 709, 683 lm/W)")
     resumable.add_arguments(i)
@@ -655,7 +656,10 @@ def main(argv=None) -> int:
 def _run(argv) -> int:
     try:
         with streams.guarded_stdout(), warnings.catch_warnings():
-            args = build_parser().parse_args(argv)  # --help writes to stdout too
+            parser = build_parser()
+            args = parser.parse_args(argv)  # --help writes to stdout too
+            if args.command in resumable.SETTINGS:  # the settings not named: a checkpoint's, else defaults
+                resumable.settle(args, parser.commands[args.command])
             if args.verbose:
                 from .cl.programs import COMPILER_OUTPUT_ENV
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import warnings
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -26,7 +27,7 @@ from . import budget, params, queries
 from .cl import constants
 from .cl.device import create_context
 from .cl.programs import launch, programs
-from .errors import OclgiError
+from .errors import OclgiError, OclgiWarning
 from .estimators import ESTIMATORS, check_options
 from .estimators.gather_options import requested_rays
 from .tracing.photon_trace import PhotonTracer
@@ -312,6 +313,9 @@ class Engine:
         cam = camera or self.scene.camera
         if cam is None:
             raise OclgiError(f"{self.scene.name}: no [camera] in the scene")
+        if camera is None and self.scene.camera_note and not getattr(self, "_camera_noted", False):
+            warnings.warn(self.scene.camera_note, OclgiWarning, stacklevel=3)  # once per engine
+            self._camera_noted = True
         width = None if width is None else params.image_size(width, "width")
         height = None if height is None else params.image_size(height, "height")
         return validate_camera(replace(cam, width=width or cam.width, height=height or cam.height))

@@ -10,7 +10,10 @@ are integers of path ranges, oclgi/tracing/run.py). A resumed run takes the
 checkpoint's parameters where the command line gives none; one the command
 line gives must agree with it, as must the scene and the query points
 (oclgi/checkpoint.py), or the command stops with exit status 2 before any
-work.
+work. The command line's own settings (``SETTINGS``: image size, samples,
+outputs, ...) are kept in the checkpoint too, so that ``--resume FILE``
+alone goes on as the run was started; one the command line names replaces
+the saved one (the query points must still agree).
 """
 
 from __future__ import annotations
@@ -23,6 +26,17 @@ from .errors import OclgiError
 
 # args attribute -> RunParams key, for the parameters the command line may give
 RUN_ARGS = {"method": "method", "photons": "photons", "radius": "radius", "seed": "seed", "max_depth": "max_depth"}
+
+# Per command, the command line's own settings a checkpoint keeps, with their
+# defaults (argparse's are None, so that a setting not named is told from one
+# named at its default value).
+_LONG_RUNS = {"batch_paths": None, "checkpoint_every": checkpoint.DEFAULT_EVERY}
+SETTINGS = {
+    "render": {"width": None, "height": None, "spp": 1, "exposure": 1.0, "view": "srgb", "layers": False,
+               "output": None, "no_png": False, "no_exr": False, "progressive": None, **_LONG_RUNS},
+    "irradiance": {"points": None, "output": None, "units": "radiometric", **_LONG_RUNS},
+}
+REQUIRED = {"irradiance": ("points", "output")}
 
 
 def _seconds(text):
@@ -47,7 +61,7 @@ def add_arguments(p, progressive: bool = False) -> None:
                         "another file); parameters not given are the saved run's")
     g.add_argument("--more", type=lambda t: params.photons(params.number_text(t), "--more"), metavar="N",
                    help="with --resume: add N photons to the saved run (equal to one run of the sum)")
-    g.add_argument("--checkpoint-every", type=_seconds, default=checkpoint.DEFAULT_EVERY, metavar="SECONDS",
+    g.add_argument("--checkpoint-every", type=_seconds, metavar="SECONDS",
                    help=f"seconds of work between saves (default {checkpoint.DEFAULT_EVERY:g})")
     g.add_argument("--batch-paths", type=lambda t: params.photons(params.number_text(t), "--batch-paths"),
                    metavar="N", help="photon paths per batch (default: as 256 MiB of segments hold; results "
@@ -74,6 +88,56 @@ def check_arguments(args, inputs: dict) -> None:
         raise OclgiError(f"{args.resume}: no such checkpoint file")
     check_output(target)
     check_not_input([target], inputs)
+
+
+def _jsonable(value):
+    return str(value) if isinstance(value, Path) else value
+
+
+def settle(args, parser) -> None:
+    """The command's settings (``SETTINGS``): those the command line names,
+    else with ``--resume`` the checkpoint's, else the defaults. ``parser``:
+    the command's own, whose argument types check the saved values as they
+    check typed ones."""
+    defaults = SETTINGS[args.command]
+    saved = {}
+    if args.resume is not None:
+        saved = checkpoint.read_record(args.resume).get("command") or {}
+        if not isinstance(saved, dict):
+            raise OclgiError(f"{args.resume}: a damaged oclgi checkpoint (its command settings)")
+    actions = {a.dest: a for a in parser._actions}
+    for name, default in defaults.items():
+        if getattr(args, name) is not None:
+            continue
+        value = saved.get(name)
+        if value is not None:
+            value = _saved_value(args.resume, actions[name], value)
+        setattr(args, name, default if value is None else value)
+    for name in REQUIRED.get(args.command, ()):
+        if getattr(args, name) is None:
+            flag = actions[name].option_strings[-1]
+            raise OclgiError(f"{flag} is required (or --resume FILE of a run that had it)")
+    args.settings = {name: _jsonable(getattr(args, name)) for name in defaults}
+
+
+def _saved_value(path, action, value):
+    """A saved setting read through its argument's type, as if typed."""
+    import argparse
+
+    flag = action.option_strings[-1]
+    if action.nargs == 0:  # a flag (store_true)
+        if not isinstance(value, bool):
+            raise OclgiError(f"{path}: a damaged oclgi checkpoint (its {flag} is {value!r})")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+        raise OclgiError(f"{path}: a damaged oclgi checkpoint (its {flag} is {value!r})")
+    try:
+        value = action.type(str(value)) if action.type is not None else str(value)
+    except (argparse.ArgumentTypeError, ValueError, OclgiError) as exc:
+        raise OclgiError(f"{path}: its saved {flag} {value!r} is refused: {exc}") from None
+    if action.choices is not None and value not in action.choices:
+        raise OclgiError(f"{path}: its saved {flag} {value!r} is not one of {', '.join(action.choices)}")
+    return value
 
 
 def save_path(args) -> Path | None:
@@ -111,7 +175,8 @@ def execute(args, engine, make_run, snapshot=None):
         if args.more is not None:
             run.extend(args.more)
     target = save_path(args)
-    saver = checkpoint.Saver(target, options, args.checkpoint_every) if target is not None else None
+    saver = (checkpoint.Saver(target, options, args.checkpoint_every, getattr(args, "settings", None))
+             if target is not None else None)
     every = getattr(args, "progressive", None)
     run.marks = every  # batches end on its multiples
 

@@ -18,21 +18,44 @@ import numpy as np
 import pytest
 
 
+_SESSION_CACHE = "OCLGI_TEST_SESSION_POCL_CACHE"
+
+
 def _private_kernel_cache() -> None:
     # Before anything imports pyopencl: PoCL reads its variables when the
     # platform is first opened.
     keep = os.environ.get("OCLGI_TEST_POCL_CACHE")
     if keep:
         os.environ["POCL_CACHE_DIR"] = keep
+    elif os.environ.get("PYTEST_XDIST_WORKER") and os.environ.get(_SESSION_CACHE):
+        # a pytest-xdist worker: the run's one cache, made (and removed) by the controller
+        os.environ["POCL_CACHE_DIR"] = os.environ[_SESSION_CACHE]
     else:
         cache = tempfile.mkdtemp(prefix="oclgi-test-pocl-cache-")
-        os.environ["POCL_CACHE_DIR"] = cache
+        os.environ["POCL_CACHE_DIR"] = os.environ[_SESSION_CACHE] = cache
         atexit.register(shutil.rmtree, cache, ignore_errors=True)
     os.environ["PYOPENCL_NO_CACHE"] = "1"
     os.environ.pop("OCLGI_COMPILER_OUTPUT", None)  # tests see what a user sees by default
 
 
 _private_kernel_cache()
+
+def pytest_addoption(parser):
+    parser.addoption("--full", action="store_true",
+                     help="also run the long campaigns (tests marked full): `make test-full`")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``full`` (long campaigns: README.md, Tests) run only
+    with ``--full``; without it they are deselected, and the summary counts
+    them."""
+    if config.getoption("--full"):
+        return
+    dropped = [item for item in items if item.get_closest_marker("full")]
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = [item for item in items if not item.get_closest_marker("full")]
+
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"

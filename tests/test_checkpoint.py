@@ -25,7 +25,7 @@ from oclgi.tracing.run import PathRange
 BOX = ROOT / "scenes" / "cornell_box.toml"
 # Long enough for a kill to land inside the loop (dozens of batches), small
 # enough for a few seconds a run.
-PHOTONS, BATCH = 600_000, 15_000
+PHOTONS, BATCH = 400_000, 10_000
 SIZE = 12
 
 
@@ -65,7 +65,14 @@ def _wait_for(path, proc, timeout=120.0):
         time.sleep(0.005)
 
 
-@pytest.mark.parametrize("method", METHODS)
+# Killed and resumed as a user runs it: the default method and Photon Maps (a
+# state of impacts, not sums) in `make test`, every other method in the full
+# suite; test_run_api_resume_and_extend_equal_one_run restores every method's
+# state in-process.
+KILLED = [m if m in ("detp_disc_index", "photon_map") else pytest.param(m, marks=pytest.mark.full) for m in METHODS]
+
+
+@pytest.mark.parametrize("method", KILLED)
 def test_killed_then_resumed_equals_uninterrupted(tmp_path, method, monkeypatch, capsys):
     full = in_process(monkeypatch, capsys, tmp_path, *_args("full.exr", method), "--checkpoint", "full.npz")
     assert full.returncode == 0, full.stderr
@@ -73,7 +80,7 @@ def test_killed_then_resumed_equals_uninterrupted(tmp_path, method, monkeypatch,
     rng = np.random.default_rng(sum(map(ord, method)))
     p = _start(tmp_path, *_args("part.exr", method), "--checkpoint", "part.npz", "--checkpoint-every", "0")
     _wait_for(tmp_path / "part.npz", p)
-    time.sleep(rng.uniform(0.0, 0.4))
+    time.sleep(rng.uniform(0.0, 0.3))
     p.send_signal(signal.SIGKILL)
     p.communicate(timeout=60)
     assert p.returncode == -signal.SIGKILL, "the run ended before it was killed: make it longer"
@@ -124,6 +131,38 @@ def test_more_photons_equal_one_longer_run(tmp_path, method, monkeypatch, capsys
     res = cmd("again.exr", first + more, "--resume", "c.npz")
     assert res.returncode == 0, res.stderr
     _same_files(tmp_path / "long.exr", tmp_path / "again.exr")
+
+
+def test_resume_alone_takes_the_run_as_started(tmp_path, monkeypatch, capsys):
+    """``--resume FILE`` alone (the scene and nothing else) continues a run
+    started with any settings: its image size, samples, exposure, view,
+    layers, output and method options come from the checkpoint, and the
+    result equals one run of the sum, bit for bit. A setting named on the
+    resume replaces the saved one."""
+    cmd = lambda *a: in_process(monkeypatch, capsys, tmp_path, *a)  # noqa: E731
+    given = ("--width", 10, "--height", 6, "--spp", 2, "--exposure", 2.5, "--view", "agx", "--layers",
+             "--method", "photon_map", "-O", "k=12", "--batch-paths", 5_000, "--quiet")
+    assert cmd("render", BOX, *given, "--photons", 30_000, "-o", "whole.exr").returncode == 0
+    assert cmd("render", BOX, *given, "--photons", 20_000, "-o", "part.exr", "--checkpoint", "c.npz").returncode == 0
+    res = cmd("render", BOX, "--resume", "c.npz", "--more", 10_000)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["wrote", "part.exr", "wrote", "part.png"]  # the saved -o
+    _same_files(tmp_path / "whole.exr", tmp_path / "part.exr")
+    # named on the resume: another output and exposure, the same run
+    res = cmd("render", BOX, "--resume", "c.npz", "--exposure", 2.5, "-o", "again.png", "--no-exr")
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "again.png").read_bytes() == (tmp_path / "whole.png").read_bytes()
+    assert not (tmp_path / "again.exr").exists()
+    # irradiance: the points file, the output and the units saved as well
+    pts = np.array([[0.0, 0.01, 0.0, 0.0, 1.0, 0.0], [0.2, 0.01, -0.1, 0.0, 1.0, 0.0]])
+    np.save(tmp_path / "p.npy", pts)
+    args = ("irradiance", BOX, "--points", "p.npy", "--units", "photometric", "--quiet")
+    assert cmd(*args, "--photons", 30_000, "-o", "whole.csv").returncode == 0
+    assert cmd(*args, "--photons", 20_000, "-o", "part.csv", "--checkpoint", "i.npz").returncode == 0
+    res = cmd("irradiance", BOX, "--resume", "i.npz", "--more", 10_000)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "part.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    _refused(cmd("irradiance", BOX, "-o", "x.npy"), "--points is required")
 
 
 def test_run_api_resume_and_extend_equal_one_run(scenes_dir):

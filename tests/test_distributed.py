@@ -1,7 +1,8 @@
 """Runs over MPI ranks (oclgi/distributed.py) equal one process bit for bit.
 
-Each test launches ``mpiexec -n 2`` and ``-n 3`` (3 ranks oversubscribe a
-small machine, which MPICH allows) on tests/mpi_worker.py, whose rank 0
+Each test launches ``mpiexec -n 2`` and, in the full suite, ``-n 3`` (3 ranks
+oversubscribe a small machine, which MPICH allows; a range split in three
+is the uneven case) on tests/mpi_worker.py, whose rank 0
 writes its results as .npy files, and compares them with the same
 computation made here in one process: the accumulators and irradiance of
 every estimator, a render, and the sums of every incremental method after
@@ -36,6 +37,10 @@ def _env():
     env["PYTHONPATH"] = os.pathsep.join([str(HERE.parent), str(HERE), env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     env.setdefault("OCLGI_KERNEL_DIR", str(HERE.parent / "kernels"))
     return env
+
+
+# 2 ranks in `make test`, 3 as well in the full suite (README.md, Tests)
+RANKS = [2, pytest.param(3, marks=pytest.mark.full)]
 
 
 def mpiexec(ranks, *args, timeout=TIMEOUT):
@@ -99,7 +104,7 @@ def single_sessions(moves):
 # -- over 2 and 3 ranks --------------------------------------------------------------
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", RANKS)
 def test_every_estimator_equals_one_process(tmp_path, single, ranks):
     _ran(mpiexec(ranks, "irradiance", tmp_path))
     for m in worker.METHODS:
@@ -117,7 +122,7 @@ def test_every_estimator_equals_one_process(tmp_path, single, ranks):
     assert _same(np.load(tmp_path / "gather_irr.npy"), gather.irradiance)
 
 
-@pytest.mark.parametrize("ranks", [2, 3])
+@pytest.mark.parametrize("ranks", RANKS)
 def test_session_after_20_moves_equals_one_process(tmp_path, moves, single_sessions, ranks):
     _ran(mpiexec(ranks, "session", tmp_path, moves))
     for m in worker.INCREMENTAL:
@@ -162,16 +167,18 @@ def _error_lines(proc):
     return re.findall(r"oclgi: error: [^\n]*", proc.stdout + proc.stderr)
 
 
+@pytest.mark.parametrize("ranks", RANKS)
 @pytest.mark.parametrize("what, message", [
-    ("method", "rank 1 of 3: method: unknown method 'no_such_method'"),
-    ("photons", "rank 1 of 3 was given another scene or other parameters than rank 0"),
-    ("device", "rank 1 of 3: "),  # its Engine finds no such OpenCL device
+    ("method", "rank 1 of {n}: method: unknown method 'no_such_method'"),
+    ("photons", "rank 1 of {n} was given another scene or other parameters than rank 0"),
+    ("device", "rank 1 of {n}: "),  # its Engine finds no such OpenCL device
 ])
-def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, message):
-    proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
+def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, message, ranks):
+    proc = mpiexec(ranks, "fail", tmp_path, 1, what, timeout=60)
     assert proc.returncode != 0
     lines = _error_lines(proc)
-    assert len(lines) == 1 and lines[0].startswith(f"oclgi: error: {message}"), proc.stdout + proc.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"oclgi: error: {message.format(n=ranks)}"), \
+        proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr
     assert not (tmp_path / "finished.npy").exists()
 
@@ -180,22 +187,25 @@ def test_an_error_on_one_rank_ends_every_rank_with_one_message(tmp_path, what, m
     ("bug", "unexpected RuntimeError: a bug in the run", "RuntimeError: a bug in the run"),
     ("interrupt", "interrupted", "KeyboardInterrupt"),
 ])
-def test_a_bug_or_an_interrupt_on_one_rank_ends_every_rank(tmp_path, what, message, raised):
+@pytest.mark.parametrize("ranks", RANKS)
+def test_a_bug_or_an_interrupt_on_one_rank_ends_every_rank(tmp_path, what, message, raised, ranks):
     """Rank 0 says which rank failed and how; that rank shows its traceback."""
-    proc = mpiexec(3, "fail", tmp_path, 1, what, timeout=60)
+    proc = mpiexec(ranks, "fail", tmp_path, 1, what, timeout=60)
     assert proc.returncode != 0
     # one message (the rank's traceback may be written into its line: compared as a prefix)
     lines = _error_lines(proc)
-    assert len(lines) == 1 and lines[0].startswith(f"oclgi: error: rank 1 of 3: {message}"), \
+    assert len(lines) == 1 and lines[0].startswith(f"oclgi: error: rank 1 of {ranks}: {message}"), \
         proc.stdout + proc.stderr
     assert proc.stderr.count("Traceback") == 1 and raised in proc.stderr
     assert not (tmp_path / "finished.npy").exists()
 
 
-def test_a_failure_inside_an_exchange_aborts_the_job(tmp_path):
-    proc = mpiexec(3, "fail", tmp_path, 1, "collective", timeout=60)
+@pytest.mark.parametrize("ranks", RANKS)
+def test_a_failure_inside_an_exchange_aborts_the_job(tmp_path, ranks):
+    proc = mpiexec(ranks, "fail", tmp_path, 1, "collective", timeout=60)
     assert proc.returncode != 0
-    assert "oclgi: error: rank 1 of 3 failed in an MPI exchange: RuntimeError: an exchange broke" in proc.stderr
+    assert f"oclgi: error: rank 1 of {ranks} failed in an MPI exchange: RuntimeError: an exchange broke" \
+        in proc.stderr
     assert not (tmp_path / "finished.npy").exists()
 
 
@@ -232,7 +242,8 @@ def _oclgi_mpi(ranks, cwd, *args):
                           cwd=cwd, env=_env(), capture_output=True, text=True, timeout=TIMEOUT)
 
 
-def test_mpirun_oclgi_writes_one_process_bytes(tmp_path):
+@pytest.mark.parametrize("ranks", RANKS)
+def test_mpirun_oclgi_writes_one_process_bytes(tmp_path, ranks):
     """``mpirun -n K oclgi render|irradiance``: rank 0 writes the files one
     process writes, byte for byte, and says so once."""
     scene = HERE.parent / "scenes" / "cornell_box.toml"
@@ -243,20 +254,19 @@ def test_mpirun_oclgi_writes_one_process_bytes(tmp_path):
            for a in (("render", scene, "--width", 16, "--height", 16, "-o", "one.exr", *common),
                      ("irradiance", scene, "--points", "p.npy", "-o", "one.npy", *common))]
     assert all(r.returncode == 0 for r in one), [r.stderr for r in one]
-    for ranks in (2, 3):
-        r = _oclgi_mpi(ranks, tmp_path, "render", scene, "--width", 16, "--height", 16, "-o", f"r{ranks}.exr",
-                       *common)
-        assert r.returncode == 0, r.stderr
-        assert r.stdout.splitlines() == [f"wrote r{ranks}.exr", f"wrote r{ranks}.png"]
-        for suffix in (".exr", ".png"):
-            assert (tmp_path / f"one{suffix}").read_bytes() == (tmp_path / f"r{ranks}{suffix}").read_bytes()
-        r = _oclgi_mpi(ranks, tmp_path, "irradiance", scene, "--points", "p.npy", "-o", f"e{ranks}.npy", *common)
-        assert r.returncode == 0, r.stderr
-        assert (tmp_path / "one.npy").read_bytes() == (tmp_path / f"e{ranks}.npy").read_bytes()
+    r = _oclgi_mpi(ranks, tmp_path, "render", scene, "--width", 16, "--height", 16, "-o", f"r{ranks}.exr",
+                   *common)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines() == [f"wrote r{ranks}.exr", f"wrote r{ranks}.png"]
+    for suffix in (".exr", ".png"):
+        assert (tmp_path / f"one{suffix}").read_bytes() == (tmp_path / f"r{ranks}{suffix}").read_bytes()
+    r = _oclgi_mpi(ranks, tmp_path, "irradiance", scene, "--points", "p.npy", "-o", f"e{ranks}.npy", *common)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "one.npy").read_bytes() == (tmp_path / f"e{ranks}.npy").read_bytes()
     # an input error: one line from rank 0, status 2 from the job; a command that does not distribute says so
-    r = _oclgi_mpi(3, tmp_path, "irradiance", scene, "--points", "missing.npy", "-o", "x.npy")
+    r = _oclgi_mpi(ranks, tmp_path, "irradiance", scene, "--points", "missing.npy", "-o", "x.npy")
     assert r.returncode != 0 and r.stderr.strip().splitlines() == ["oclgi: error: points file not found: missing.npy"]
-    r = _oclgi_mpi(2, tmp_path, "render", scene, "--checkpoint", "c.npz", "-o", "x.exr")
+    r = _oclgi_mpi(ranks, tmp_path, "render", scene, "--checkpoint", "c.npz", "-o", "x.exr")
     assert r.returncode != 0 and r.stderr.strip().splitlines() == [
         "oclgi: error: --checkpoint does not run over MPI ranks yet: run it in one process"]
     assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.npy").exists()

@@ -22,12 +22,31 @@ def test_mtl_illumination_models_become_kinds(scenes_dir):
     kinds = {m.name.split(":")[-1]: m for m in scene.materials}
     assert kinds["leftSphere"].kind == "mirror" and kinds["leftSphere"].specular == (0.95, 0.95, 0.95)
     glass = kinds["rightSphere"]
-    assert glass.kind == "dielectric" and glass.ior == 2.5 and glass.transmission == (0.1, 0.1, 0.1)
+    # MTL glass as Blender's and three.js's importers read it: clear, at its Ni (Ks 0.3 and Tf 0.1 no tints)
+    assert glass.kind == "dielectric" and glass.ior == 2.5
+    assert glass.transmission == (1.0, 1.0, 1.0) and glass.specular == (1.0, 1.0, 1.0)
     assert kinds["floor"].kind == "diffuse"
     text = [str(w.message) for w in caught]
     # the mirror's and the glass's Kd 0.01 cannot be honoured: one warning each, naming the material
     assert sum("leftSphere" in t and "Kd" in t for t in text) == 1
     assert sum("rightSphere" in t and "Kd" in t for t in text) == 1
+    # the glass's tints are named as read otherwise, in the same one warning
+    assert sum("rightSphere" in t and "Tf 0.1 0.1 0.1" in t and "Ks 0.3 0.3 0.3" in t for t in text) == 1
+    assert not any("almost black" in t for t in text)
+
+
+def test_dark_glass_is_said(scenes_dir):
+    """A glass material that transmits under a tenth of the light (a scene
+    file's tint) is said when the scene is made; clear glass is not."""
+    obj = str(scenes_dir / "cornell-box" / "CornellBox-Sphere.obj")
+    for tint, said in ((0.05, True), (0.5, False)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            oclgi.load_dict({"mesh": [{"path": obj, "materials": {"rightSphere": {
+                "kind": "dielectric", "transmission": [tint, tint, tint]}}}]})
+        dark = [str(w.message) for w in caught if "almost black" in str(w.message)]
+        assert len(dark) == int(said), dark
+        assert not said or "rightSphere" in dark[0]
 
 
 def test_mtl_phong_is_scaled_to_conserve_energy(tmp_path):

@@ -41,7 +41,10 @@ BOUNDS = {
 }
 
 
-@pytest.mark.parametrize("name", BOUNDS)
+# Mirror and glass (the delta kinds) in `make test`; water, the glossy floor and
+# textured Sponza, each a Mitsuba render at hundreds of samples, in the full suite.
+@pytest.mark.parametrize("name", [n if n == "cornell_sphere" else pytest.param(n, marks=pytest.mark.full)
+                                  for n in BOUNDS])
 def test_image_agrees_with_mitsuba(scenes_dir, name):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", oclgi.OclgiWarning)  # the files' Kd on mirrors and glass
@@ -68,6 +71,7 @@ def _block_luminance(img, keep, b=6):
             keep[:h, :w].reshape(h // b, b, w // b, b).sum(axis=(1, 3)))
 
 
+@pytest.mark.full
 def test_textured_sponza_under_sun_and_sky_agrees_with_mitsuba(scenes_dir):
     """Sponza with its procedural textures under a sun and a sky, 96 x 54:
     Mitsuba at 128 spp is noisy per pixel (its dark arcades), so the image

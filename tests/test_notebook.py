@@ -34,7 +34,6 @@ def kernel_of_this_python(tmp_path, monkeypatch):
     return KERNEL
 
 
-@pytest.mark.slow
 def test_the_quickstart_notebook_runs(kernel_of_this_python):
     import nbformat
     from nbclient import NotebookClient

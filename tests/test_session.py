@@ -6,6 +6,9 @@ session built from scratch at the final pose, and moving back to the start
 must give the first frame's accumulators again.
 """
 
+import copy
+import functools
+
 import numpy as np
 import pytest
 
@@ -17,7 +20,13 @@ N_MOVES = 50
 
 
 def _scene(scenes_dir):
-    """The Cornell box with a movable bunny standing on the floor."""
+    """The Cornell box with a movable bunny standing on the floor (a copy of
+    it read once: the bunny's ASCII PLY takes half a second to parse)."""
+    return copy.deepcopy(_read_scene(scenes_dir))
+
+
+@functools.cache
+def _read_scene(scenes_dir):
     return oclgi.load_dict({
         "mesh": [
             {"path": str(scenes_dir / "cornell-box" / "CornellBox-Original.obj")},

@@ -37,7 +37,7 @@ from oclgi.study import Config, equal_time, run_study
 
 SEEDS = 8
 K = 10  # small k: the k / (k-1) over-estimate (11%) stands well clear of the noise
-PHOTONS = [60_000, 240_000]
+PHOTONS = [30_000, 120_000]
 
 
 def chi2_limit(n_tests, alpha=1e-3):
@@ -67,8 +67,8 @@ def furnace_study():
     """Face points 0.15 from the edges (discs stay on their face), exact reference."""
     engine = oclgi.Engine(box(rho=0.5, le=1.0))
     p, n = face_points(np.random.default_rng(4), n_per_face=4)
-    configs = [Config("detp", [40_000, 160_000], radius=0.1), Config("photon_map", [40_000, 160_000], k=K),
-               Config("photon_map", [40_000, 160_000], k=K, estimator="k"), Config("impact", [40_000, 160_000])]
+    configs = [Config("detp", [20_000, 80_000], radius=0.1), Config("photon_map", [20_000, 80_000], k=K),
+               Config("photon_map", [20_000, 80_000], k=K, estimator="k"), Config("impact", [20_000, 80_000])]
     return run_study(engine, configs, points=np.hstack([p, n]), seeds=SEEDS,
                      reference=np.full(len(p), math.pi / (1 - 0.5)))
 

@@ -75,6 +75,36 @@ def test_trimesh_objects_and_face_arrays_give_the_file_scenes_bits(tmp_path):
     assert np.array_equal(_sums(oclgi.Engine(arrays)), from_file)
 
 
+def test_a_trimesh_scene_without_a_camera_renders_from_trimeshs_default(recwarn):
+    """trimesh gives every Scene a default camera (``Scene.camera``): a
+    scene without one renders from it, with a note, and is not changed; a
+    scene file without [camera] still says it has none."""
+    import trimesh
+
+    scene = _trimesh_scene()
+    assert not scene.has_camera
+    engine = oclgi.Engine(scene)
+    assert not scene.has_camera  # the user's scene is left as it was
+    cam = engine.scene.camera
+    # trimesh's own default camera, computed on a copy: the same eye, axis and fields of view
+    ref = scene.copy()
+    world = ref.camera_transform
+    assert np.allclose(cam.position, world[:3, 3])
+    assert np.allclose(np.subtract(cam.look_at, cam.position), -world[:3, 2])
+    assert cam.fov == pytest.approx(ref.camera.fov[1]) and cam.height == 256
+    across = 2 * np.degrees(np.arctan(np.tan(np.radians(cam.fov) / 2) * cam.width / cam.height))
+    assert across == pytest.approx(ref.camera.fov[0], abs=0.2)
+    with pytest.warns(oclgi.OclgiWarning, match="trimesh's default"):  # said when it is used
+        result = engine.render(photons=5_000, width=24, height=18)
+    assert result.radiance.shape == (18, 24, 3) and result.radiance.max() > 0
+    # a camera the scene has is used as it is, without a note
+    scene.camera_transform = trimesh.transformations.translation_matrix([0.0, 0.5, 4.0])
+    recwarn.clear()
+    moved = oclgi.Engine(scene).scene.camera
+    assert not [w for w in recwarn if "default" in str(w.message)]
+    assert np.allclose(moved.position, (0.0, 0.5, 4.0))
+
+
 def test_face_arrays_are_checked():
     with pytest.raises(oclgi.OclgiError, match=r"face_albedo: expected an \(4, 3\) array"):
         oclgi.load_dict({"mesh": [{"vertices": V, "faces": F, "face_albedo": [[0.5, 0.5, 0.5]]}]})

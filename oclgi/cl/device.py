@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
 
 import pyopencl as cl
 
@@ -135,13 +136,25 @@ def check_device(dev: cl.Device) -> None:
         )
 
 
+# One context per device and process, shared by every engine on that device:
+# programs belong to a context, and building one again for a new context
+# costs about 30 ms a program even when PoCL finds it in its cache (it
+# preprocesses the source to look it up), which a notebook or a server that
+# makes several engines paid over and over. Each engine has its own queue.
+_contexts: dict[int, cl.Context] = {}
+_contexts_lock = threading.Lock()
+
+
 def create_context(spec: str | None = None) -> tuple[cl.Context, cl.CommandQueue]:
+    """The device's context (shared, see above) and a new in-order queue on it."""
     check_cache_dir()
     dev = choose_device(spec)
     check_device(dev)
-    ctx = cl.Context([dev])
-    queue = cl.CommandQueue(ctx)
-    return ctx, queue
+    with _contexts_lock:
+        ctx = _contexts.get(dev.int_ptr)
+        if ctx is None:
+            ctx = _contexts[dev.int_ptr] = cl.Context([dev])
+    return ctx, cl.CommandQueue(ctx)
 
 
 def _kind(dev: cl.Device) -> str:

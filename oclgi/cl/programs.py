@@ -263,18 +263,22 @@ def _program_log(program: cl.Program) -> str:
     return "\n".join(logs)
 
 
-_caches: dict[int, ProgramCache] = {}
+_caches: dict[tuple, ProgramCache] = {}
+_caches_lock = threading.Lock()
 
 
 def programs(ctx: cl.Context) -> ProgramCache:
-    """The program cache of a context (one per context, shared by all users)."""
+    """The program cache of a context (one per context and kernel folder,
+    shared by all users)."""
     # queue.context is a new Python object for the same context: compare
     # contexts with ==, never `is`. The cache holds its context, so the
     # pointer cannot be reused by another context while it lives.
-    cache = _caches.get(ctx.int_ptr)
-    if cache is None or cache.ctx != ctx:
-        cache = ProgramCache(ctx)
-        _caches[ctx.int_ptr] = cache
+    key = (ctx.int_ptr, kernel_dir())
+    with _caches_lock:
+        cache = _caches.get(key)
+        if cache is None or cache.ctx != ctx:
+            cache = ProgramCache(ctx)
+            _caches[key] = cache
     return cache
 # A fixed work-group size for launches that do not ask for one. Left to
 # itself, the runtime picks a size from the global size, and PoCL compiles a

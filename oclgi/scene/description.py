@@ -80,7 +80,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OclgiError
+from ..errors import OclgiError, OclgiWarning
 from .. import params
 from .mesh import from_trimesh, is_file, load_mesh, transform_normals
 from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
@@ -302,6 +302,7 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None, smooth=True):
     if textured and face_uv is None:
         raise OclgiError(f"{label}: a material has a texture but the mesh has no texture coordinates")
     camera = getattr(loaded, "camera", None)
+    note = getattr(loaded, "camera_note", None)
     if camera is not None and "transform" in desc:  # the file's camera moves with its mesh
         camera = replace(camera, position=tuple(m @ np.asarray(camera.position) + shift),
                          look_at=tuple(m @ np.asarray(camera.look_at) + shift),
@@ -310,7 +311,7 @@ def _mesh(desc, i, base_dir, materials, mat_index, lights=None, smooth=True):
     face_normal = loaded.face_normal() if smooth and loaded is not None else None
     if face_normal is not None and "transform" in desc:
         face_normal = np.where(np.isnan(face_normal), np.nan, transform_normals(face_normal, m))
-    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour, camera, face_normal
+    return vertices, faces, np.asarray(local, dtype=np.int64)[fmat], face_uv, face_colour, (camera, note), face_normal
 
 
 def _face_materials(desc, n_faces: int, where: str):
@@ -434,7 +435,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     point_lights += [x for x in file_lights if isinstance(x, lights_mod.PointLight)]
     lights += [x for x in file_lights if not isinstance(x, lights_mod.PointLight)]
 
-    camera = None
+    camera, camera_note = None, None
     if "camera" in desc:
         c = desc["camera"]
         _check_keys(c, _CAMERA, "camera")
@@ -449,8 +450,9 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
             height=_number(c.get("height", 256), "camera.height", int),
         )
         camera = validate_camera(camera)
-    elif any(c is not None for c in cameras):  # none named: the first mesh file's own (glTF)
-        camera = validate_camera(next(c for c in cameras if c is not None))
+    elif any(c[0] is not None for c in cameras):  # none named: the first mesh's own (glTF, trimesh)
+        camera, camera_note = next(c for c in cameras if c[0] is not None)
+        camera = validate_camera(camera)
 
     tables = {"photons": desc.get("photons", {}), "estimator": desc.get("estimator", {})}
     _check_keys(tables["photons"], _PHOTONS, "photons")
@@ -472,6 +474,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         point_lights=point_lights,
         lights=lights,
         camera=camera,
+        camera_note=camera_note,
         settings=settings,
         name=str(desc.get("name", "scene")),
     )

@@ -19,7 +19,10 @@ kind                parameters (defaults)
 ``dielectric``      ``ior`` (1.5), ``specular`` (1, tint of the reflection),
                     ``transmission`` (1, tint of the refraction): smooth
                     glass or water, Fresnel reflection and refraction, total
-                    internal reflection; the normal points outside
+                    internal reflection; the normal points outside. MTL
+                    glass (illum 4, 6, 7, 9) is clear at its ``Ni``: its
+                    ``Ks`` and ``Tf`` are not tints, as Blender's and
+                    three.js's OBJ importers read them
 ``conductor``       ``specular`` (1, the reflectance F at every angle, as
                     Mitsuba's ``roughconductor`` with ``material = "none"``),
                     ``roughness`` (0.1, GGX alpha): a rough metal
@@ -80,6 +83,7 @@ TABLE_KEYS = {"kind", "albedo", "emission", "specular", "exponent", "ior", "roug
 MAX_EXPONENT = 1e6  # a Phong lobe narrower than float32's cos^n can resolve is a mirror
 MIN_ROUGHNESS = 1e-3  # GGX alpha below this is numerically a mirror: say mirror
 MAX_IOR = 10.0
+DARK_GLASS = 0.1  # glass transmitting less than this looks black: said when a scene is made
 
 
 @dataclass
@@ -309,8 +313,15 @@ def _from_mtl(m: Material, fm: FileMaterial, ignored: list) -> None:
         m.ior = float(fm.ior) if fm.ior is not None and fm.ior > 1.0 else 1.5
         if fm.ior is not None and not fm.ior > 1.0:
             ignored.append(f"Ni {fm.ior:g} (glass needs an index above 1: 1.5 used)")
-        m.specular = tuple(ks) if ks is not None and max(ks) > 0 else (1.0, 1.0, 1.0)
-        m.transmission = tuple(fm.transmission) if fm.transmission is not None else (1.0, 1.0, 1.0)
+        # The common reading of MTL glass (Blender's and three.js's OBJ importers): clear glass
+        # whose reflection and refraction are Fresnel's at Ni. Neither importer tints by Tf, and
+        # Blender takes Ks as the specular level, not a tint; a scene file's table tints it.
+        m.specular, m.transmission = (1.0, 1.0, 1.0), (1.0, 1.0, 1.0)
+        for key, value in (("Ks", ks), ("Tf", fm.transmission)):
+            if value is not None and tuple(value) != (1.0, 1.0, 1.0):
+                ignored.append(f"{key} {' '.join(f'{c:g}' for c in value)} (MTL glass is read as clear, as "
+                               "Blender's and three.js's importers read it; tint it with specular or "
+                               "transmission in a [mesh.materials] table)")
         _unused_albedo(fm, "Kd", ignored)
     if fm.dissolve is not None and fm.dissolve < 1.0:
         ignored.append(f"d {fm.dissolve:g} (partial transparency)")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import logging
+import math
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +46,7 @@ class LoadedMesh:
     read_file: object = None  # name -> Path, bytes (a zip member) or None: the files a material names (textures)
     lights: list = field(default_factory=list)  # a glTF's punctual lights (oclgi/scene/gltf_lights.py)
     camera: object = None  # a glTF's camera (gltf_lights.read_camera), or None
+    camera_note: str | None = None  # said when ``camera`` is used: it is a default, not the file's own
 
 
 def is_file(path: Path, what: str) -> bool:
@@ -151,6 +153,9 @@ def _load_trimesh(path: Path, data: bytes, suffix: str, resolver) -> LoadedMesh:
         log.removeHandler(hush)
         log.propagate = propagate
     mesh = from_trimesh(loaded, str(path))
+    # a file's camera is its own or none (a scene file without [camera] says so when it renders),
+    # never the default one a trimesh Scene given to the API gets
+    mesh.camera, mesh.camera_note = None, None
     if suffix in (".gltf", ".glb"):
         from . import gltf_lights
 
@@ -225,8 +230,42 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
     face_uv = np.concatenate(uvs)
     face_colour = np.concatenate(colours) if any(not np.isnan(c).all() for c in colours) else None
     face_normal = np.concatenate(normals) if any(not np.isnan(n).all() for n in normals) else None
+    camera, note = trimesh_camera(loaded)
     return LoadedMesh(np.concatenate(verts), np.concatenate(faces), np.concatenate(fmat), names, mats,
-                      lambda: face_uv, face_colour=face_colour, face_normal=lambda: face_normal)
+                      lambda: face_uv, face_colour=face_colour, face_normal=lambda: face_normal,
+                      camera=camera, camera_note=note)
+
+
+TRIMESH_FOV = (60.0, 45.0)  # trimesh's default camera's field of view (x, y), degrees (Scene.set_camera)
+
+
+def trimesh_camera(scene, height: int = 256):
+    """A trimesh Scene's camera as an oclgi Camera, looking along its
+    node's -Z with +Y up, ``height`` pixels high at the camera's aspect
+    ratio; and a note when it is trimesh's default camera (the one
+    ``Scene.camera`` makes for a scene without one: everything in view,
+    along -Z), else None. Computed without setting it on ``scene``."""
+    from trimesh.scene import cameras
+
+    from .scene import Camera
+
+    if scene.has_camera:
+        cam, world, note = scene.camera, np.asarray(scene.camera_transform, np.float64), None
+        fov = np.asarray(cam.fov, np.float64)
+    else:
+        fov = np.asarray(TRIMESH_FOV)
+        world = np.asarray(cameras.look_at(scene.bounds, fov=fov), np.float64)
+        note = ("the trimesh Scene has no camera: rendering from trimesh's default one (Scene.camera: "
+                "everything in view, looking along -Z); give the scene a camera or a [camera] table to choose")
+    eye, forward, up = world[:3, 3], -world[:3, 2], world[:3, 1]
+    if not (np.isfinite(world).all() and np.linalg.norm(forward) > 0 and np.linalg.norm(up) > 0
+            and np.isfinite(fov).all() and (fov > 0).all()):
+        return None, None  # nothing to look through: the scene's [camera] or the API's camera must say
+    # trimesh keeps fov[0] / fov[1] as the image's aspect ratio (Camera.resolution from fov)
+    aspect = math.tan(math.radians(fov[0]) / 2) / math.tan(math.radians(fov[1]) / 2)
+    return Camera(position=tuple(float(x) for x in eye), look_at=tuple(float(x) for x in eye + forward),
+                  up=tuple(float(x) for x in up / np.linalg.norm(up)), fov=float(fov[1]),
+                  width=max(1, int(round(height * aspect))), height=height), note
 
 
 def _file_normals(geom) -> np.ndarray | None:

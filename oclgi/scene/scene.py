@@ -20,7 +20,7 @@ from ..errors import OclgiError, OclgiWarning  # noqa: F401  (oclgi.scene.scene.
 from ..params import MAX_LENGTH, RunParams
 from . import lights as lights_mod
 from .degenerate import degenerate_triangles
-from .materials import Material
+from .materials import DARK_GLASS, Material
 from .lights import PointLight  # noqa: F401  (oclgi.scene.scene.PointLight, as it always was)
 
 
@@ -114,6 +114,8 @@ class Scene:
     # (F, 3, 3) unit vertex normals of the corners (shading normals: OBJ vn,
     # glTF/PLY normals), NaN for a triangle without a full set; None: none
     tri_vertex_normals: np.ndarray | None = None
+    # said when ``camera`` is used: it is a default (a trimesh Scene's without one), not the scene's own
+    camera_note: str | None = None
 
     def __post_init__(self):
         if self.tri_object is None:
@@ -198,6 +200,10 @@ class Scene:
             if not isinstance(m, Material):
                 raise OclgiError(f"{self.name}: materials must be oclgi.Material, got {type(m).__name__}")
             m.validate()
+            if m.kind in ("dielectric", "rough_dielectric") and max(m.transmission) < DARK_GLASS:
+                warnings.warn(f"material {m.name!r}: glass transmitting {max(m.transmission):.3g} of the light "
+                              f"(under {DARK_GLASS:g}) renders almost black; transmission = [1, 1, 1] is "
+                              "clear glass", OclgiWarning, stacklevel=3)
         lights_mod.validate(self)
         if not isinstance(self.settings, RunParams):  # a RunParams checks its values when made
             raise OclgiError(f"{self.name}: settings must be an oclgi.params.RunParams, "
