@@ -42,7 +42,7 @@ def _bytes(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def vertex_values(engine, tess, points, irradiance: np.ndarray, quantity: str) -> np.ndarray:
+def vertex_values(engine, tess, irradiance: np.ndarray, quantity: str) -> np.ndarray:
     """(V, 3) float32: the irradiance, or the radiance L = Le + albedo E / pi
     with each vertex's source-triangle material."""
     if quantity == "irradiance":
@@ -76,7 +76,7 @@ def bake(engine, edge: float | None = None, quantity: str = "irradiance", exposu
     placed.update()  # the movable objects' vertices where the engine has them
     points = placed.points
     est = engine.irradiance(points, **estimate)
-    values = vertex_values(engine, tess, points, est.irradiance, quantity)
+    values = vertex_values(engine, tess, est.irradiance, quantity)
     shown = exposure * (values / np.pi if quantity == "irradiance" else values)
     positions = points.positions[:, :3].astype(np.float64)
     normals = points.normals[:, :3].astype(np.float64)

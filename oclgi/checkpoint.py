@@ -34,7 +34,6 @@ import signal
 import threading
 import time
 import warnings
-import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -114,11 +113,17 @@ def _read(path: Path, sums: bool) -> tuple:
                 raise ValueError("no record")
             meta = json.loads(bytes(z[META_KEY]).decode())
             arrays = {k[len(SUMS_PREFIX):]: z[k] for k in files if k.startswith(SUMS_PREFIX)} if sums else None
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
-        raise OclgiError(f"{path}: not an oclgi checkpoint ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - whatever a damaged or crafted file raises (a record nested
+        # 10^5 deep: RecursionError; a member declaring 10^20 elements: OverflowError) is one refusal
+        raise OclgiError(f"{path}: not an oclgi checkpoint ({type(exc).__name__}: {_short(exc)})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise OclgiError(f"{path}: not an oclgi checkpoint of format {FORMAT}")
     return meta, arrays
+
+
+def _short(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 160 else text[:157] + "..."
 
 
 def read_record(path: Path) -> dict:
@@ -134,8 +139,8 @@ def load(path: Path) -> tuple:
     try:
         paths = PathRange(int(meta["first"]), int(meta["count"]))
         state = RunState(paths, int(meta["next_path"]), int(meta["segments"]), sums)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise OclgiError(f"{path}: a damaged oclgi checkpoint ({exc})") from None
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
+        raise OclgiError(f"{path}: a damaged oclgi checkpoint ({type(exc).__name__}: {_short(exc)})") from None
     return meta, state
 
 
@@ -167,6 +172,53 @@ def check(path: Path, saved: dict, current: dict, photons_may_grow: bool = False
 
         warnings.warn(f"{path} was written on {saved.get('device')!r}, resumed on {current['device']!r}: "
                       "equal results are promised on one device only", OclgiWarning, stacklevel=2)
+
+
+@contextmanager
+def exclusive(path: Path, fresh: bool):
+    """Within: this process alone writes the checkpoint at ``path``; another
+    run that names it is refused at once (two runs saving into one file
+    would silently replace each other's state). ``fresh``: a new run, which
+    is refused if the file exists by the time it holds it.
+
+    The lock is an advisory lock (flock) on a hidden file beside it, which
+    the kernel drops when its process ends, however it ends: a run killed
+    by SIGKILL leaves no stale lock, only the empty file, which the next
+    run reuses and removes."""
+    import fcntl
+    import os
+
+    path = Path(path)
+    lock = path.parent / f".{path.name}.oclgi-lock"
+    while True:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)  # as the first save would
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise OclgiError(f"cannot lock the checkpoint {path}: {exc.strerror or exc}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise OclgiError(f"{path} is the checkpoint of another oclgi run going on now: wait for it to end, "
+                             "or give this run another --checkpoint file") from None
+        try:  # the file locked must still be the one named (its last holder may have removed it)
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        if fresh and path.exists():
+            raise OclgiError(f"{path} exists: continue its run with --resume {path}, or remove it")
+        yield
+    finally:
+        try:
+            os.unlink(lock)
+        except OSError:
+            pass
+        os.close(fd)
 
 
 class Saver:

@@ -9,7 +9,8 @@
     oclgi study SCENE [--methods m1,m2[:key=value],...] [--photons N1,N2,...] [--seeds R]
                       [--points vertices|camera[:WxH]|random:N|FILE.npy|.csv]
                       [--reference detp[:PHOTONS]|mitsuba[:SPP]|FILE.npy] [-O key=value] [--image] -o DIR
-    oclgi view SCENE [--host H] [--port P] [--edge E] [--all-vertices] [--photons N] [--method M] [--radius D]
+    oclgi view SCENE [--host H] [--port P] [--allow-origin ORIGIN] [--memory SIZE] [--max-pages N] [--edge E]
+                     [--all-vertices] [--photons N] [--method M] [--radius D]
     oclgi info
 
 Errors in the input (missing or malformed files, bad numbers, no emitter, no
@@ -27,6 +28,7 @@ from pathlib import Path
 from . import interrupt, streams
 from .errors import OclgiError
 
+streams.reopen_closed_stderr()  # before anything may write to it (2>&-: as 2>/dev/null)
 # Start-up: before numpy and pyopencl are imported (they take half a second,
 # and start threads), a SIGINT ignored at start is made to stay ignored in
 # every thread, and a Ctrl-C during the imports ends as any other one does.
@@ -282,6 +284,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="address to listen on (default 127.0.0.1: this machine only; any other address, such as "
                         "0.0.0.0, lets other machines run work on this one's device)")
     v.add_argument("--port", type=_port, default=8765, help="TCP port (default 8765; 0: any free one)")
+    v.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
+                   help="another origin whose pages may open the viewer's socket, e.g. http://192.168.1.5:8765 "
+                        "(by default only the server's own page may; every request also needs the token in the "
+                        "URL it prints); repeatable")
+    v.add_argument("--memory", metavar="SIZE",
+                   help="memory budget of all pages together, e.g. 8G (default: half of the device's memory and "
+                        "of the machine's); a page's request past it gets an error, its session stays as it was")
+    v.add_argument("--max-pages", type=_positive_int, default=8, metavar="N",
+                   help="pages served at once (default 8)")
     v.add_argument("--edge", type=_positive_float,
                    help="longest edge of the tessellated triangles whose vertices carry the light "
                         "(default: the disc radius)")

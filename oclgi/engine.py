@@ -259,23 +259,23 @@ class Engine:
         view.owner = owner
         return view
 
-    # -- parameters (oclgi/parameters.py) -------------------------------------------
+    # -- parameters (oclgi/scene_parameters.py) -------------------------------------
     def parameters(self):
         """What can change after loading (materials, lights, camera, the
         run's defaults), by name; set values, then ``update()``."""
-        from .parameters import Parameters
+        from .scene_parameters import Parameters
 
         return Parameters(self)
 
     def _parameter_values(self) -> dict:
-        from .parameters import values
+        from .scene_parameters import values
 
         return values(self.scene, self.run_params(), self.scene.camera)
 
     def _apply_parameters(self, changes: dict):
         """The engine's part of an update: its scene, its tables (materials,
         lights), its run defaults. Sessions already open keep theirs."""
-        from .parameters import Updated, changed_scene, kinds
+        from .scene_parameters import Updated, changed_scene, kinds
 
         t0 = time.perf_counter()
         scene, run = changed_scene(self.scene, changes)

@@ -50,9 +50,25 @@ def ignore_further() -> None:
         pass
 
 
+# A Ctrl-C came (the handler below ran). Some libraries swallow the
+# KeyboardInterrupt it raises: trimesh wraps any exception raised while it
+# imports an optional dependency (scipy, say), KeyboardInterrupt included,
+# and goes on with a stand-in, so a Ctrl-C in those half-seconds was lost.
+_pending = False
+
+
 def _on_sigint(signum, frame):
+    global _pending
+    _pending = True
     ignore_further()
     raise KeyboardInterrupt
+
+
+def reraise_swallowed() -> None:
+    """Raise KeyboardInterrupt again if a Ctrl-C came and a library swallowed
+    it (called after such imports, and between a run's batches)."""
+    if _pending:
+        raise KeyboardInterrupt
 
 
 def keep_ignored() -> bool:

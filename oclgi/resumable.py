@@ -163,6 +163,14 @@ def execute(args, engine, make_run, snapshot=None):
     and extend it by ``--more``, complete it with saves to the checkpoint
     file, and return (run, estimate). ``snapshot(run, estimate)`` is called
     every ``--progressive`` photons with the estimate so far."""
+    target = save_path(args)
+    if target is None:
+        return _execute(args, engine, make_run, snapshot)
+    with checkpoint.exclusive(target, fresh=args.resume is None):  # one run a checkpoint file at a time
+        return _execute(args, engine, make_run, snapshot)
+
+
+def _execute(args, engine, make_run, snapshot):
     saved, state = checkpoint.load(args.resume) if args.resume is not None else (None, None)
     kwargs = run_kwargs(args, saved)
     options = {k: v for k, v in kwargs.items() if k not in params.RUN_KEYS}

@@ -25,6 +25,24 @@ BROKEN_PIPE_STATUS = 141
 WRITE_ERROR_STATUS = 2
 
 
+def reopen_closed_stderr() -> None:
+    """A command started with stderr closed (``2>&-``) runs as with
+    ``2>/dev/null``: its messages go nowhere, its status and outputs are as
+    ever. File descriptor 2 is pointed at the null device first, so that no
+    file the command opens takes that number (a compiler's diagnostics,
+    written to descriptor 2, would land in it), and ``sys.stderr`` (None
+    then) becomes a stream on it."""
+    try:
+        os.fstat(2)
+    except OSError:
+        null = os.open(os.devnull, os.O_WRONLY)
+        if null != 2:
+            os.dup2(null, 2)
+            os.close(null)
+    if sys.stderr is None:
+        sys.stderr = open(2, "w", closefd=False)  # noqa: SIM115 (the process' own stream, never closed)
+
+
 class StdoutError(Exception):
     """Writing to standard output failed; ``error`` is the OSError. A type of
     its own, so that main tells it from any other OSError (an output file's

@@ -35,6 +35,7 @@ def _private_kernel_cache() -> None:
         os.environ["POCL_CACHE_DIR"] = os.environ[_SESSION_CACHE] = cache
         atexit.register(shutil.rmtree, cache, ignore_errors=True)
     os.environ["PYOPENCL_NO_CACHE"] = "1"
+
     os.environ.pop("OCLGI_COMPILER_OUTPUT", None)  # tests see what a user sees by default
 
 
@@ -45,10 +46,20 @@ def pytest_addoption(parser):
                      help="also run the long campaigns (tests marked full): `make test-full`")
 
 
+# The files whose tests take longest (tens of seconds each on 2 cores) run
+# first: pytest-xdist hands files to workers in order, and one of these
+# started last would leave a worker alone with it at the end.
+FIRST = ("test_warm", "test_viewer_browser", "test_distributed", "test_signals", "test_checkpoint",
+         "test_kernel_build", "test_detp_sphere_cache", "test_environment")
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked ``full`` (long campaigns: README.md, Tests) run only
     with ``--full``; without it they are deselected, and the summary counts
-    them."""
+    them. The longest files go first (``FIRST``), each file's tests in their
+    own order."""
+    rank = {name: i for i, name in enumerate(FIRST)}
+    items.sort(key=lambda item: rank.get(item.module.__name__, len(FIRST)))  # stable: the rest keep their order
     if config.getoption("--full"):
         return
     dropped = [item for item in items if item.get_closest_marker("full")]

@@ -224,6 +224,7 @@ PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty
      b"property float z\nend_header\n\x00\x01", r"m\.ply: cannot read PLY file"),
     (INP, (PLY_HEAD + "0 0 0\nnan 1 0\n0 1 0\n3 0 1 2\n").encode(), r"m\.ply: 1 vertices have NaN or infinite"),
     (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 7\n").encode(), r"m\.ply: face indices out of range"),
+    (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 -1\n").encode(), r"m\.ply: face indices out of range"),
 ])
 def test_malformed_ply(fails_cleanly, sub, tmp_path, data, match):
     write_scene(tmp_path, mesh="m.ply", extra="")

@@ -125,6 +125,7 @@ def test_bake_command(monkeypatch, capsys, scenes_dir, tmp_path):
     for args, words in (((["-o", tmp_path / "x.gltf"]), "must end in .glb"),
                         ((["-o", tmp_path / "y.glb", "--edge", "0"]), "edge"),
                         ((["-o", tmp_path / "z.glb", "--edge", "1e-5"]), "vertices \\(at most"),
+                        ((["-o", tmp_path / "t.glb", "--edge", "1e-30"]), "vertices \\(at most"),  # no overflow
                         ((["-o", tmp_path / "w.glb", "--quantity", "power"]), "quantity")):
         r = in_process(monkeypatch, capsys, tmp_path, "bake", scene, "--photons", 1000, *args)
         assert r.returncode == 2, (args, r.stderr)

@@ -239,3 +239,63 @@ def test_another_runs_checkpoint_is_refused(tmp_path, scenes_dir, monkeypatch, c
     _refused(cmd(*base, "--checkpoint", "c.npz"), "c.npz exists")
     _refused(cmd(*base, "--checkpoint", "c.txt"), "must end in .npz")
     assert not (tmp_path / "b.exr").exists()
+
+
+def test_crafted_checkpoints_are_one_line(tmp_path, monkeypatch, capsys):
+    """A record nested 100,000 deep, a member whose header declares 10^20
+    elements, a record that is not an object: each is refused in one line
+    with status 2 before any work, never a traceback."""
+    import io
+    import json
+    import zipfile
+
+    def npz(path, members):
+        with zipfile.ZipFile(path, "w") as z:
+            for name, data in members.items():
+                z.writestr(name + ".npy", data)
+
+    def npy(header: str, body: bytes = b"") -> bytes:
+        h = header.encode().ljust(118) + b"\n"
+        return b"\x93NUMPY\x01\x00" + len(h).to_bytes(2, "little") + h + body
+
+    deep = "[" * 100_000 + "]" * 100_000
+    meta = np.frombuffer(deep.encode(), np.uint8)
+    buf = io.BytesIO()
+    np.save(buf, meta)
+    npz(tmp_path / "deep.npz", {"meta": buf.getvalue()})
+    huge = npy("{'descr': '<i8', 'fortran_order': False, 'shape': (100000000000000000000,), }")
+    buf = io.BytesIO()
+    np.save(buf, np.frombuffer(json.dumps({"format": 1, "first": 0, "count": 1, "next_path": 0,
+                                           "segments": 0}).encode(), np.uint8))
+    npz(tmp_path / "huge.npz", {"meta": buf.getvalue(), "sums.acc": huge})
+    buf = io.BytesIO()
+    np.save(buf, np.frombuffer(b"[1, 2]", np.uint8))
+    npz(tmp_path / "list.npz", {"meta": buf.getvalue()})
+    for name in ("deep.npz", "huge.npz", "list.npz"):
+        res = in_process(monkeypatch, capsys, tmp_path, *_args("x.exr", "detp_disc_index", 1000), "--resume", name)
+        _refused(res, "checkpoint")
+        assert "Traceback" not in res.stderr
+        assert not (tmp_path / "x.exr").exists()
+
+
+
+def test_two_runs_cannot_share_a_checkpoint(tmp_path, monkeypatch, capsys):
+    """Two runs started together with the same --checkpoint: the second is
+    refused at once (the first's saves would be replaced by its own), and a
+    run killed by SIGKILL leaves no lock that stops the next one."""
+    p = _start(tmp_path, *_args("a.exr", "detp_disc_index"), "--checkpoint", "c.npz", "--checkpoint-every", "0")
+    try:
+        _wait_for(tmp_path / ".c.npz.oclgi-lock", p)
+        second = in_process(monkeypatch, capsys, tmp_path, *_args("b.exr", "detp_disc_index"), "--checkpoint",
+                            "c.npz")
+        _refused(second, "c.npz is the checkpoint of another oclgi run going on now")
+        _wait_for(tmp_path / "c.npz", p)
+        resumed = in_process(monkeypatch, capsys, tmp_path, *_args("b.exr", "detp_disc_index"), "--resume", "c.npz")
+        _refused(resumed, "another oclgi run going on now")  # a resume of it too, while it runs
+    finally:
+        p.send_signal(signal.SIGKILL)
+        p.communicate(timeout=60)
+    assert not (tmp_path / "b.exr").exists()
+    res = in_process(monkeypatch, capsys, tmp_path, *_args("a.exr", "detp_disc_index"), "--resume", "c.npz")
+    assert res.returncode == 0, res.stderr
+    assert not (tmp_path / ".c.npz.oclgi-lock").exists()

@@ -150,12 +150,13 @@ def test_an_ies_spot_is_the_profile_times_the_cone(tmp_path):
     light = sc.lights[0]
     assert light.table == "spot_light" and light.cone_angle == 35
     # quadrature over the sphere of I(gamma, C) x smoothstep
-    g = (np.arange(4000) + 0.5) / 4000 * 90.0
-    c = (np.arange(720) + 0.5) / 720 * 360.0
+    ng, nc = 2000, 360
+    g = (np.arange(ng) + 0.5) / ng * 90.0
+    c = (np.arange(nc) + 0.5) / nc * 360.0
     gg, cc = np.meshgrid(g, c)
     spot = lights.SpotLight((0, 0, 0), (0, -1, 0), (1, 1, 1), 35, 15)
     f = ies_candela(VERT, HORIZ, TABLE, gg, cc) * spot.profile(np.cos(np.radians(gg)))
-    flux = float((f * np.sin(np.radians(gg))).sum() * np.radians(90 / 4000) * np.radians(0.5))
+    flux = float((f * np.sin(np.radians(gg))).sum() * np.radians(90 / ng) * np.radians(360 / nc))
     assert engine.compiled.total_power[0] * LUMENS_PER_WATT == pytest.approx(flux, rel=2e-4)
     s, _ = engine.trace(photons=100_000)
     units = s["power"] / engine.photon_watts(100_000)

@@ -21,38 +21,43 @@ from oclgi.errors import OclgiError
 SCRIPT = r"""
 import json, sys
 import oclgi
-method, photons = sys.argv[1], int(sys.argv[2])
-engine = oclgi.Engine(oclgi.load_file(sys.argv[3]), batch_bytes=8 << 20, progress=False)
+method = sys.argv[1]
+engine = oclgi.Engine(oclgi.load_file(sys.argv[2]), batch_bytes=8 << 20, progress=False)
 pts = engine.camera_points(width=16, height=16)
 opts = {"k": 20} if method == "photon_map" else {}
 # Kernels compile (and PoCL specialises them per launch size) in a first,
 # full-size batch of a short run; a compile peaks at hundreds of MiB. The
-# high-water mark is then reset (Linux clear_refs) and the run measured alone.
+# high-water mark is then reset (Linux clear_refs) before each run measured,
+# smallest first: a larger run's peak cannot hide under a smaller one's.
 engine.irradiance(pts, method=method, photons=20_000, **opts)
-with open("/proc/self/clear_refs", "w") as f:
-    f.write("5")
-est = engine.irradiance(pts, method=method, photons=photons, **opts)
-hwm = [line for line in open("/proc/self/status") if line.startswith("VmHWM:")][0]
-print(json.dumps({"peak_kib": int(hwm.split()[1]), "segments": est.stats.segments}))
+for photons in map(int, sys.argv[3:]):
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+    est = engine.irradiance(pts, method=method, photons=photons, **opts)
+    del est.estimator
+    hwm = [line for line in open("/proc/self/status") if line.startswith("VmHWM:")][0]
+    print(json.dumps({"peak_kib": int(hwm.split()[1]), "segments": est.stats.segments}))
+    del est
 """
 
 
-def _peak(method, photons):
-    res = subprocess.run([sys.executable, "-c", SCRIPT, method, str(photons), str(ROOT / "scenes" / "cornell_box.toml")],
-                         capture_output=True, text=True, timeout=300)
+def _peaks(method, *photons):
+    """(peak bytes, segments) of each run, in one process of the method's own."""
+    res = subprocess.run([sys.executable, "-c", SCRIPT, method, str(ROOT / "scenes" / "cornell_box.toml"),
+                          *map(str, photons)], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
-    out = json.loads(res.stdout.strip().splitlines()[-1])
-    return out["peak_kib"] * 1024, out["segments"]
+    out = [json.loads(line) for line in res.stdout.strip().splitlines()[-len(photons):]]
+    return [(o["peak_kib"] * 1024, o["segments"]) for o in out]
 
 
 def test_streaming_estimators_peak_memory_does_not_grow_with_photons():
     small, large = 100_000, 700_000
     for method in ("detp_disc_index", "impact"):
-        (p0, _), (p1, segs) = _peak(method, small), _peak(method, large)
+        (p0, _), (p1, segs) = _peaks(method, small, large)
         # seven times the photons (2.3 million segments, ~80 MB if kept): the same peak within noise
         assert p1 - p0 < 24 << 20, f"{method}: peak {p0 / 2**20:.0f} -> {p1 / 2**20:.0f} MiB"
     # the measurement sees growth where there is some: the Photon Map keeps every impact (36 bytes)
-    (p0, _), (p1, segs) = _peak("photon_map", small), _peak("photon_map", large)
+    (p0, _), (p1, segs) = _peaks("photon_map", small, large)
     assert p1 - p0 > 0.5 * segs * 36, f"photon_map: peak {p0 / 2**20:.0f} -> {p1 / 2**20:.0f} MiB"
 
 

@@ -215,3 +215,50 @@ def test_full_stdout_is_one_line_and_status_2(tmp_path):
     assert p.returncode == 2
     assert err == "oclgi: error: cannot write to standard output: No space left on device\n"
     assert (tmp_path / "f.exr").is_file()
+
+
+def test_closed_stderr_runs_as_with_stderr_to_the_null_device(tmp_path):
+    """`2>&-`: the command runs and writes as ever (its messages go nowhere);
+    an input error still exits 2 and writes nothing; no file takes
+    descriptor 2 (a compiler's diagnostics would land in it)."""
+    def closed_stderr():
+        os.close(2)
+
+    ok = subprocess.run([sys.executable, "-m", "oclgi", *map(str, _render(tmp_path / "s.exr", 2000, 8))],
+                        cwd=tmp_path, stdout=subprocess.PIPE, stderr=None, preexec_fn=closed_stderr, timeout=300)
+    assert ok.returncode == 0 and ok.stdout.decode().split() == ["wrote", str(tmp_path / "s.exr"), "wrote",
+                                                                 str(tmp_path / "s.png")]
+    bad = subprocess.run([sys.executable, "-m", "oclgi", *map(str, _render(tmp_path / "b.exr", 0, 8))],
+                         cwd=tmp_path, stdout=subprocess.PIPE, stderr=None, preexec_fn=closed_stderr, timeout=300)
+    assert bad.returncode == 2 and bad.stdout == b"" and not (tmp_path / "b.exr").exists()
+    assert (tmp_path / "s.exr").read_bytes()[:4] == b"v/1\x01"  # an EXR, with nothing else written into it
+
+
+SWALLOWING = r"""
+import os, signal, sys
+import trimesh
+real = trimesh.load
+def load(*args, **kwargs):
+    try:  # a Ctrl-C while trimesh works, swallowed as trimesh swallows one during its optional imports
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):
+            pass
+    except BaseException:
+        pass
+    return real(*args, **kwargs)
+trimesh.load = load
+from oclgi.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_ctrl_c_a_library_swallows_still_stops_the_run(tmp_path):
+    """trimesh catches every exception of an optional import, KeyboardInterrupt
+    included, and goes on: a Ctrl-C in those moments (0.5-1 s after start)
+    ran the whole render and exited 0. It stops it, in one line and 130."""
+    scene = ROOT / "scenes" / "cornell_bunny.toml"
+    p = subprocess.run([sys.executable, "-c", SWALLOWING, "render", str(scene), "--photons", "2000000", "--width",
+                        "16", "--height", "16", "-o", str(tmp_path / "x.exr")], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=300)
+    assert (p.returncode, p.stderr) == (130, "oclgi: interrupted\n"), p.stderr[-2000:]
+    assert not list(tmp_path.glob("x.*")) and not list(tmp_path.glob(".x.*"))

@@ -51,7 +51,8 @@ def server(scenes_dir):
 
 
 def status(url) -> dict:
-    with urllib.request.urlopen(url + "status.json", timeout=10) as r:
+    base, token = url.split("?", 1)  # the printed URL carries the server's token
+    with urllib.request.urlopen(f"{base}status.json?{token}", timeout=10) as r:
         return json.load(r)
 
 

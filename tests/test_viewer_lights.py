@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import PHOTONS, PageModel, open_viewer, receive_until, reference_colours, sync
+from viewer_client import (PHOTONS, PageModel, open_viewer, page_headers, receive_until, reference_colours,
+                           sync)
 
 PATH = [[-0.4, 1.6, 0.1], [0.3, 1.7, -0.2], [0.0, 1.5, 0.4]]
 FREE = (0.2, 1.4, 0.2)
@@ -35,7 +36,7 @@ def viewer(scenes_dir, tmp_path_factory):
 
 def run(test, viewer):
     async def main():
-        async with TestClient(TestServer(viewer.app())) as client:
+        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
             await test(client)
     asyncio.run(main())
 

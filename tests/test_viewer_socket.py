@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import (PHOTONS, PageModel, expected_radiance, open_viewer, receive_until, reference_colours,
-                           sync)
+from viewer_client import (PHOTONS, PageModel, expected_radiance, open_viewer, page_headers, receive_until,
+                           reference_colours, sync)
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def home(viewer):
 
 def run(test, viewer):
     async def main():
-        async with TestClient(TestServer(viewer.app())) as client:
+        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
             await test(client)
     asyncio.run(main())
 

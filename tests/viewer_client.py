@@ -25,6 +25,11 @@ def open_viewer(scene_path, photons: int = PHOTONS, edge: float = EDGE):
     return Viewer(oclgi.Engine(scene), tessellate(scene, edge), photons=photons)
 
 
+def page_headers(viewer) -> dict:
+    """What the page's requests carry: the server's token (oclgi/viewer/guard.py)."""
+    return {"Authorization": f"token {viewer.guard.token}"}
+
+
 def as_shown(colours: np.ndarray, e: int) -> np.ndarray:
     """The float16 bits a page holds for float32 ``colours`` at scale 2^e:
     colours * 2^-e rounded to the nearest float16 (ties to even)."""

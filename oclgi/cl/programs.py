@@ -149,7 +149,8 @@ _build_lock = threading.Lock()
 @contextmanager
 def _captured_fd2(sink: list):
     try:
-        sys.stderr.flush()
+        if sys.stderr is not None:
+            sys.stderr.flush()
         saved = os.dup(2)
     except (OSError, ValueError):  # no usable stderr (embedded interpreters): nothing to catch
         yield
@@ -160,7 +161,8 @@ def _captured_fd2(sink: list):
             yield
         finally:
             try:
-                sys.stderr.flush()
+                if sys.stderr is not None:
+                    sys.stderr.flush()
             except (OSError, ValueError):
                 pass
             os.dup2(saved, 2)

@@ -43,9 +43,14 @@ def _walk(roots):
     return found, shared
 
 
-def release(*roots) -> set[int]:
-    """Release every buffer reachable from ``roots`` but the shared objects'; their ids."""
+def release(*roots, keep=()) -> set[int]:
+    """Release every buffer reachable from ``roots`` but the shared objects'
+    and those reachable from ``keep`` (what still uses them: a store resized
+    from the one released shares some of its buffers); their ids."""
     found, shared = _walk(roots)
+    if keep:
+        kept, kept_shared = _walk(keep)
+        shared = shared | set(kept) | kept_shared
     done = set()
     for key, buf in found.items():
         if key not in shared:

@@ -72,12 +72,6 @@ class Estimator:
         ``sums_per_point``."""
         raise NotImplementedError
 
-    def set_accumulators(self, index: np.ndarray, values: np.ndarray) -> None:
-        """Overwrite the sums of points ``index`` (exact int64 values)."""
-        acc = self.accumulators()
-        acc[index] = values
-        cl.enqueue_copy(self.queue, self.acc, np.ascontiguousarray(acc))
-
     def accumulate(self, batch):
         raise NotImplementedError
 

@@ -228,6 +228,12 @@ class DetpDiscIndex(DetpEstimator):
             local_size=self.local_size,
         )
 
+    def forget_store(self, store) -> None:
+        """``store`` is gone (a session resized or re-traced it): its crossing
+        lists are of no use to the next store, and must not keep it alive."""
+        if self._crossings is not None and self._crossings["batch"] is store:
+            self._crossings = None
+
     def replayed(self) -> int:
         """Segments ``accumulate_change`` has summed from lists so far (for
         the current store; 0 without lists)."""

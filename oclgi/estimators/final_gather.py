@@ -156,9 +156,6 @@ class FinalGather(Estimator):
     def replace_points(self, index, new) -> None:
         raise OclgiError("gather (final gathering): the query points cannot be replaced (sessions refuse it)")
 
-    def set_accumulators(self, index, values) -> None:
-        raise OclgiError("gather (final gathering): the sums are the hits', not the points'")
-
     def resolve(self, scale: float) -> cl.Buffer:
         """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""
         hit_irr = self.inner.resolve(scale)

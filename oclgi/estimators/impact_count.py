@@ -92,11 +92,6 @@ class ImpactCount(Estimator):
         cl.enqueue_copy(self.queue, out, self.acc)
         return out
 
-    def triangle_irradiance(self) -> np.ndarray:
-        out = np.empty((self.n_tris, 4), np.float32)
-        cl.enqueue_copy(self.queue, out, self.tri_irr)
-        return out[:, :3]
-
 
 def locate(queue, compiled, points):
     """Find the triangle under each point (within 1e-4 of the scene diagonal)."""

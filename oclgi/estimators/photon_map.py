@@ -113,6 +113,15 @@ def max_impacts(device) -> int:
 DEFAULT_K = 50  # neighbours per estimate
 
 
+def point_buffers(est, points) -> tuple:
+    """The device buffers of a k-nearest estimate over ``points`` (Photon
+    Maps' and ray_map_knn's): positions, normals, their Morton order (the
+    search's, for locality only), and what pm_resolve reads and writes per
+    point: the int64 RGB sums, r_k^2 and E (float4)."""
+    return (est.upload(points.positions), est.upload(points.normals), est.upload(query_order(points.positions)),
+            est.zeros(est.n * 3 * 8), est.zeros(est.n * 4), est.zeros(est.n * 16))
+
+
 def _check_k(k, estimator):
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_K:
         raise OclgiError(f"photon_map: k must be an integer in 1..{MAX_K}, got {k!r}")
@@ -150,12 +159,7 @@ class PhotonMap(Estimator):
         self.limit = max_impacts(queue.device)
         prog = programs(self.ctx).get("photon_map")  # compaction and resolve do not depend on k
         self.k_count, self.k_gather, self.k_resolve = prog.pm_count, prog.pm_gather, prog.pm_resolve
-        self.positions = self.upload(points.positions)
-        self.normals = self.upload(points.normals)
-        self.order = self.upload(query_order(points.positions))
-        self.acc = self.zeros(self.n * 3 * 8)
-        self.r2 = self.zeros(self.n * 4)
-        self.irr = self.zeros(self.n * 16)
+        self.positions, self.normals, self.order, self.acc, self.r2, self.irr = point_buffers(self, points)
         self.chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.n_impacts = 0
         self.knn: KnnIndex | None = None

@@ -139,7 +139,7 @@ from ..cl.constants import LANES, POINT_BVH_STACK
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import Estimator
-from .photon_map import DEFAULT_K, ESTIMATOR_KINDS, MAX_K
+from .photon_map import DEFAULT_K, ESTIMATOR_KINDS, MAX_K, point_buffers
 
 METRICS = ("plane", "ray", "line")  # kernels/ray_map_knn.cl's RMK_PLANE, RMK_RAY, RMK_LINE
 MAX_LEAF = 64
@@ -147,7 +147,6 @@ MAX_PIECES = 64  # pieces per segment, at most
 PIECE_BUDGET = 4  # pieces per segment, on average at most (memory)
 ROWS = 9  # float rows of a piece (kernels/ray_map_knn.cl)
 BYTES_PER_SEGMENT = 256  # device: power 16 + 4 pieces x 40 + nodes (module docstring)
-HOST_BYTES_PER_SEGMENT = 40  # origin, direction, length, power while gathering
 HOST_BYTES_PER_PIECE = 320  # the build's peak (module docstring)
 DEVICE_FRACTION = 0.75  # of global memory for the map; the rest: batch, scene, points
 NODE_BYTES = 32  # oclgi.cl.layout.BvhNode
@@ -366,12 +365,7 @@ class RayMapKnn(Estimator):
         self.ext = np.float32(float(extension or 0.0) + 10.0 * compiled.eps)
         self.limit = max_segments(queue.device)
         self.k_resolve = programs(self.ctx).get("photon_map").pm_resolve  # E = acc / (scale pi r2)
-        self.positions = self.upload(points.positions)
-        self.normals = self.upload(points.normals)
-        self.order = self.upload(query_order(points.positions))
-        self.acc = self.zeros(self.n * 3 * 8)
-        self.r2 = self.zeros(self.n * 4)
-        self.irr = self.zeros(self.n * 16)
+        self.positions, self.normals, self.order, self.acc, self.r2, self.irr = point_buffers(self, points)
         self.chunks: list[tuple[np.ndarray, ...]] = []
         self.n_segments = 0
         self.knn: SegmentKnnIndex | None = None

@@ -116,7 +116,7 @@ class LightSession(SessionBase):
         return done
 
     def _recompute(self, position, direction):
-        from ..parameters import light_name
+        from ..scene_parameters import light_name
 
         key = light_name(self.engine.scene, self.reuse.light)
         changes = {f"{key}.position": position}

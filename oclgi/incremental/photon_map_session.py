@@ -194,25 +194,23 @@ class PhotonMapSession(SessionBase):
         equal to a fresh session with that count at the session's pose.
         Returns the seconds it took."""
         self._check_open()
-        from ..cl.release import release
-
         t0 = time.perf_counter()
         p = self.params
         new_params = self.engine.run_params("photon_map", photons, None, p.seed, p.max_depth, None, p.count_emitted)
         store, _ = self.store.resized(new_params.photons)
         old, self.store, self.params, self.scale = self.store, store, new_params, store.scale
-        release(old)
+        self._release_store(old)
         self.map = self.engine.estimator(self.points.copy(), self.params, **self.options)
         self.points = self.map.points
         self._search_all()
         return time.perf_counter() - t0
 
     def _apply_parameters(self, changes: dict):
-        """An update (oclgi/parameters.py): materials and lights, seed and
+        """An update (oclgi/scene_parameters.py): materials and lights, seed and
         depth re-trace the store; photons trace or drop the difference; a
         camera traces its points; then every point is searched again (a
         k-nearest estimate depends on every impact)."""
-        from ..parameters import Updated, kinds
+        from ..scene_parameters import Updated, kinds
 
         t0 = time.perf_counter()
         what = kinds(changes)

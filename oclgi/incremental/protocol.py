@@ -78,14 +78,14 @@ class SessionBase:
     def parameters(self):
         """What can change in this session (materials, lights, its camera,
         its photons and estimator), by name; set values, then ``update()``:
-        only what depends on them is recomputed (oclgi/parameters.py)."""
-        from ..parameters import Parameters
+        only what depends on them is recomputed (oclgi/scene_parameters.py)."""
+        from ..scene_parameters import Parameters
 
         self._check_open()
         return Parameters(self)
 
     def _parameter_values(self) -> dict:
-        from ..parameters import values
+        from ..scene_parameters import values
 
         self._check_open()
         view = getattr(self, "view", None)
@@ -94,7 +94,7 @@ class SessionBase:
     def _new_tables(self, changes: dict):
         """The session's engine view with the changed materials and lights
         (checked, nothing changed yet on a refusal): (scene, compiled, run changes)."""
-        from ..parameters import changed_scene, kinds
+        from ..scene_parameters import changed_scene, kinds
 
         scene, run = changed_scene(self.engine.scene, changes)
         compiled = self.engine.compiled.with_scene(scene) if "tables" in kinds(changes) else None
@@ -106,7 +106,6 @@ class SessionBase:
         ``new``: traced anew when the tables, seed or depth changed, resized
         when only the photon count did (the kept paths copied), else kept;
         ``done`` (an Updated) counts the paths traced and dropped."""
-        from ..cl.release import release
         from .segment_store import SegmentStore
 
         p = self.params
@@ -122,9 +121,21 @@ class SessionBase:
             done.paths_traced = max(new.photons - p.photons, 0)
             done.paths_dropped = max(p.photons - new.photons, 0)
         if self.store is not old:
-            release(old)
+            self._release_store(old)
             self.scale = self.store.scale
         self.params = new
+
+    def _release_store(self, old) -> None:
+        """Free a store the session has replaced (resized, re-traced): the
+        estimators forget what they kept of it (DetpDiscIndex's crossing
+        lists), and only the buffers nothing of the session still holds are
+        released (a resized store keeps some of the old one's)."""
+        from ..cl.release import release
+
+        for est in (getattr(self, "estimator", None), getattr(self, "dyn_est", None)):
+            if est is not None and hasattr(est, "forget_store"):
+                est.forget_store(old)
+        release(old, keep=(self,))
 
     def _check_open(self) -> None:
         if self.closed:

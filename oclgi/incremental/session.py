@@ -209,8 +209,6 @@ class Session(SessionBase):
         for bit to a fresh session with that count at the session's pose.
         Returns the seconds it took."""
         self._check_open()
-        from ..cl.release import release
-
         t0 = time.perf_counter()
         p = self.params
         new_params = self.engine.run_params(p.method, photons, p.radius, p.seed, p.max_depth, p.extension,
@@ -222,14 +220,14 @@ class Session(SessionBase):
                     est.accumulate(delta)
         self.queue.finish()
         old, self.store, self.params, self.scale = self.store, store, new_params, store.scale
-        release(old)
+        self._release_store(old)
         return time.perf_counter() - t0
 
     def _apply_parameters(self, changes: dict):
-        """An update (oclgi/parameters.py): materials and lights, seed and
+        """An update (oclgi/scene_parameters.py): materials and lights, seed and
         depth re-trace the store; photons trace or drop only the difference;
         a camera traces its points; the estimator's parameters re-sum."""
-        from ..parameters import Updated, kinds
+        from ..scene_parameters import Updated, kinds
 
         t0 = time.perf_counter()
         what = kinds(changes)

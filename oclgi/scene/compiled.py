@@ -127,7 +127,7 @@ class CompiledScene:
         # scene scale for ray offsets and the DETP tolerance
         self.eps = 1e-5 * scene.diagonal
 
-    # -- what a parameter update changes (oclgi/parameters.py) -------------------
+    # -- what a parameter update changes (oclgi/scene_parameters.py) -------------------
     def _tables(self, scene: Scene) -> None:
         """The materials' and emitters' device tables of ``scene`` (its
         geometry this compiled scene's): all that a change of a material's

@@ -60,9 +60,10 @@
     extension = 0.0                 # DETP extension e past the hit point
     count_emitted = true            # segments leaving the lights count (direct light)
 
-oclgi/scene/lights.py has the lights' parameters, defaults and power; a
-glTF mesh's KHR_lights_punctual lights join them, placed by the mesh's
-transform (oclgi/scene/gltf_lights.py). The readers of single values
+oclgi/scene/lights.py has the lights' parameters, defaults and power,
+oclgi/scene/light_tables.py the readers of their tables; a glTF mesh's
+KHR_lights_punctual lights join them, placed by the mesh's transform
+(oclgi/scene/gltf_lights.py). The readers of single values
 (vectors, numbers, radiant values, keys) are oclgi/scene/values.py.
 
 In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
@@ -80,11 +81,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OclgiError, OclgiWarning
+from ..errors import OclgiError
 from .. import params
 from .mesh import from_trimesh, is_file, load_mesh, transform_normals
 from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
-from . import lights as lights_mod
+from . import light_tables, lights as lights_mod
 from .values import check_keys as _check_keys, number as _number, radiant as _radiant, table_list as _table_list
 from .values import vec3 as _vec3
 from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
@@ -185,7 +186,7 @@ def _transform(t, where):
     return m, shift
 
 
-def _mesh(desc, i, base_dir, materials, mat_index, lights=None, smooth=True):
+def _mesh(desc, i, base_dir, materials, lights=None, smooth=True):
     where = f"mesh[{i}]"
     _check_keys(desc, _MESH, where)
     per_element = [k for k in ("face_albedo", "face_emission", "vertex_albedo") if k in desc]
@@ -410,7 +411,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     file_lights = []  # the meshes' own (glTF) lights
     for i in order:
         m = meshes[i]
-        v, f, fm, uv, colour, file_camera, vn = _mesh(m, i, base_dir, materials, None, file_lights, smooth)
+        v, f, fm, uv, colour, file_camera, vn = _mesh(m, i, base_dir, materials, file_lights, smooth)
         cameras.append(file_camera)
         normals.append(vn if vn is not None else np.full((len(f), 3, 3), np.nan))
         any_normal = any_normal or vn is not None
@@ -431,7 +432,7 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         fobjs.append(np.full(len(f), len(objects) - 1, np.int64))
         offset += len(v)
 
-    point_lights, lights = lights_mod.read(desc, base_dir)
+    point_lights, lights = light_tables.read(desc, base_dir)
     point_lights += [x for x in file_lights if isinstance(x, lights_mod.PointLight)]
     lights += [x for x in file_lights if not isinstance(x, lights_mod.PointLight)]
 

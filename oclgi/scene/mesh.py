@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import interrupt
 from ..errors import OclgiError
 from .counts import check_counts
 from .materials import FileMaterial
@@ -61,6 +62,7 @@ def is_file(path: Path, what: str) -> bool:
 def load_mesh(path: Path) -> LoadedMesh:
     from . import resolvers  # imports trimesh: only when a mesh needs it
 
+    interrupt.reraise_swallowed()  # trimesh's imports swallow a Ctrl-C (oclgi/interrupt.py)
     path = Path(path)
     if not is_file(path, "mesh file"):
         raise OclgiError(f"mesh file not found: {path}")
@@ -181,6 +183,8 @@ def from_trimesh(loaded, label: str) -> LoadedMesh:
         raise OclgiError(f"{label}: expected a trimesh Trimesh or Scene, got {type(loaded).__name__}")
     if type(loaded).__name__ == "Trimesh":
         import trimesh
+
+        interrupt.reraise_swallowed()
 
         loaded = trimesh.Scene(loaded)
     path = label

@@ -74,11 +74,13 @@ def tessellate(scene, edge: float | None = None) -> Tessellation:
         raise OclgiError(f"the tessellation's edge length must be a positive number, got {edge!r}")
     v = scene.vertices[scene.faces]  # (F, 3, 3)
     longest = np.max(np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2), axis=1)
-    m = np.maximum(np.ceil(longest / edge), 1).astype(np.int64)
-    total = int(((m + 1) * (m + 2) // 2).sum())
-    if total > MAX_VERTICES:
-        raise OclgiError(f"an edge of {edge:.4g} cuts the scene into {total:,} vertices (at most {MAX_VERTICES:,}); "
+    cuts = np.maximum(np.ceil(longest / edge), 1)  # float64: a tiny edge must not overflow an integer
+    total = float(((cuts + 1) * (cuts + 2) / 2).sum())
+    if not total <= MAX_VERTICES:
+        total = f"{total:,.0f}" if total < 1e18 else f"{total:.3g}"
+        raise OclgiError(f"an edge of {edge:.4g} cuts the scene into {total} vertices (at most {MAX_VERTICES:,}); "
                          f"use a longer edge (the scene's diagonal is {diag:.4g})")
+    m = cuts.astype(np.int64)
     normals = scene.triangle_normals()
     pos, nrm, src, bary, faces, face_src = [], [], [], [], [], []
     base = 0

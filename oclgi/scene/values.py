@@ -1,8 +1,8 @@
 """A scene file's values, read and checked: keys, vectors, radiant values, numbers.
 
 Shared by the scene description (oclgi/scene/description.py) and the
-lights' tables (oclgi/scene/lights.py): every error is one line naming the
-key (``where``), and unknown keys are errors.
+lights' tables (oclgi/scene/light_tables.py): every error is one line
+naming the key (``where``), and unknown keys are errors.
 """
 
 from __future__ import annotations

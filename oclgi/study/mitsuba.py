@@ -342,13 +342,13 @@ def irradiance(scene, positions, normals, spp=4096, seed=0, max_depth=None, vari
         sensor = mi.load_dict({"type": "radiancemeter", "origin": [float(x) for x in c[i] + above * n[i]],
                                "direction": [float(x) for x in -n[i]], "film": film,
                                "sampler": {"type": SAMPLER, "sample_count": spp}})
-        _check_sees_square(mi, mscene, sensor, above, i)
+        _check_sees_square(mscene, sensor, above, i)
         img = mi.render(mscene, sensor=sensor, spp=spp, seed=(seed * 0x9E3779B1 + i) % 2**32)
         out[i] = math.pi * np.array(img, dtype=np.float64).reshape(3)
     return out
 
 
-def _check_sees_square(mi, mscene, sensor, distance, i):
+def _check_sees_square(mscene, sensor, distance, i):
     """The sensor's ray must meet point i's own square first (2i or 2i+1 of
     the squares mesh, at the distance it was placed), not other geometry."""
     ray, _ = sensor.sample_ray(0.0, 0.5, [0.5, 0.5], [0.5, 0.5])

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import OclgiError
+from ..params import MAX_PHOTONS
 
 REFERENCE_SEED_BASE = 1 << 40
 DEFAULT_RUNS = 4
@@ -129,6 +130,12 @@ def compute(engine, points, ref, max_photons: int, detp_radius: float | None) ->
 def _detp_runs(engine, points, ref, max_photons, detp_radius):
     photons = ref.photons or 16 * max_photons
     per_run = max(photons // ref.runs, 1)
+    if per_run > MAX_PHOTONS:  # said as the study's numbers, not as the one run's that would refuse it
+        given = f"{photons:,} photons" if ref.photons else \
+            f"16 times the largest count ({max_photons:,}), {photons:,} photons"
+        raise OclgiError(f"the DETP reference would trace {given} in {ref.runs} runs of {per_run:,}, more than "
+                         f"a run may trace (2^31): give the reference's count, --reference detp:N, with N at "
+                         f"most {ref.runs * MAX_PHOTONS:,}")
     radius = ref.radius or 0.5 * (detp_radius or engine.scene.radius)
     runs = np.stack([
         engine.irradiance(points, method=ref.method, photons=per_run, radius=radius,

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
-from .. import params as params_mod
+from .. import interrupt, params as params_mod
 from ..errors import OclgiError
 from .photon_trace import PhotonTracer
 
@@ -240,6 +240,7 @@ class Run:
         first = True
         try:
             while not self.done:
+                interrupt.reraise_swallowed()  # a Ctrl-C a library swallowed still stops the run
                 n = self.step()
                 bar.update(n)
                 if first:  # a long run says so, with its time from the first batch

@@ -17,14 +17,20 @@ def view(args) -> None:
     from ..engine import Engine
     from ..scene.description import load_file
     from ..scene.tessellate import tessellate
+    from .guard import check_origins
     from .server import Viewer
 
+    from .ledger import parse_size
+
+    origins = check_origins(args.allow_origin)  # before any work
+    memory = parse_size(args.memory) if args.memory is not None else None
     t0 = time.perf_counter()
     scene = load_file(args.scene)
     engine = Engine(scene, device=args.device, local_size=args.local_size, progress=False)
     run = engine.run_params(args.method, args.photons, args.radius)
     tess = tessellate(scene, args.edge if args.edge is not None else run.radius)
-    viewer = Viewer(engine, tess, args.method, args.photons, args.radius, args.all_vertices)
+    viewer = Viewer(engine, tess, args.method, args.photons, args.radius, args.all_vertices, allow_origins=origins,
+                    memory=memory, max_pages=args.max_pages)
     if not args.quiet:
         print(f"oclgi view: {scene.name}: {len(tess.vertices):,} vertices (edge {tess.edge:.3g}), "
               f"{len(viewer.points):,} query points, "

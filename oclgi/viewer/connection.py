@@ -49,6 +49,11 @@ MAX_MESSAGES_PER_SECOND = 240  # a drag sends one a display frame (60 to 144 a s
 MAX_IN_FLIGHT = 2  # frames sent and not yet acknowledged before an overtaken one is skipped
 MAX_QUEUED = 64  # requests waiting (moves of one object coalesce, so only mixed ones pile up)
 RENDER_MAGIC = b"OGVR"  # a render's binary message (Connection._send_render)
+# Paths a render traces between other pages' work: its batches are separate
+# calls on the device's thread, so a move of another page waits for one
+# batch, not for the render (a large image's batch takes about a tenth of a
+# second on 2 cores), and a page that goes away stops its render there.
+RENDER_BATCH = 20_000
 RENDER_HEADER = struct.Struct("<4sIIII")
 
 
@@ -82,9 +87,21 @@ class Connection:
         colours = self.viewer.colours(self.current.irradiance())
         return colours, time.perf_counter() - t0
 
+    def _book(self, key, photons: int, what: str) -> None:
+        """Hold a session of ``photons`` paths in the server's budget (oclgi/viewer/ledger.py)."""
+        from .ledger import session_bytes
+
+        v = self.viewer
+        v.ledger.book(key, session_bytes(photons, v.run.max_depth, len(v.points)), what)
+
     def _open(self):
         v = self.viewer
-        self.session = self.current = v.open_session()
+        self._book(self, v.run.photons, f"a page's session of {v.run.photons:,} photons")
+        try:
+            self.session = self.current = v.open_session()
+        except BaseException:
+            v.ledger.release_page(self)
+            raise
         self.segments = int(self.session.store.path_len().sum())
         return self._colours()
 
@@ -128,10 +145,12 @@ class Connection:
         if self.light_session is not None and self.light_session[0] == name:
             return self.light_session[1], None
         self._drop_light_session()
+        self._book((self, "light"), p.photons, f"a light session of {p.photons:,} photons")
         try:
             ls = LightSession(self.viewer.engine, self.viewer.points, light=light.index, photons=p.photons,
                               seed=p.seed, max_depth=p.max_depth, method=p.method, radius=p.radius)
         except OclgiError as exc:  # another emitter, a glossy first hit: reuse does not apply
+            self.viewer.ledger.release((self, "light"))
             self.no_reuse[name] = str(exc)
             return None, str(exc)
         self.light_session = (name, ls)
@@ -141,6 +160,7 @@ class Connection:
         if self.light_session is not None:
             self.light_session[1].close()
             self.light_session = None
+        self.viewer.ledger.release((self, "light"))
 
     def _move_light(self, name: str, position: tuple) -> dict:
         light = self.viewer.lights[name]
@@ -177,7 +197,13 @@ class Connection:
                 raise BadMessage(f"estimator: k is the Photon Map's option, not {method}'s")
             if "radius" in fields:
                 options["radius"] = fields["radius"]
-        new = self.viewer.open_session(method, old.params.photons, self.lights, **options)
+        self._book((self, "switch"), old.params.photons, f"a {method} session of {old.params.photons:,} photons "
+                   "beside the page's own while it switches")
+        try:
+            new = self.viewer.open_session(method, old.params.photons, self.lights, **options)
+        except BaseException:
+            self.viewer.ledger.release((self, "switch"))
+            raise
         self.viewer.sessions_opened += 1
         try:
             for name, m in self.viewer.movable.items():
@@ -186,19 +212,23 @@ class Connection:
                     new.move(name, pose)
         except BaseException:
             self._close_session(new)
+            self.viewer.ledger.release((self, "switch"))
             raise
         self._drop_light_session()
         self.session = self.current = new
         self._close_session(old)
+        self.viewer.ledger.release((self, "switch"))  # the page holds one session again, the same size
         self.segments = int(new.store.path_len().sum())
         return {"switched": True, "seconds": {"total": time.perf_counter() - t0}}
 
-    def _render(self, fields: dict, on_batch) -> dict:
-        """The engine's image from the page's camera at the session's poses
-        and lights (``Engine.render``'s steps, ``on_batch`` between batches)."""
+    def _render_run(self, fields: dict):
+        """The run of the engine's image from the page's camera at the
+        session's poses and lights (``Engine.render``'s steps), booked in
+        the server's budget; (engine, run), its batches of RENDER_BATCH paths
+        left to step."""
+        from .. import budget
         from ..scene.scene import Camera
 
-        t0 = time.perf_counter()
         s = self.session
         engine = s.engine.posed()
         if self.session_stale:
@@ -211,10 +241,13 @@ class Connection:
             args["k"] = s.options["k"]
         else:
             args["radius"] = p.radius
+        need = budget.render_need(cam.width, cam.height, p.method, p.photons, p.max_depth, engine.batch_bytes,
+                                  k=args.get("k"))
+        self.viewer.ledger.book((self, "render"), need.device_total + need.host,
+                                f"a {cam.width}x{cam.height} render")
         run = engine.render_run(cam, **args)
-        est = run.complete(False, on_batch)
-        image = engine.render_result(run, est)
-        return {"image": image, "seconds": time.perf_counter() - t0, "method": p.method, "photons": int(p.photons)}
+        run.set_batch(min(run.batch, RENDER_BATCH))
+        return engine, run
 
     def _apply(self, req: Request) -> dict:
         info = {"kind": req.kind}
@@ -251,8 +284,16 @@ class Connection:
                 params.update()
             info["seconds"] = {"total": time.perf_counter() - t0}
         elif req.kind == "photons":
+            count = req.fields["count"]
+            held = self.viewer.ledger.held.get(self)
+            self._book(self, max(count, s.params.photons), f"a session of {count:,} photons")  # refused: as it was
             self._drop_light_session()
-            info["seconds"] = {"total": s.set_photons(req.fields["count"])}
+            try:
+                info["seconds"] = {"total": s.set_photons(count)}
+            except BaseException:
+                self.viewer.ledger.held[self] = held
+                raise
+            self._book(self, count, f"a session of {count:,} photons")  # fewer: the difference is freed
             self.segments = int(s.store.path_len().sum())
         colours, read = self._colours()
         info["seconds"]["read"] = read
@@ -364,25 +405,31 @@ class Connection:
         """Render, with a ``render_progress`` message a batch (at most ten a
         second), then ``rendered`` and the image (RENDER_MAGIC: uint32 id
         index, width, height, PNG length; the PNG; float32 radiance[H][W][3])."""
-        loop = asyncio.get_running_loop()
-        ident, last = req.fields["id"], [0.0]
-
-        def on_batch(run):  # in the device's thread
-            now = time.monotonic()
-            if now - last[0] >= 0.1 or run.done:
-                last[0] = now
-                msg = {"type": "render_progress", "id": ident, "traced": int(run.traced),
-                       "paths": int(run.paths.count)}
-                asyncio.run_coroutine_threadsafe(self.send_json(msg), loop)
-
+        ident, last, t0 = req.fields["id"], 0.0, time.perf_counter()
         await self.send_json({"type": "render_started", "id": ident, "width": req.fields["width"],
                               "height": req.fields["height"]})
         try:
-            done = await self.viewer.device(self._render, req.fields, on_batch)
+            engine, run = await self.viewer.device(self._render_run, req.fields)
+            while not run.done:  # a batch a call: other pages' requests run in between
+                if self.ws.closed:
+                    return  # the page went away: its render stops here
+                first = run.traced == 0
+                await self.viewer.device(run.step)
+                if first:  # the estimator's own check of the run (a Photon Map outgrowing the device)
+                    await self.viewer.device(run.estimator.first_batch, run.traced, run.paths.count, run.segments)
+                now = time.monotonic()
+                if now - last >= 0.1 or run.done:
+                    last = now
+                    await self.send_json({"type": "render_progress", "id": ident, "traced": int(run.traced),
+                                          "paths": int(run.paths.count)})
+            image = await self.viewer.device(lambda: engine.render_result(run, run.finish()))
         except OclgiError as exc:
             await self.error(str(exc), "render")
             return
-        image = done.pop("image")
+        finally:
+            self.viewer.ledger.release((self, "render"))
+        p = self.session.params
+        done = {"seconds": time.perf_counter() - t0, "method": p.method, "photons": int(p.photons)}
         png = png_bytes(image.pixels)
         h, w = image.radiance.shape[:2]
         self.renders += 1
@@ -404,6 +451,8 @@ class Connection:
     def _close_session(self, session) -> None:
         if session is None:
             return
+        if self.session is None:  # the page is closing: all it held
+            self.viewer.ledger.release_page(self)
         if self.light_session is not None and session is not self.light_session[1]:
             self._drop_light_session()
         session.close()

@@ -1,7 +1,7 @@
 """The lights a page can drag: the scene's point and spot lights, by name.
 
 Each has the key its position has among the session's parameters
-(``light.NAME.position``, oclgi/parameters.py), its index among the point
+(``light.NAME.position``, oclgi/scene_parameters.py), its index among the point
 and spot lights (what ``LightSession`` takes) and its ``path``, the
 precomputed positions of the scene file's light animation (None without
 one): at those a light session reuses the stored paths instead of
@@ -25,7 +25,7 @@ class DraggableLight:
 def movable_lights(scene) -> dict:
     """name -> DraggableLight for the scene's point and spot lights, named
     as the parameters name them (without ``light.``)."""
-    from ..parameters import light_name
+    from ..scene_parameters import light_name
     from ..scene.lights import PointLight, SpotLight, all_lights
 
     out = {}

@@ -15,7 +15,9 @@ closed ones released, ``/socket`` the WebSocket (oclgi/viewer/messages.py).
 
 The server listens on 127.0.0.1 unless told otherwise: it runs whatever
 the page asks on this machine's device, so binding another address is the
-user's explicit choice.
+user's explicit choice. Every request passes oclgi/viewer/guard.py's
+checks (a token, this server's Host names, the page's own Origin): other
+web pages the user has open can neither drive it nor read the scene.
 """
 
 from __future__ import annotations
@@ -23,12 +25,15 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import functools
+import json
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import OclgiError
 from .draggable_lights import movable_lights
+from .guard import Guard
+from .ledger import DEFAULT_MAX_PAGES, Ledger
 
 STATIC = Path(__file__).resolve().parent / "static"
 DEFAULT_HOST = "127.0.0.1"
@@ -40,7 +45,9 @@ class Viewer:
     """What every page shares: the engine, the tessellation, the device's
     worker thread; and the count of sessions for ``/status.json``."""
 
-    def __init__(self, engine, tess, method=None, photons=None, radius=None, all_vertices: bool = False):
+    def __init__(self, engine, tess, method=None, photons=None, radius=None, all_vertices: bool = False,
+                 allow_origins=(), token: str | None = None, memory: int | None = None,
+                 max_pages: int = DEFAULT_MAX_PAGES):
         from ..estimators import ESTIMATORS
         from .mesh_payload import description, mesh_bytes, vertex_objects
         from .messages import Movable
@@ -72,6 +79,8 @@ class Viewer:
                                 lights=[{"name": name, "kind": light.kind, "position": list(light.position),
                                          "path": light.path} for name, light in self.lights.items()])
         self.diagonal = scene.diagonal
+        self.guard = Guard(DEFAULT_HOST, token, allow_origins)
+        self.ledger = Ledger.for_device(engine.queue.device, memory, max_pages)  # every page's memory
         self.executor = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="oclgi-device")
         self.connections: set = set()
         self.sessions_opened = self.sessions_closed = self.buffers_released = 0
@@ -126,7 +135,7 @@ class Viewer:
     def app(self):
         from aiohttp import web
 
-        app = web.Application()
+        app = web.Application(middlewares=[self.guard.middleware()])
         app.router.add_get("/", self._page)
         app.router.add_get("/mesh.bin", self._mesh)
         app.router.add_get("/scene.json", self._scene)
@@ -163,6 +172,12 @@ class Viewer:
 
         ws = web.WebSocketResponse(max_msg_size=MAX_FRAME_BYTES)
         await ws.prepare(request)
+        try:
+            self.ledger.check_page(len(self.connections))
+        except OclgiError as exc:  # one page too many: told, then closed
+            await ws.send_str(json.dumps({"type": "error", "message": str(exc), "request": "open"}))
+            await ws.close()
+            return ws
         self.numbered += 1
         conn = Connection(self, ws, self.numbered)
         self.connections.add(conn)
@@ -191,9 +206,11 @@ class Viewer:
 
     # -- serving ---------------------------------------------------------------
     async def serve(self, host: str, port: int, ready=None) -> None:
-        """Serve until cancelled (Ctrl-C); ``ready(url)`` once listening."""
+        """Serve until cancelled (Ctrl-C); ``ready(url)`` once listening, the
+        URL with the page's token."""
         from aiohttp import web
 
+        self.guard.listen_on(host)
         runner = web.AppRunner(self.app(), shutdown_timeout=5.0, access_log=None)
         await runner.setup()
         try:
@@ -204,7 +221,7 @@ class Viewer:
                 raise OclgiError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
             bound = runner.addresses[0][1] if port == 0 else port
             if ready is not None:
-                ready(f"http://{'[' + host + ']' if ':' in host else host}:{bound}/")
+                ready(f"http://{'[' + host + ']' if ':' in host else host}:{bound}/?token={self.guard.token}")
             await asyncio.Event().wait()
         finally:
             await runner.cleanup()

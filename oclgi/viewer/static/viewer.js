@@ -134,8 +134,10 @@ async function main() {
   const canvas = $("view");
   const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: true});
   if (!gl) { showError("this browser has no WebGL2"); return; }
-  const scene = await (await fetch("scene.json")).json();
-  const meshBuffer = await (await fetch("mesh.bin")).arrayBuffer();
+  // the server's token (oclgi/viewer/guard.py), from the URL `oclgi view` printed
+  const token = encodeURIComponent(new URLSearchParams(location.search).get("token") || "");
+  const scene = await (await fetch(`scene.json?token=${token}`)).json();
+  const meshBuffer = await (await fetch(`mesh.bin?token=${token}`)).arrayBuffer();
   const header = new DataView(meshBuffer);
   const V = header.getUint32(4, true), F = header.getUint32(8, true);
   const positions = new Float32Array(meshBuffer, 16, 3 * V);
@@ -388,7 +390,7 @@ async function main() {
   }
 
   // the socket
-  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/socket`);
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/socket?token=${token}`);
   ws.binaryType = "arraybuffer";
   state.ws = ws;
   const pendingMoves = new Map(); // object name -> matrix: sent once a display frame, the latest only

@@ -1,4 +1,4 @@
-"""Parameter updates (oclgi/parameters.py): each kind of change recomputes
+"""Parameter updates (oclgi/scene_parameters.py): each kind of change recomputes
 only what depends on it (counted: photon paths traced, camera points
 traced, sums redone, on the store's tracer), and the result equals a fresh
 engine or session made with the new values, bit for bit."""
