@@ -299,3 +299,36 @@ def test_two_runs_cannot_share_a_checkpoint(tmp_path, monkeypatch, capsys):
     res = in_process(monkeypatch, capsys, tmp_path, *_args("a.exr", "detp_disc_index"), "--resume", "c.npz")
     assert res.returncode == 0, res.stderr
     assert not (tmp_path / ".c.npz.oclgi-lock").exists()
+
+
+def _flipped(tmp_path, monkeypatch, capsys, cases, seed):
+    """A finished run's checkpoint with random bytes flipped or cut short:
+    each resume goes on or stops with one line and status 2, never a
+    traceback, and writes nothing when it stops."""
+    cmd = lambda *a: in_process(monkeypatch, capsys, tmp_path, *a)  # noqa: E731
+    assert cmd(*_args("a.exr", "detp_disc_index", 5_000), "--checkpoint", "c.npz").returncode == 0
+    good = (tmp_path / "c.npz").read_bytes()
+    rng = np.random.default_rng(seed)
+    for case in range(cases):
+        data = bytearray(good)
+        if case % 4 == 3:
+            data = data[:int(rng.integers(0, len(data)))]  # cut short
+        else:
+            for i in rng.integers(0, len(data), int(rng.integers(1, 9))):
+                data[i] ^= 1 << int(rng.integers(8))
+        (tmp_path / "f.npz").write_bytes(bytes(data))
+        res = cmd(*_args(f"f{case}.exr", "detp_disc_index", 5_000), "--resume", "f.npz")
+        assert "Traceback" not in res.stderr, (case, res.stderr)
+        if res.returncode != 0:
+            assert res.returncode == 2 and res.stderr.count("\n") == 1 and res.stderr.startswith("oclgi: error: "), \
+                (case, res.stderr)
+            assert not (tmp_path / f"f{case}.exr").exists()
+
+
+def test_damaged_checkpoints_resume_or_stop_in_one_line(tmp_path, monkeypatch, capsys):
+    _flipped(tmp_path, monkeypatch, capsys, cases=12, seed=0)
+
+
+@pytest.mark.full
+def test_damaged_checkpoints_campaign(tmp_path, monkeypatch, capsys):
+    _flipped(tmp_path, monkeypatch, capsys, cases=200, seed=1)
