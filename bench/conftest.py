@@ -14,7 +14,7 @@ build has its own benchmark). Scenes:
   the atrium; its roof is open, so paths end both ways.
 
 ``--bench-scale`` multiplies every workload size (paths, rays, triangles), so
-``--bench-scale 0.1`` gives a quick run; the numbers in README.md use 1.
+``--bench-scale 0.1`` gives a quick run; the numbers in bench/HISTORY.md use 1.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ Runs every DETP method on the Cornell box with exact work counters
 visits) and wall times, and writes into ``bench/results/``:
 
 - ``detp_study.json``  every measurement (machine, sizes, counts, seconds);
-- ``detp_study.md``    the tables that ``bench/README.md`` quotes;
+- ``detp_study.md``    the tables that ``bench/HISTORY.md`` quotes;
 - ``detp_*.png``       the plots.
 
 Experiments (DESIGN.md section 3):

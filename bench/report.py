@@ -1,4 +1,4 @@
-"""Print the tables of bench/README.md from a benchmark JSON.
+"""Print the result tables (as bench/HISTORY.md, "Results", has them) from a benchmark JSON.
 
     python bench/report.py [bench/results/latest.json]
 

@@ -6,7 +6,7 @@ One sample per pixel looks at the pixel's centre: at a silhouette or a
 corner the pixel shows one side, where a reference (Mitsuba's box filter)
 shows the mean of both, an error no photon count removes. Four samples
 integrate the pixel, at the cost of four query points per pixel from the
-same photons (far less than four renders: bench/README "Samples per
+same photons (far less than four renders: bench/HISTORY.md "Samples per
 pixel"), so at equal time they have fewer photons each: less aliasing at
 the edges, more noise inside. This bench measures both, at equal time.
 

@@ -80,7 +80,8 @@ def test_sah_tree(engines, points, plain, scene):
     assert work["session"]["nodes"] < work["default"]["nodes"], work
 
 
-@pytest.mark.parametrize("local_size", [1, 7, 64])
+# 1 and 7 against the launches' own size (64 where they name none: every other test runs it); 64 itself in the full suite
+@pytest.mark.parametrize("local_size", [1, 7, pytest.param(64, marks=pytest.mark.full)])
 def test_work_group_sizes(engines, points, plain, local_size):
     e = oclgi.Engine(engines["cornell"].scene, local_size=local_size)
     frac = RADIUS_FRACTIONS[2]  # large discs: many atomics on the same disc

@@ -40,7 +40,8 @@ def test_leaf_sizes_and_pieces(engines, points, plain, scene, leaf_size, piece):
     assert est.work["u"] < est.stats.segments * len(points[scene]) / 2  # the map does cull
 
 
-@pytest.mark.parametrize("local_size", [1, 7, 64])
+# 1 and 7 against the launches' own size (64 where they name none: every other test runs it); 64 itself in the full suite
+@pytest.mark.parametrize("local_size", [1, 7, pytest.param(64, marks=pytest.mark.full)])
 def test_work_group_sizes_and_batches(engines, points, plain, local_size):
     """Also split into batches of 3,000 paths: one ray map per batch."""
     e = oclgi.Engine(engines["cornell"].scene, local_size=local_size, batch_bytes=3000 * 16 * 48)

@@ -272,6 +272,7 @@ def test_mpirun_oclgi_writes_one_process_bytes(tmp_path, ranks):
     assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.npy").exists()
 
 
+@pytest.mark.full  # make test: the README's mpirun study runs; estimates over ranks equal one process's above
 def test_mpirun_oclgi_study_gives_one_process_statistics(tmp_path):
     """The study over 2 ranks: every estimate split over the ranks; the
     statistics (all but the time columns) are one process's."""

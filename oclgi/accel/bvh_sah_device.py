@@ -36,7 +36,7 @@ from .bvh_tree import BvhData, flatten
 # one's 0.1 s, but a process' first device build also loads the program
 # and its kernel (about 0.1 s from a warm PoCL cache, 0.5 s cold: `oclgi
 # warm` fills it): at this size a first build breaks even, and every later
-# one (other objects, other scenes) gains (bench/README.md, BVH build).
+# one (other objects, other scenes) gains (bench/HISTORY.md, "BVH build").
 DEVICE_MIN_PRIMITIVES = 50_000
 
 

@@ -34,7 +34,7 @@ F32_MAX = float(np.finfo(np.float32).max)
 # changes a transform only), traversed by every ray of every kernel. The
 # binned SAH tree collapsed into 8-wide nodes, its leaves as blocks of 4
 # triangles (oclgi/accel/bvh_build.py QUALITIES has the others; measured
-# against each other in bench/README.md).
+# against each other in bench/HISTORY.md, "Wide nodes").
 BVH_QUALITY = "sah8b"
 
 

@@ -4,7 +4,7 @@ The top level of the scene's BVH is its instances (kernels/bvh.h): a ray
 tests each instance's world box, in index order, and traverses the object
 of each box it meets. One box at a time, the top level cost grew with the
 number of objects: 10^6 rays in Sponza took 1.35x as long with 32 small
-movable boxes, 2.1x with 64 (bench/README, "The top level with many
+movable boxes, 2.1x with 64 (bench/HISTORY.md, "The top level with many
 movable objects"). So the device
 buffer holds, after the ``Instance`` records (from the next 32-byte
 boundary), their boxes as

@@ -60,9 +60,6 @@ def is_file(path: Path, what: str) -> bool:
 
 
 def load_mesh(path: Path) -> LoadedMesh:
-    from . import resolvers  # imports trimesh: only when a mesh needs it
-
-    interrupt.reraise_swallowed()  # trimesh's imports swallow a Ctrl-C (oclgi/interrupt.py)
     path = Path(path)
     if not is_file(path, "mesh file"):
         raise OclgiError(f"mesh file not found: {path}")
@@ -76,7 +73,7 @@ def load_mesh(path: Path) -> LoadedMesh:
             data = path.read_bytes()
         except OSError as exc:
             raise OclgiError(f"cannot read mesh file {path}: {exc.strerror or exc}") from None
-        return _load_trimesh(path, data, suffix, lambda: resolvers.FolderResolver(path))
+        return _load_trimesh(path, data, suffix, lambda: _resolvers().FolderResolver(path))
     raise OclgiError(f"{path}: unsupported mesh type {suffix!r} (use one of {sorted(MESH_TYPES | {'.zip'})})")
 
 
@@ -95,9 +92,16 @@ def _beside(path: Path):
     return find
 
 
-def _load_zip(path: Path) -> LoadedMesh:
+def _resolvers():
+    """oclgi/scene/resolvers.py, which imports trimesh (half a second, so only
+    for the files trimesh reads: OBJ has a reader of its own)."""
     from . import resolvers
 
+    interrupt.reraise_swallowed()  # trimesh's imports swallow a Ctrl-C (oclgi/interrupt.py)
+    return resolvers
+
+
+def _load_zip(path: Path) -> LoadedMesh:
     try:
         with zipfile.ZipFile(path) as z:
             reader = ZipReader(path, z)
@@ -123,7 +127,7 @@ def _load_zip(path: Path) -> LoadedMesh:
                 return _from_obj(read_obj(path / inner, data.decode("utf-8", errors="replace"), read_lib), read_member)
             # a glTF's buffers and images are members beside it
             return _load_trimesh(path / inner, data, inner.suffix.lower(),
-                                 lambda: resolvers.MemberResolver(reader, inner.parent.as_posix()))
+                                 lambda: _resolvers().MemberResolver(reader, inner.parent.as_posix()))
     except (zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, RuntimeError, EOFError,
             OSError, ValueError) as exc:
         raise OclgiError(f"{path}: not a readable zip file ({exc})") from None

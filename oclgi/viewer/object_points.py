@@ -5,7 +5,7 @@ them, so a finely modelled movable object keeps all its vertices: the
 Stanford bunny scaled into the Cornell box has 36k, about a millimetre
 apart under discs of 3 cm. They are the session's dynamic points, summed
 again over the whole store after every move, and their overlapping discs
-are most of an update's time (bench/README.md, "Viewer": 408 against 35 ms
+are most of an update's time (bench/HISTORY.md, "Viewer": 408 against 35 ms
 per move with and without them). Closer than the edge they only repeat one
 another (each is the disc's mean irradiance), so a movable object is
 queried at one vertex per cell of the edge's size (and per material and
