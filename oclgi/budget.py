@@ -112,16 +112,24 @@ def device_limits(device) -> tuple[int, int]:
     return int(device.max_mem_alloc_size), int(device.global_mem_size)
 
 
-def host_available() -> int | None:
-    """Bytes of memory the host can give now without swapping (Linux's
-    MemAvailable, else the free pages), None where the system does not say."""
+def meminfo(key: str) -> int | None:
+    """A line of Linux's /proc/meminfo in bytes ("MemAvailable", "MemTotal"), None where there is none."""
     try:
         with open("/proc/meminfo") as f:
             for line in f:
-                if line.startswith("MemAvailable:"):
+                if line.startswith(key + ":"):
                     return int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
         pass
+    return None
+
+
+def host_available() -> int | None:
+    """Bytes of memory the host can give now without swapping (Linux's
+    MemAvailable, else the free pages), None where the system does not say."""
+    available = meminfo("MemAvailable")
+    if available is not None:
+        return available
     try:
         return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):

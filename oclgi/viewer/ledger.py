@@ -25,14 +25,7 @@ SESSION_HOST_BYTES = 64 << 20  # a session's host side: its tables, points and f
 
 def machine_memory() -> int:
     """The machine's memory in bytes (Linux's MemTotal), 0 where unknown."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemTotal:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return 0
+    return budget.meminfo("MemTotal") or 0
 
 
 def session_bytes(photons: int, max_depth: int, n_points: int) -> int:
