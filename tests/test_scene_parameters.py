@@ -104,7 +104,7 @@ def test_session_update_recomputes_only_what_depends_on_it(engine, case):
     if expect["paths"] == PHOTONS:
         assert s.store is not store and s.store.tracer.launches == 1
     elif expect["paths"]:
-        assert s.store.tracer.launches == 0 and s.store.added.n_paths == expect["paths"]
+        assert s.store.tracer.launches == 0 and s.store.added_paths == expect["paths"]
     elif s.store is store:
         assert store.tracer.launches == launches
     else:  # fewer paths: the first ones copied

@@ -121,7 +121,8 @@ class SegmentStore:
         self.seed = int(seed)
         self.tracer = PhotonTracer(self.queue, engine.compiled, seed, max_depth, self.photons, engine.local_size)
         # retrace() finds a path's random numbers by the batch's path_offset
-        self.added = None  # the paths traced here that ``copy`` did not hold (resized)
+        self.added = None  # the paths traced here that ``copy`` did not hold (resized hands them over)
+        self.added_paths = 0  # how many there were
         if copy is None:
             self.batch = self.tracer.trace(self.first_path, self.photons)
         else:
@@ -185,7 +186,11 @@ class SegmentStore:
             raise OclgiError("a store of part of a run's paths (a rank's) cannot change its photon count")
         new = SegmentStore(self.engine, photons, self.seed, self.max_depth, copy=self)
         if photons > self.photons:
-            return new, new.added
+            # the paths added, as a batch of their own for the caller to sum; not kept by the store,
+            # whose own buffers hold them too (kept, they doubled a grown session's memory)
+            added, new.added = new.added, None
+            new.added_paths = added.n_paths
+            return new, added
         if photons < self.photons:
             dropped = np.arange(photons, self.photons, dtype=np.int32)
             mf = cl.mem_flags
