@@ -62,6 +62,8 @@ def _jsonable(value):
         return float(value)
     if isinstance(value, (np.bool_,)):
         return bool(value)
+    if isinstance(value, Path):
+        return str(value)
     return value
 
 

@@ -90,10 +90,6 @@ def check_arguments(args, inputs: dict) -> None:
     check_not_input([target], inputs)
 
 
-def _jsonable(value):
-    return str(value) if isinstance(value, Path) else value
-
-
 def settle(args, parser) -> None:
     """The command's settings (``SETTINGS``): those the command line names,
     else with ``--resume`` the checkpoint's, else the defaults. ``parser``:
@@ -117,7 +113,7 @@ def settle(args, parser) -> None:
         if getattr(args, name) is None:
             flag = actions[name].option_strings[-1]
             raise OclgiError(f"{flag} is required (or --resume FILE of a run that had it)")
-    args.settings = {name: _jsonable(getattr(args, name)) for name in defaults}
+    args.settings = {name: checkpoint._jsonable(getattr(args, name)) for name in defaults}
 
 
 def _saved_value(path, action, value):

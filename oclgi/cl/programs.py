@@ -25,6 +25,7 @@ files there; in the source tree it maps to ``kernels/``).
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import sys
@@ -47,7 +48,12 @@ COMPILER_OUTPUT_ENV = "OCLGI_COMPILER_OUTPUT"
 
 
 def kernel_dir() -> Path:
-    env = os.environ.get("OCLGI_KERNEL_DIR")
+    return _kernel_dir(os.environ.get("OCLGI_KERNEL_DIR"))
+
+
+@functools.lru_cache(maxsize=8)
+def _kernel_dir(env: str | None) -> Path:
+    """The folder found for an OCLGI_KERNEL_DIR value (programs() asks in every move)."""
     if env:
         return Path(env)
     try:

@@ -93,6 +93,10 @@ class Estimator:
         cl.enqueue_copy(self.queue, self.positions, self.points.positions)
         cl.enqueue_copy(self.queue, self.normals, self.points.normals)
 
+    def forget_store(self, store) -> None:
+        """``store`` is gone (a session resized or re-traced it): drop what
+        this estimator kept of it (none does but DetpDiscIndex)."""
+
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
         """After a run's first batch (``paths_done`` of ``paths_total``
         paths, ``segments`` segments): refuse a run whose state would

@@ -133,7 +133,7 @@ class SessionBase:
         from ..cl.release import release
 
         for est in (getattr(self, "estimator", None), getattr(self, "dyn_est", None)):
-            if est is not None and hasattr(est, "forget_store"):
+            if est is not None:
                 est.forget_store(old)
         release(old, keep=(self,))
 

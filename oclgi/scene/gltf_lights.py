@@ -151,8 +151,6 @@ def read_camera(data: bytes, suffix: str, label: str, height: int = 256):
     oclgi Camera (looking along its node's -Z, +Y up; ``yfov`` the vertical
     field of view; the image ``height`` pixels high and as wide as its
     ``aspectRatio`` says, square without one), or None."""
-    from .scene import Camera
-
     doc = document(data, suffix)
     cameras = doc.get("cameras") if doc is not None else None
     if not isinstance(cameras, list) or not cameras:
@@ -169,15 +167,27 @@ def read_camera(data: bytes, suffix: str, label: str, height: int = 256):
         if not (isinstance(yfov, (int, float)) and 0 < yfov < math.pi and isinstance(aspect, (int, float))
                 and 0.01 < aspect < 100):
             raise OclgiError(f"{label}: camera {k}: yfov must be in (0, pi) and aspectRatio positive")
-        eye = world[:3, 3]
-        forward = -world[:3, 2]
-        up = world[:3, 1]
-        if not (np.isfinite(world).all() and np.linalg.norm(forward) > 0 and np.linalg.norm(up) > 0):
+        cam = camera_at(world, math.degrees(yfov), aspect, height)
+        if cam is None:
             raise OclgiError(f"{label}: camera {k}'s node {i} has a degenerate transform")
-        return Camera(position=tuple(float(x) for x in eye), look_at=tuple(float(x) for x in eye + forward),
-                      up=tuple(float(x) for x in up / np.linalg.norm(up)), fov=math.degrees(yfov),
-                      width=max(1, int(round(height * aspect))), height=height)
+        return cam
     return None
+
+
+def camera_at(world: np.ndarray, fov: float, aspect: float, height: int):
+    """A camera at a node's world transform, looking along its -Z with +Y up
+    (glTF's and trimesh's convention): ``fov`` vertical, in degrees, the
+    image ``height`` pixels high and ``aspect`` times as wide; None for a
+    degenerate transform."""
+    from .scene import Camera
+
+    world = np.asarray(world, np.float64)
+    eye, forward, up = world[:3, 3], -world[:3, 2], world[:3, 1]
+    if not (np.isfinite(world).all() and np.linalg.norm(forward) > 0 and np.linalg.norm(up) > 0):
+        return None
+    return Camera(position=tuple(float(x) for x in eye), look_at=tuple(float(x) for x in eye + forward),
+                  up=tuple(float(x) for x in up / np.linalg.norm(up)), fov=float(fov),
+                  width=max(1, int(round(height * aspect))), height=height)
 
 
 def _light(d, world: np.ndarray, where: str):

@@ -248,32 +248,28 @@ TRIMESH_FOV = (60.0, 45.0)  # trimesh's default camera's field of view (x, y), d
 
 
 def trimesh_camera(scene, height: int = 256):
-    """A trimesh Scene's camera as an oclgi Camera, looking along its
-    node's -Z with +Y up, ``height`` pixels high at the camera's aspect
-    ratio; and a note when it is trimesh's default camera (the one
-    ``Scene.camera`` makes for a scene without one: everything in view,
-    along -Z), else None. Computed without setting it on ``scene``."""
+    """A trimesh Scene's camera as an oclgi Camera (gltf_lights.camera_at),
+    ``height`` pixels high at the camera's aspect ratio; and a note when it
+    is trimesh's default camera (the one ``Scene.camera`` makes for a scene
+    without one: everything in view, along -Z), else None. Computed without
+    setting it on ``scene``."""
     from trimesh.scene import cameras
 
-    from .scene import Camera
+    from .gltf_lights import camera_at
 
     if scene.has_camera:
-        cam, world, note = scene.camera, np.asarray(scene.camera_transform, np.float64), None
-        fov = np.asarray(cam.fov, np.float64)
+        world, fov, note = scene.camera_transform, np.asarray(scene.camera.fov, np.float64), None
     else:
         fov = np.asarray(TRIMESH_FOV)
-        world = np.asarray(cameras.look_at(scene.bounds, fov=fov), np.float64)
+        world = cameras.look_at(scene.bounds, fov=fov)
         note = ("the trimesh Scene has no camera: rendering from trimesh's default one (Scene.camera: "
                 "everything in view, looking along -Z); give the scene a camera or a [camera] table to choose")
-    eye, forward, up = world[:3, 3], -world[:3, 2], world[:3, 1]
-    if not (np.isfinite(world).all() and np.linalg.norm(forward) > 0 and np.linalg.norm(up) > 0
-            and np.isfinite(fov).all() and (fov > 0).all()):
+    if not (np.isfinite(fov).all() and (fov > 0).all() and (fov < 180).all()):
         return None, None  # nothing to look through: the scene's [camera] or the API's camera must say
     # trimesh keeps fov[0] / fov[1] as the image's aspect ratio (Camera.resolution from fov)
     aspect = math.tan(math.radians(fov[0]) / 2) / math.tan(math.radians(fov[1]) / 2)
-    return Camera(position=tuple(float(x) for x in eye), look_at=tuple(float(x) for x in eye + forward),
-                  up=tuple(float(x) for x in up / np.linalg.norm(up)), fov=float(fov[1]),
-                  width=max(1, int(round(height * aspect))), height=height), note
+    cam = camera_at(world, fov[1], aspect, height)
+    return (cam, note) if cam is not None else (None, None)
 
 
 def _file_normals(geom) -> np.ndarray | None:

@@ -285,15 +285,12 @@ class Connection:
             info["seconds"] = {"total": time.perf_counter() - t0}
         elif req.kind == "photons":
             count = req.fields["count"]
-            held = self.viewer.ledger.held.get(self)
             self._book(self, max(count, s.params.photons), f"a session of {count:,} photons")  # refused: as it was
             self._drop_light_session()
             try:
                 info["seconds"] = {"total": s.set_photons(count)}
-            except BaseException:
-                self.viewer.ledger.held[self] = held
-                raise
-            self._book(self, count, f"a session of {count:,} photons")  # fewer: the difference is freed
+            finally:  # what the session holds now: the new count, or the old one if it failed
+                self._book(self, s.params.photons, f"a session of {s.params.photons:,} photons")
             self.segments = int(s.store.path_len().sum())
         colours, read = self._colours()
         info["seconds"]["read"] = read
