@@ -49,10 +49,9 @@ _TREES = {}
 def compiled_with(engine, quality):
     """The engine's scene compiled with the given scene tree (one of
     ``oclgi.accel.bvh_build.QUALITIES``: "sah8b", the default, the binned SAH
-    tree in 8-wide nodes with leaf blocks; "sah8", "sah8q", "sah8qb" its
-    other wide layouts; "sah", the same tree traversed binary; "lbvh",
-    "lbvh8" the Morton tree): the engine's own for its default, else built
-    once per session."""
+    tree in 8-wide nodes with leaf blocks; "sah", the same tree traversed
+    binary; "lbvh", the binary Morton tree): the engine's own for its
+    default, else built once per session."""
     if engine.compiled.bvh_quality == quality:
         return engine.compiled
     key = (id(engine), quality)

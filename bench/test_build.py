@@ -4,11 +4,10 @@ in numpy (``bvh_sah.py``, the specification) and on the OpenCL device
 (``bvh_sah_device.py``, the same tree: the scene's and the movable objects'
 trees of 20,000 triangles or more); and the time to collapse the SAH tree
 into the scene's 8-wide nodes (``oclgi.accel.bvh_wide.collapse``) and the
-leaves into blocks of 4 triangles (``bvh_leaf_blocks.leaf_blocks``;
-``bvh_quantise.quantise`` for the quantised layouts), which a scene compile
-adds to the SAH build; ``test_scene_tree`` times the three steps of the
-default scene tree (``sah8b``) together, and ``test_mesh_build`` both SAH
-builders on the bunny and Sponza.
+leaves into blocks of 4 triangles (``bvh_leaf_blocks.leaf_blocks``),
+which a scene compile adds to the SAH build; ``test_scene_tree`` times the
+three steps of the default scene tree (``sah8b``) together, and
+``test_mesh_build`` both SAH builders on the bunny and Sponza.
 
 The build runs each time a scene is compiled, so it is the start-up cost of
 every run; the target is at most 1 s for 10^6 triangles on a 2-core machine
@@ -36,7 +35,6 @@ from oclgi.accel.bvh_build import BUILDERS, build_bvh
 from oclgi.accel.bvh_leaf_blocks import leaf_blocks
 from oclgi.accel.bvh_sah import build_sah
 from oclgi.accel.bvh_sah_device import build_sah_device
-from oclgi.accel.bvh_quantise import quantise
 from oclgi.accel.bvh_wide import collapse
 from oclgi.cl.layout import Tri
 from oclgi.scene.compiled import BVH_STACK_SIZE
@@ -131,9 +129,9 @@ def _records(tris, bvh):
     return records
 
 
-def test_wide_layouts(benchmark, scale, cores_used, queue):
-    """The 8-wide nodes of the same triangles into the other wide layouts:
-    leaf blocks (the default scene tree's last step) and quantised boxes."""
+def test_leaf_blocks(benchmark, scale, cores_used, queue):
+    """The 8-wide nodes of the same triangles with their leaves as blocks
+    of 4 triangles (the default scene tree's last step)."""
     n = scale(TRIANGLES)
     tris = random_triangles(n, np.random.default_rng(3))
     bvh = build_sah_device(queue, tris.min(axis=1), tris.max(axis=1))
@@ -143,13 +141,10 @@ def test_wide_layouts(benchmark, scale, cores_used, queue):
     benchmark.group = "bvh build"
     with cores_used():
         nodes, blocks = benchmark.pedantic(leaf_blocks, args=(wide.nodes, records), rounds=3, warmup_rounds=1)
-    t0 = time.perf_counter()
-    quantise(wide.nodes)
-    quantise_s = time.perf_counter() - t0
 
     assert len(blocks) >= n / 4
     info = benchmark.extra_info
-    info.update(triangles=n, wide_nodes=len(wide.nodes), leaf_blocks=len(blocks), quantise_s=round(quantise_s, 3))
+    info.update(triangles=n, wide_nodes=len(wide.nodes), leaf_blocks=len(blocks))
     if benchmark.stats:
         info["seconds"] = round(benchmark.stats.stats.median, 3)
 

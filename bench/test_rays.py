@@ -20,13 +20,12 @@ Two ray sets of 10^6 rays each:
 
 Each runs on every scene tree (``oclgi.accel.bvh_build.QUALITIES``): the
 binned SAH tree in 8-wide nodes with its leaves as blocks of 4 triangles
-(the default, "sah8b"), the same nodes with leaves as runs of triangles
-("sah8"), either with quantised child boxes ("sah8qb", "sah8q"), the same
-tree traversed binary ("sah"), and the Morton LBVH ("lbvh8", "lbvh"),
-with the traversal work of each counted exactly (nodes visited and
-triangles tested per ray, ``oclgi.accel.bvh.traversal_work``; a wide node
-tests 8 boxes, a binary one 2): the count is what a tree changes, the time
-what it costs on this machine. ``-k sah`` runs the SAH layouts alone.
+(the default, "sah8b"), the same tree traversed binary ("sah"), and the
+binary Morton LBVH ("lbvh"), with the traversal work of each counted
+exactly (nodes visited and triangles tested per ray,
+``oclgi.accel.bvh.traversal_work``; a wide node tests 8 boxes, a binary one
+2): the count is what a tree changes, the time what it costs on this
+machine. ``-k sah`` runs the SAH layouts alone.
 
 Both must agree on hit or miss for more than 99% of the rays (float
 intersectors may differ on grazing rays); nothing is asserted about time.
@@ -127,7 +126,6 @@ def test_closest_hit(benchmark, request, scale, cores_used, scene, rays, tree):
     nodes, tests = traversal_work(engine.queue, compiled, origins, dirs)
     info.update(scene=scene, rays=rays, tree=tree, n_rays=n, triangles=engine.scene.n_triangles,
                 tree_nodes=compiled.n_nodes, tree_depth=compiled.bvh_depth, wide=compiled.bvh_wide,
-                quantised=compiled.bvh_quantised, blocks=compiled.bvh_blocks,
                 binary_nodes=compiled.n_binary_nodes,
                 nodes_per_ray=round(float(nodes.mean()), 2), tests_per_ray=round(float(tests.mean()), 2),
                 hit_fraction=round(float(np.mean(tri >= 0)), 4), hit_agreement=round(agree, 6),

@@ -8,8 +8,8 @@ segments/s is the engine's raw speed on a scene. It depends on the BVH
 segment slots, the unused ones zero-filled.
 
 Each scene is traced with every scene tree (``oclgi.accel.bvh_build.QUALITIES``:
-the binned SAH tree in 8-wide nodes in each wide layout, "sah8b" the default,
-and binary; the Morton LBVH both ways), the same paths with each. ``-k sah``
+the binned SAH tree in 8-wide nodes with leaf blocks, "sah8b" the default,
+and binary; the binary Morton LBVH), the same paths with each. ``-k sah``
 runs the SAH layouts alone.
 
 The workload is what ``Engine.irradiance`` does for its trace step: the same

@@ -6,17 +6,13 @@
  *   - binary (Instance.root >= 0): oclgi_types.h BvhNode, children of an
  *     inner node adjacent at first and first + 1, leaves a run of triangles
  *     in BVH order;
- *   - wide (Instance.root < 0, the root node is ~root without its flag
- *     bits): the same binary tree collapsed into nodes of up to 8 children
+ *   - wide (Instance.root < 0, the root node is ~root): the same binary
+ *     tree collapsed into BvhNode8 nodes of up to 8 children
  *     (oclgi/accel/bvh_wide.py) whose boxes are slabbed all at once, one
  *     float8 op per plane (PoCL does not vectorise across work-items: the
- *     lanes are written out). Two flags in ~root say the rest: with
- *     OCLGI_BVH_QUANTISED_ROOT the nodes are BvhNode8Q (child boxes in 8
- *     bits on a grid per node, oclgi/accel/bvh_quantise.py), else
- *     BvhNode8; with OCLGI_BVH_BLOCK_ROOT a leaf is TriBlock4 records after
- *     the nodes in the same buffer (oclgi/accel/bvh_leaf_blocks.py), tested
- *     4 triangles at a time (geometry.h tri4_intersect), else a run of Tri
- *     records. The `nodes` buffer holds the layout the instances' roots say.
+ *     lanes are written out); a leaf is TriBlock4 records after the nodes
+ *     in the same buffer (oclgi/accel/bvh_leaf_blocks.py), tested 4
+ *     triangles at a time (geometry.h tri4_intersect).
  * Top level: the instances, each a world-space box and a
  * transform; a ray is moved into an object's frame (the direction is not
  * renormalised, so distances t stay world distances) and traversed there.
@@ -195,22 +191,9 @@ HOT_INLINE void bvh8_slab(int finite, float8 nx, float8 ny, float8 nz, float8 fx
     }
 }
 
-/* A quantised plane: q * step is exact (8-bit q, power-of-two step), so the
- * plane rounds once, outwards of the exact one by the host's choice of q
- * (oclgi/accel/bvh_quantise.py); FP_CONTRACT is off (geometry.h), and a
- * fused multiply-add would round the same exact product the same way. */
-HOT_INLINE float8 bvh8q_plane(uchar8 q, float base, float step)
-{
-    return base + convert_float8(q) * step;
-}
-
-/* One object's wide BVH from its root node, in either wide layout: BvhNode8
- * (the child planes stored) or, with `quantised`, BvhNode8Q (decoded with
- * bvh8q_plane: every decoded box holds the exact one, so the walk enters
- * at least the nodes the exact boxes let it enter, and the nearest hit is
- * the same). A node's 8 child boxes are slabbed together (bvh8_slab; in
- * BvhNode8, with box_slab's arithmetic on the same planes as the binary
- * walk, so the same bits). Each hit lane's key is its
+/* One object's wide BVH from its root node. A node's 8 child boxes are
+ * slabbed together (bvh8_slab, box_slab's arithmetic on the same planes as
+ * the binary walk, so the same bits). Each hit lane's key is its
  * entry distance with the lane number in the 3 low mantissa bits (entry
  * distances are >= 0, so the int order is the float order; misses are -1);
  * sorted in descending order, the keys' children and distances go to the
@@ -219,13 +202,16 @@ HOT_INLINE float8 bvh8q_plane(uchar8 q, float base, float step)
  * lane bits cleared: at most 7 ulps below the true entry, so culling on pop
  * never drops a node the exact distance would keep.
  *
- * An unused lane of BvhNode8 has the box lo = hi = +inf: along an axis with
- * 1/d >= 0 its entry is +inf, and with all three negative its exit is -inf;
- * either way it is a miss (the test below counts an entry of +inf as one,
- * as the binary walk's box_entry does). An unused lane of BvhNode8Q has
- * child 0 and is masked out. */
-HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tris, int root, int quantised,
-                            int blocks, float3 o, float3 d, int any_hit, Hit *hit)
+ * A leaf lane holds ~(offset / 32 << 3 | count - 1): its count triangles
+ * are in ceil(count / 4) TriBlock4 records from that byte offset in the
+ * nodes' buffer, tested in the leaf's order, the lowest lane of equal
+ * distances kept (the one a test one by one would keep).
+ *
+ * An unused lane has the box lo = hi = +inf: along an axis with 1/d >= 0
+ * its entry is +inf, and with all three negative its exit is -inf; either
+ * way it is a miss (the test below counts an entry of +inf as one, as the
+ * binary walk's box_entry does). */
+HOT_INLINE int bvh8_traverse(__global const void *nodes, int root, float3 o, float3 d, int any_hit, Hit *hit)
 {
     float3 inv = 1.0f / d;
     RayShear shear = ray_shear(d);
@@ -233,8 +219,8 @@ HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tri
     float stack_t[BVH_WIDE_STACK];
     int sp = 0;
     const int8 lane = (int8)(0, 1, 2, 3, 4, 5, 6, 7);
-    /* the near planes' field indices (lo x..z = 0..2, hi x..z = 3..5 in both
-     * layouts), chosen once per ray; an axis with d = 0 (1/d infinite)
+    /* the near planes' field indices (lo x..z = 0..2, hi x..z = 3..5),
+     * chosen once per ray; an axis with d = 0 (1/d infinite)
      * takes the general form */
     int finite = isfinite(inv.x) && isfinite(inv.y) && isfinite(inv.z);
     int3 near = (int3)(inv.x >= 0.0f ? 0 : 3, inv.y >= 0.0f ? 1 : 4, inv.z >= 0.0f ? 2 : 5);
@@ -243,27 +229,13 @@ HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tri
     for (;;) {
         if (ref >= 0) {
             float8 enter, leave;
-            int8 child;
-            int8 used = (int8)(-1);
+            __global const BvhNode8 *n = (__global const BvhNode8 *)nodes + ref;
+            __global const float8 *f = &n->lox;
             BVH_COUNT(hit, nodes, 1);
-            if (quantised) {
-                __global const BvhNode8Q *n = (__global const BvhNode8Q *)nodes + ref;
-                __global const uchar8 *q = &n->qlox;
-                float4 b = n->base, s = n->step;
-                bvh8_slab(finite, bvh8q_plane(q[near.x], b.x, s.x), bvh8q_plane(q[near.y], b.y, s.y),
-                          bvh8q_plane(q[near.z], b.z, s.z), bvh8q_plane(q[3 - near.x], b.x, s.x),
-                          bvh8q_plane(q[5 - near.y], b.y, s.y), bvh8q_plane(q[7 - near.z], b.z, s.z),
-                          o, inv, hit->t, &enter, &leave);
-                child = n->child;
-                used = child != 0;
-            } else {
-                __global const BvhNode8 *n = (__global const BvhNode8 *)nodes + ref;
-                __global const float8 *f = &n->lox;
-                bvh8_slab(finite, f[near.x], f[near.y], f[near.z], f[3 - near.x], f[5 - near.y], f[7 - near.z],
-                          o, inv, hit->t, &enter, &leave);
-                child = n->child;
-            }
-            int8 in = (enter <= leave) & (enter < INFINITY) & used;
+            bvh8_slab(finite, f[near.x], f[near.y], f[near.z], f[3 - near.x], f[5 - near.y], f[7 - near.z],
+                      o, inv, hit->t, &enter, &leave);
+            int8 child = n->child;
+            int8 in = (enter <= leave) & (enter < INFINITY);
             /* -0.0f and +0.0f both become key 0 | lane */
             int8 key = select((int8)(-1), (as_int8(enter) & 0x7FFFFFF8) | lane, in);
             int4 c4 = in.lo + in.hi;
@@ -283,7 +255,7 @@ HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tri
                 ref = stack[sp];
                 continue;
             }
-        } else if (blocks) {
+        } else {
             int run = ~ref, count = (run & 7) + 1;
             BVH_COUNT(hit, tests, count);
             __global const TriBlock4 *b = (__global const TriBlock4 *)((__global const char *)nodes +
@@ -295,19 +267,6 @@ HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tri
                     int4 id = b->id;
                     hit->t = t; hit->u = u; hit->v = v;
                     hit->tri = lane == 0 ? id.x : (lane == 1 ? id.y : (lane == 2 ? id.z : id.w));
-                    if (any_hit) return hit->tri;
-                }
-            }
-        } else {
-            int run = ~ref;
-            int first = run >> 3, end = first + (run & 7) + 1;
-            BVH_COUNT(hit, tests, end - first);
-            for (int i = first; i < end; ++i) {
-                __global const Tri *tr = &tris[i];
-                float t, u, v;
-                if (tri_intersect(o, shear, vload3(0, tr->v0), vload3(0, tr->v1), vload3(0, tr->v2),
-                                  hit->t, &t, &u, &v)) {
-                    hit->t = t; hit->u = u; hit->v = v; hit->tri = tr->id;
                     if (any_hit) return hit->tri;
                 }
             }
@@ -326,11 +285,7 @@ HOT_INLINE int bvh8_traverse(__global const void *nodes, __global const Tri *tri
 inline int bvh_traverse(__global const void *nodes, __global const Tri *tris, int root,
                         float3 o, float3 d, int any_hit, Hit *hit)
 {
-    if (root < 0) {
-        int q = (~root & OCLGI_BVH_QUANTISED_ROOT) != 0, b = (~root & OCLGI_BVH_BLOCK_ROOT) != 0;
-        return bvh8_traverse(nodes, tris, ~root & ~(OCLGI_BVH_QUANTISED_ROOT | OCLGI_BVH_BLOCK_ROOT), q, b, o, d,
-                             any_hit, hit);
-    }
+    if (root < 0) return bvh8_traverse(nodes, ~root, o, d, any_hit, hit);
     return bvh2_traverse((__global const BvhNode *)nodes, tris, root, o, d, any_hit, hit);
 }
 

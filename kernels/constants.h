@@ -15,8 +15,7 @@
     !defined(OCLGI_GRID_KEY_BITS) || !defined(OCLGI_GRID_EMPTY) || !defined(OCLGI_GRID_HASH_MUL) ||    \
     !defined(OCLGI_CELL_OUTSIDE_BIT) || !defined(OCLGI_EMITTER_TRIANGLE) || !defined(OCLGI_EMITTER_POINT) ||   \
     !defined(OCLGI_EMITTER_SPOT) || !defined(OCLGI_EMITTER_SUN) || !defined(OCLGI_EMITTER_SKY) ||  \
-    !defined(OCLGI_EMITTER_ENVMAP) || !defined(OCLGI_EMITTER_IES) || !defined(OCLGI_BVH_QUANTISED_ROOT) || \
-    !defined(OCLGI_BVH_BLOCK_ROOT) || !defined(OCLGI_SAH_BINS)
+    !defined(OCLGI_EMITTER_ENVMAP) || !defined(OCLGI_EMITTER_IES) || !defined(OCLGI_SAH_BINS)
 #error "oclgi's shared constants are not defined: build through oclgi.cl.programs (oclgi/cl/constants.py)"
 #endif
 

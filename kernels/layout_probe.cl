@@ -1,7 +1,7 @@
 /* layout_probe.cl: reports sizeof and offsetof of every shared struct, in
  * the order of oclgi/cl/layout.py (struct by struct, size first, then each
  * field), so tests/test_layout.py can compare them with the numpy dtypes;
- * after the end marker, the alignment of BvhNode8 and BvhNode8Q.
+ * after the end marker, the alignment of BvhNode8 and InstanceBoxes.
  * Entry point: layout_probe, one work-item. */
 #include "oclgi_types.h"
 
@@ -15,9 +15,6 @@ __kernel void layout_probe(__global int *out)
     SIZE(BvhNode); OFF(BvhNode, lo); OFF(BvhNode, first); OFF(BvhNode, hi); OFF(BvhNode, count);
     SIZE(BvhNode8); OFF(BvhNode8, lox); OFF(BvhNode8, loy); OFF(BvhNode8, loz); OFF(BvhNode8, hix);
     OFF(BvhNode8, hiy); OFF(BvhNode8, hiz); OFF(BvhNode8, child);
-    SIZE(BvhNode8Q); OFF(BvhNode8Q, child); OFF(BvhNode8Q, base); OFF(BvhNode8Q, step); OFF(BvhNode8Q, qlox);
-    OFF(BvhNode8Q, qloy); OFF(BvhNode8Q, qloz); OFF(BvhNode8Q, qhix); OFF(BvhNode8Q, qhiy); OFF(BvhNode8Q, qhiz);
-    OFF(BvhNode8Q, pad);
     SIZE(TriBlock4); OFF(TriBlock4, v0x); OFF(TriBlock4, v0y); OFF(TriBlock4, v0z); OFF(TriBlock4, v1x);
     OFF(TriBlock4, v1y); OFF(TriBlock4, v1z); OFF(TriBlock4, v2x); OFF(TriBlock4, v2y); OFF(TriBlock4, v2z);
     OFF(TriBlock4, id);
@@ -48,6 +45,5 @@ __kernel void layout_probe(__global int *out)
     out[i++] = -1; /* end marker */
     /* after it, the alignment of the structs whose vector fields need more than 16 bytes */
     out[i++] = (int)__alignof__(BvhNode8);
-    out[i++] = (int)__alignof__(BvhNode8Q);
     out[i++] = (int)__alignof__(InstanceBoxes);
 }

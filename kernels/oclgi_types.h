@@ -42,9 +42,12 @@ typedef struct {
 /* The scene's wide node (bvh.h): up to 8 children, their boxes as SoA
  * float8 fields (child k in lane k), so one float8 op slabs every child
  * against one plane. child[k] >= 0: an inner child, index of its BvhNode8;
- * child[k] < 0: a leaf, ~(first_tri << 3 | (count - 1)), triangles [first,
- * first + count), count 1..8. An unused lane has the box lo = hi = +inf,
- * which every ray misses (bvh.h says why). 224 bytes, 32-byte aligned. */
+ * child[k] < 0: a leaf of count 1..8 triangles, ~(offset / 32 << 3 |
+ * (count - 1)), its triangles in TriBlock4 records from that byte offset
+ * in the nodes' buffer (oclgi/accel/bvh_leaf_blocks.py recodes the
+ * collapse's ~(first_tri << 3 | (count - 1)), a run of the Tri array).
+ * An unused lane has the box lo = hi = +inf, which every ray misses (bvh.h
+ * says why). 224 bytes, 32-byte aligned. */
 typedef struct {
     float8 lox;
     float8 loy;
@@ -54,26 +57,6 @@ typedef struct {
     float8 hiz;
     int8 child;
 } BvhNode8;
-
-/* BvhNode8 with quantised child boxes (bvh.h bvh8_traverse): 128 bytes, two
- * cache lines, against BvhNode8's 224. child as in BvhNode8, but 0 for an
- * unused lane (no node's child is node 0, a root). A child plane is base +
- * q * step on its axis, q an 8-bit count and step a power of two (so the
- * product is exact and the sum rounds once); the host rounds lower planes
- * down and upper planes up, so every decoded box holds the exact one
- * (oclgi/accel/bvh_quantise.py). base.w and step.w are unused. */
-typedef struct {
-    int8 child;
-    float4 base;
-    float4 step;
-    uchar8 qlox;
-    uchar8 qloy;
-    uchar8 qloz;
-    uchar8 qhix;
-    uchar8 qhiy;
-    uchar8 qhiz;
-    int4 pad;
-} BvhNode8Q;
 
 /* Up to 4 triangles of a wide leaf as SoA lanes (geometry.h
  * tri4_intersect), stored after the wide nodes in the same buffer (bvh.h):

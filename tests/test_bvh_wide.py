@@ -1,16 +1,13 @@
-"""The scene's wide BVH (8-wide nodes, oclgi/accel/bvh_wide.py and the
-float8 traversal of kernels/bvh.h), in both wide layouts (exact boxes,
-"sah8", and quantised boxes, "sah8q", oclgi/accel/bvh_quantise.py; each
-with leaves as blocks of 4 triangles, "sah8b" and "sah8qb",
-oclgi/accel/bvh_leaf_blocks.py),
-against brute force and against the binary traversal of the same tree.
+"""The scene's wide BVH, "sah8b" (8-wide nodes, oclgi/accel/bvh_wide.py and
+the float8 traversal of kernels/bvh.h, with leaves as blocks of 4
+triangles, oclgi/accel/bvh_leaf_blocks.py), against brute force and
+against the binary traversal of the same tree.
 
 The wide tree holds the binary tree's boxes and leaves, and the traversal
 uses the binary walk's slab arithmetic and triangle test: every ray must
 give the binary walk's (t, u, v, tri) bit for bit, but where two triangles
 lie at exactly the same distance (the same t bits; which one is found first
-depends on the order of the visits). The quantised boxes hold the exact
-ones, so that walk may visit more nodes, never fewer, and the same holds. Both are checked against a float64
+depends on the order of the visits). It is checked against a float64
 brute-force cast on the Cornell box, the bunny and Sponza, with incoherent
 rays and with the rays of diffuse bounces.
 """
@@ -56,32 +53,21 @@ def sponza(scenes_dir):
 
 
 SCENES = ["cornell", "bunny", "sponza"]
-# The wide layouts: exact or quantised boxes, leaves as runs of triangles
-# or as blocks of 4 (oclgi/accel/bvh_build.py QUALITIES).
-WIDE_TREES = ["sah8b", "sah8", "sah8q", "sah8qb"]
-
-
-def tree_of(engine, tree):
-    """The engine's scene with the given scene tree (built once per engine)."""
-    if engine.compiled.bvh_quality == tree:
-        return engine.compiled
-    cache = engine.__dict__.setdefault("_trees", {})
-    if tree not in cache:
-        cache[tree] = CompiledScene(engine.ctx, engine.scene, bvh_quality=tree)
-    return cache[tree]
 
 
 def binary_of(engine):
     """The engine's scene with the binary SAH tree (built once per engine)."""
-    return tree_of(engine, "sah")
+    if "_binary" not in engine.__dict__:
+        engine._binary = CompiledScene(engine.ctx, engine.scene, bvh_quality="sah")
+    return engine._binary
 
 
-def assert_same_as_binary(engine, origins, dirs, tmax=np.inf, wide=None):
-    """The wide traversal's hits equal the binary one's bit for bit, but for
-    exact ties (the same t bits, another triangle). Returns the tie count."""
-    wide = wide or engine.compiled
+def assert_same_as_binary(engine, origins, dirs, tmax=np.inf):
+    """The wide traversal's hits (the engine's default tree) equal the
+    binary one's bit for bit, but for exact ties (the same t bits, another
+    triangle). Returns the tie count."""
     a = closest_hits(engine.queue, binary_of(engine), origins, dirs, tmax)
-    b = closest_hits(engine.queue, wide, origins, dirs, tmax)
+    b = closest_hits(engine.queue, engine.compiled, origins, dirs, tmax)
     hit = a[3] >= 0
     assert np.array_equal(hit, b[3] >= 0), "hit or miss differs"
     bits = [x.view(np.int32) if x.dtype == np.float32 else x for x in (*a[:3], a[3])]
@@ -92,34 +78,20 @@ def assert_same_as_binary(engine, origins, dirs, tmax=np.inf, wide=None):
     return int(tie.sum())
 
 
-_BRUTE = {}
-
-
-def _brute(name, rays, origins, dirs, scene):
-    """Brute force's hits, once per ray set: every tree of a scene is checked
-    on the same rays (the rng fixture starts each test at the same seed)."""
-    key = (name, rays, origins.tobytes(), dirs.tobytes())
-    if key not in _BRUTE:
-        _BRUTE[key] = ray_triangle_brute(origins, dirs, scene.vertices[scene.faces])
-    return _BRUTE[key]
-
-
-@pytest.mark.parametrize("tree", WIDE_TREES)
 @pytest.mark.parametrize("rays", list(RAYS))
 @pytest.mark.parametrize("name", SCENES)
-def test_wide_equals_brute_force_and_binary(request, rng, name, rays, tree):
+def test_wide_equals_brute_force_and_binary(request, rng, name, rays):
     """Every ray checked against all triangles in float64 (1,000 rays on
     the large meshes, where brute force is slow), and 100,000 rays against
     the binary traversal bit for bit."""
     engine = request.getfixturevalue(name)
     scene = engine.scene
-    assert engine.compiled.bvh_wide  # the default scene tree is the wide one
-    wide = tree_of(engine, tree)
-    assert wide.bvh_wide and wide.bvh_quantised == ("q" in tree) and wide.bvh_blocks == ("b" in tree)
+    wide = engine.compiled
+    assert wide.bvh_quality == "sah8b" and wide.bvh_wide  # the default scene tree is the wide one
     n = 1_000 if scene.n_triangles > 1000 else 10_000
     origins, dirs = RAYS[rays](scene, rng, n)
     t, _u, _v, tri = closest_hits(engine.queue, wide, origins, dirs)
-    t_ref, tri_ref = _brute(name, rays, origins, dirs, scene)
+    t_ref, tri_ref = ray_triangle_brute(origins, dirs, scene.vertices[scene.faces])
     hit, hit_ref = tri >= 0, tri_ref >= 0
     assert hit_ref.mean() > 0.3
     both = hit & hit_ref
@@ -132,12 +104,11 @@ def test_wide_equals_brute_force_and_binary(request, rng, name, rays, tree):
     assert ((tri[both] == tri_ref[both]) | (rel < 1e-5) | (rel > 1e-4)).all()
 
     origins, dirs = RAYS[rays](scene, rng, 100_000)
-    ties = assert_same_as_binary(engine, origins, dirs, wide=wide)
+    ties = assert_same_as_binary(engine, origins, dirs)
     assert ties <= 0.005 * len(origins)
 
 
-@pytest.mark.parametrize("tree", WIDE_TREES)
-def test_axis_aligned_rays_equal_binary(cornell, rng, tree):
+def test_axis_aligned_rays_equal_binary(cornell, rng):
     """Directions with zero components (1/d infinite: the slab test's NaN
     case, which the wide walk takes in box.h's own form) from origins on the
     walls' and boxes' planes: the same hits as the binary walk."""
@@ -155,28 +126,13 @@ def test_axis_aligned_rays_equal_binary(cornell, rng, tree):
     dirs[zero] = 0.0
     dirs = unit(dirs)
     assert (dirs == 0).any(axis=1).mean() > 0.5
-    wide = tree_of(cornell, tree)
-    t, _u, _v, tri = closest_hits(cornell.queue, wide, origins, dirs)
+    t, _u, _v, tri = closest_hits(cornell.queue, cornell.compiled, origins, dirs)
     assert np.isfinite(t).mean() > 0.3
-    if not wide.bvh_quantised:
-        assert_same_as_binary(cornell, origins, dirs, wide=wide)
-        return
-    # The slab test (box.h) misses a box when the ray lies in the plane of
-    # one of its faces with a zero direction component along it (the NaN of
-    # 0 * inf meets the other plane's inf): the quantised box, a little
-    # larger, does not have the ray on its plane. There the quantised walk
-    # may find a hit the exact boxes hide, never lose one: where the two
-    # differ (other than by ties), it hit, nearer or where binary missed,
-    # and the ray has a zero direction component.
-    t_b, _ub, _vb, tri_b = closest_hits(cornell.queue, binary_of(cornell), origins, dirs)
-    differ = ~((t.view(np.int32) == t_b.view(np.int32)) & ((tri == tri_b) | (tri >= 0)))
-    assert (tri[differ] >= 0).all() and ((tri_b[differ] < 0) | (t[differ] <= t_b[differ])).all()
-    assert (dirs[differ] == 0).any(axis=1).all() and differ.mean() < 0.05
+    assert_same_as_binary(cornell, origins, dirs)
 
 
-@pytest.mark.parametrize("tree", WIDE_TREES)
-def test_any_hit_agrees_with_closest_hit(bunny, rng, tree):
-    wide = tree_of(bunny, tree)
+def test_any_hit_agrees_with_closest_hit(bunny, rng):
+    wide = bunny.compiled
     origins, dirs = incoherent_rays(bunny.scene, rng, 20_000)
     t, _u, _v, tri = closest_hits(bunny.queue, wide, origins, dirs)
     half = np.where(tri >= 0, t * 0.5, 1.0)
@@ -185,32 +141,26 @@ def test_any_hit_agrees_with_closest_hit(bunny, rng, tree):
     assert (any_hits(bunny.queue, wide, origins, dirs, full).astype(bool) == (tri >= 0)).all()
 
 
-@pytest.mark.parametrize("tree", WIDE_TREES)
-def test_limited_rays_equal_binary(bunny, rng, tree):
+def test_limited_rays_equal_binary(bunny, rng):
     """A finite tmax (shadow rays, the locate queries) culls the same in both."""
     origins, dirs = incoherent_rays(bunny.scene, rng, 50_000)
     tmax = rng.uniform(0.0, 0.1, len(origins)).astype(np.float32)
-    assert_same_as_binary(bunny, origins, dirs, tmax, wide=tree_of(bunny, tree))
+    assert_same_as_binary(bunny, origins, dirs, tmax)
 
 
 def test_wide_tree_visits_fewer_nodes(bunny, sponza, rng):
     """The counted work: a third of the binary walk's nodes or fewer, the
-    triangles tested about the same (the same leaves). The quantised boxes
-    are larger: at least the exact layout's work, and at most 20% more."""
+    triangles tested about the same (the same leaves)."""
     for engine in (bunny, sponza):
         origins, dirs = incoherent_rays(engine.scene, rng, 20_000)
         nodes_w, tests_w = traversal_work(engine.queue, engine.compiled, origins, dirs)
         nodes_b, tests_b = traversal_work(engine.queue, binary_of(engine), origins, dirs)
-        nodes_q, tests_q = traversal_work(engine.queue, tree_of(engine, "sah8q"), origins, dirs)
         assert nodes_w.min() >= 1
         assert nodes_w.sum() < 0.4 * nodes_b.sum()
         assert 0.8 * tests_b.sum() < tests_w.sum() < 1.2 * tests_b.sum()
-        assert nodes_w.sum() <= nodes_q.sum() < 1.2 * nodes_w.sum()
-        assert tests_w.sum() <= tests_q.sum() < 1.2 * tests_w.sum()
 
 
-@pytest.mark.parametrize("tree", WIDE_TREES)
-def test_moved_instance_equals_binary(scenes_dir, rng, tree):
+def test_moved_instance_equals_binary(scenes_dir, rng):
     """Two-level scenes: a moved object's wide tree is traversed in its own
     frame like the binary one, to the same hits."""
     scene = oclgi.load_dict({
@@ -221,7 +171,7 @@ def test_moved_instance_equals_binary(scenes_dir, rng, tree):
         ],
         "point_light": [{"position": [0, 1.5, 0], "intensity": [1, 1, 1]}],
     })
-    engine = oclgi.Engine(scene, bvh=tree)
+    engine = oclgi.Engine(scene)
     binary = binary_of(engine)
     angle = 0.7
     m = np.eye(4)
@@ -344,28 +294,12 @@ def test_tree_is_selectable_and_fingerprinted(cornell):
     wide, binary = cornell.compiled, binary_of(cornell)
     assert (wide.bvh_quality, wide.bvh_wide, binary.bvh_wide) == ("sah8b", True, False)
     assert wide.n_nodes < binary.n_nodes == binary.n_binary_nodes == wide.n_binary_nodes
-    assert (cornell.scene and oclgi.Engine(cornell.scene, bvh="lbvh8").compiled.bvh_wide)
+    assert not oclgi.Engine(cornell.scene, bvh="lbvh").compiled.bvh_wide
     # the instances' roots say the layout; the fingerprint hashes the traversed nodes
     assert (wide.instances_host["root"] < 0).all() and (binary.instances_host["root"] >= 0).all()
     assert wide.fingerprint() != binary.fingerprint()
-    assert wide.fingerprint() == CompiledScene(cornell.ctx, cornell.scene).fingerprint()
-    assert wide.fingerprint() != tree_of(cornell, "sah8").fingerprint()  # the leaf blocks are hashed too
-
-
-@pytest.mark.parametrize("rays", list(RAYS))
-def test_leaf_blocks_equal_runs_bit_for_bit(sponza, bunny, rng, rays):
-    """Leaves tested 4 triangles at a time give the one-at-a-time test's
-    hits, ties included: the same nodes in the same order, each lane the
-    same arithmetic, and the lowest lane of equal distances kept (the one a
-    sequential test keeps)."""
-    for engine in (bunny, sponza):
-        origins, dirs = RAYS[rays](engine.scene, rng, 100_000)
-        for runs, blocks in (("sah8", "sah8b"), ("sah8q", "sah8qb")):
-            a = closest_hits(engine.queue, tree_of(engine, runs), origins, dirs)
-            b = closest_hits(engine.queue, tree_of(engine, blocks), origins, dirs)
-            hit = a[3] >= 0
-            assert np.array_equal(a[3], b[3]) and np.array_equal(a[0].view(np.int32), b[0].view(np.int32))
-            for x, y in zip(a[1:3], b[1:3]):
-                assert np.array_equal(x[hit].view(np.int32), y[hit].view(np.int32))
-            assert np.array_equal(traversal_work(engine.queue, tree_of(engine, runs), origins, dirs),
-                                  traversal_work(engine.queue, tree_of(engine, blocks), origins, dirs))
+    again = CompiledScene(cornell.ctx, cornell.scene)
+    assert wide.fingerprint() == again.fingerprint()
+    again._leaf_blocks = again._leaf_blocks.copy()
+    again._leaf_blocks["v0x"][0, 0] += 1.0
+    assert wide.fingerprint() != again.fingerprint()  # the leaf blocks are hashed too

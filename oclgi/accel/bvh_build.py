@@ -50,28 +50,24 @@ def bit_length(x: np.ndarray) -> np.ndarray:
 
 # The builders of binary trees.
 BUILDERS = ("lbvh", "sah")
-# The scene trees (oclgi/scene/compiled.py): a builder, and "8" for its tree
-# collapsed into 8-wide nodes (bvh_wide.py), which the scene's traversal
-# slabs 8 boxes at a time; then "q" for those nodes with quantised child
-# boxes (bvh_quantise.py: 128 bytes a node against 224) and "b" for leaves
-# as blocks of 4 triangles tested at once (bvh_leaf_blocks.py). Without
-# "8" the binary tree is traversed as built.
-QUALITIES = ("lbvh", "sah", "lbvh8", "sah8", "sah8q", "sah8b", "sah8qb")
+# The scene trees (oclgi/scene/compiled.py): "lbvh" and "sah", a builder's
+# binary tree traversed as built, and "sah8b", the SAH tree collapsed into
+# 8-wide nodes (bvh_wide.py), which the scene's traversal slabs 8 boxes at a
+# time, with its leaves as blocks of 4 triangles tested at once
+# (bvh_leaf_blocks.py).
+QUALITIES = ("lbvh", "sah", "sah8b")
 
 
 class SceneTree(NamedTuple):
     builder: str  # of BUILDERS
-    wide: bool  # 8-wide nodes
-    quantised: bool  # BvhNode8Q, else BvhNode8 (wide trees)
-    blocks: bool  # leaves as TriBlock4 records (wide trees)
+    wide: bool  # 8-wide nodes, leaves as TriBlock4 records
 
 
 def scene_tree(quality: str) -> SceneTree:
     """What a scene tree name of QUALITIES builds."""
     if quality not in QUALITIES:
         raise ValueError(f"BVH quality must be one of {QUALITIES}, got {quality!r}")
-    builder, _, layout = quality.partition("8")
-    return SceneTree(builder, "8" in quality, "q" in layout, "b" in layout)
+    return SceneTree(quality.partition("8")[0], "8" in quality)
 
 
 def build_bvh(box_lo: np.ndarray, box_hi: np.ndarray, leaf_size: int = 4, quality: str = "lbvh",

@@ -27,12 +27,12 @@ MAX_UNIT = (1 << (31 - LEAF_BITS)) - 1
 
 def leaf_blocks(nodes: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(nodes with recoded leaf lanes, TriBlock4 records) for the joint node
-    array of wide trees (``BvhNode8`` or ``BvhNode8Q`` records, leaves as
-    runs of ``tris``, the joint ``Tri`` array)."""
+    array of wide trees (``BvhNode8`` records, leaves as runs of ``tris``,
+    the joint ``Tri`` array)."""
     if nodes.itemsize % UNIT or TriBlock4.itemsize % UNIT:
         raise AssertionError("nodes and blocks must be multiples of 32 bytes")
     child = nodes["child"]
-    used = np.isfinite(nodes["lox"]) if "lox" in nodes.dtype.names else child != 0
+    used = np.isfinite(nodes["lox"])
     leaf = used & (child < 0)
     run = ~child[leaf].astype(np.int64)  # row-major: the nodes' order, lane by lane
     first, count = run >> LEAF_BITS, (run & ((1 << LEAF_BITS) - 1)) + 1

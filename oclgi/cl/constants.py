@@ -26,13 +26,6 @@ LANES = 8
 # most 1 + b + 31 levels for fewer than 2^31 primitives.
 # The scene's BVHs (kernels/bvh.h), 30-bit codes: 62 levels at most.
 BVH_STACK_SIZE = 64
-# A wide tree's Instance.root is ~node (kernels/bvh.h); with this bit set
-# in ~root, its nodes are the quantised BvhNode8Q records, else BvhNode8.
-BVH_QUANTISED_ROOT = 1 << 30
-# With this bit set in ~root, the tree's leaves are TriBlock4 records after
-# its nodes (a leaf lane holds ~(offset / 32 << 3 | count - 1), the offset in
-# bytes from the start of the nodes' buffer), else runs of Tri records.
-BVH_BLOCK_ROOT = 1 << 29
 # The overlap walks over the disc, piece and ball trees (kernels/box_bvh.h),
 # 30-bit codes: a node pushes at most its two children, so depth + 1 entries.
 BOX_BVH_STACK = 64
@@ -128,8 +121,6 @@ VIEW_FILMIC = 2
 DEFINES = {
     "lanes": LANES,
     "bvh_stack_size": BVH_STACK_SIZE,
-    "bvh_quantised_root": BVH_QUANTISED_ROOT,
-    "bvh_block_root": BVH_BLOCK_ROOT,
     "box_bvh_stack": BOX_BVH_STACK,
     "box_leaf_bits": BOX_LEAF_BITS,
     "box_wide_stack": BOX_WIDE_STACK,

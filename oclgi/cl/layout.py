@@ -21,21 +21,12 @@ BvhNode = np.dtype([("lo", f4, 3), ("first", i4), ("hi", f4, 3), ("count", i4)])
 
 # The scene's wide BVH node, 224 bytes (kernels/bvh.h, oclgi/accel/bvh_wide.py):
 # the boxes of up to 8 children as SoA lanes, and per lane the child: an
-# inner child's node index (>= 0) or a leaf's ~(first_tri << 3 | count - 1);
-# unused lanes have lo = hi = +inf.
+# inner child's node index (>= 0) or a leaf's ~(first_tri << 3 | count - 1),
+# which oclgi/accel/bvh_leaf_blocks.py recodes to point at its TriBlock4
+# records; unused lanes have lo = hi = +inf.
 WIDE = LANES  # one float8 per field
 BvhNode8 = np.dtype([("lox", f4, WIDE), ("loy", f4, WIDE), ("loz", f4, WIDE), ("hix", f4, WIDE), ("hiy", f4, WIDE),
                      ("hiz", f4, WIDE), ("child", i4, WIDE)])
-
-# The same node with its child boxes quantised, 128 bytes (two cache lines;
-# oclgi/accel/bvh_quantise.py writes it, kernels/bvh.h reads it): per lane
-# the child as in BvhNode8 (0 for an unused lane), then the node's grid,
-# base (xyz) and power-of-two step (xyz) per axis, and each child plane as
-# an 8-bit count of steps from the base, rounded outwards.
-u1 = np.uint8
-BvhNode8Q = np.dtype([("child", i4, WIDE), ("base", f4, 4), ("step", f4, 4), ("qlox", u1, WIDE), ("qloy", u1, WIDE),
-                      ("qloz", u1, WIDE), ("qhix", u1, WIDE), ("qhiy", u1, WIDE), ("qhiz", u1, WIDE),
-                      ("pad", i4, 4)])
 
 # A wide leaf's triangles for the 4-lane watertight test, 160 bytes
 # (oclgi/accel/bvh_leaf_blocks.py writes them after the wide nodes, in the
@@ -150,7 +141,7 @@ RayMapDisc = np.dtype(
 ScRecord = np.dtype([("org_tmax", f4, 4), ("dir_inv2", f4, 4)])
 
 STRUCTS = {
-    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "BvhNode8Q": BvhNode8Q, "TriBlock4": TriBlock4, "Tri": Tri,
+    "BvhNode": BvhNode, "BvhNode8": BvhNode8, "TriBlock4": TriBlock4, "Tri": Tri,
     "Instance": Instance, "InstanceBoxes": InstanceBoxes, "Segment": Segment,
     "Material": Material, "Texture": Texture, "Background": Background, "Emitter": Emitter,
     "DiscBlock": DiscBlock, "PieceBlock": PieceBlock, "RayMapDisc": RayMapDisc, "ScRecord": ScRecord,

@@ -17,9 +17,8 @@ import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_leaf_blocks import leaf_blocks
-from ..accel.bvh_quantise import quantise
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_BLOCK_ROOT, BVH_QUANTISED_ROOT, BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
+from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
 from ..cl.layout import Emitter, Instance, Tri
 from ..errors import OclgiError
 from . import background, materials, shading_normals, textures
@@ -33,8 +32,9 @@ F32_MAX = float(np.finfo(np.float32).max)
 # The scene's and the movable objects' trees: built once per scene (a move
 # changes a transform only), traversed by every ray of every kernel. The
 # binned SAH tree collapsed into 8-wide nodes, its leaves as blocks of 4
-# triangles (oclgi/accel/bvh_build.py QUALITIES has the others; measured
-# against each other in bench/HISTORY.md, "Wide nodes").
+# triangles (oclgi/accel/bvh_build.py QUALITIES has the binary trees too;
+# bench/HISTORY.md, "Wide nodes", the other layouts it was measured
+# against).
 BVH_QUALITY = "sah8b"
 
 
@@ -66,10 +66,8 @@ class CompiledScene:
     it into 8-wide nodes (BvhNode8, oclgi/accel/bvh_wide.py), which the
     kernels traverse 8 child boxes at a time, with its leaves as blocks of 4
     triangles tested at once (TriBlock4, oclgi/accel/bvh_leaf_blocks.py);
-    "sah8" keeps the leaves as runs of triangles, "sah8q" and "sah8qb"
-    quantise the child boxes (BvhNode8Q, oclgi/accel/bvh_quantise.py); "sah"
-    traverses the binary SAH tree itself (two boxes a node), "lbvh" and
-    "lbvh8" the Morton tree.
+    "sah" traverses the binary SAH tree itself (two boxes a node), "lbvh"
+    the binary Morton tree.
     Every one gives the same hits up to which of two equally near triangles
     is found (the wide and binary layouts of one tree: the same bits but
     for such ties); ``n_nodes`` counts the traversed layout's nodes,
@@ -203,17 +201,16 @@ class CompiledScene:
 
     @property
     def scene_args(self) -> tuple:
-        """The kernels' SCENE_ARGS (kernels/bvh.h): nodes (BvhNode or
-        BvhNode8 records, as the instances' roots say), triangles,
-        instances, count."""
+        """The kernels' SCENE_ARGS (kernels/bvh.h): nodes (BvhNode records,
+        or BvhNode8 records and their leaves' TriBlock4 records, as the
+        instances' roots say), triangles, instances, count."""
         return (self.nodes, self.tris, self.instances, len(self.instances_host))
 
     def _build_objects(self, v):
         """One BVH per object, in one node array and one triangle array; one
         Instance per object, placed where the scene file put it (identity).
         A wide tree's Instance root is ~(its root node) (kernels/bvh.h)."""
-        builder, wide, quantised, blocks = scene_tree(self.bvh_quality)
-        flags = (BVH_QUANTISED_ROOT if quantised else 0) | (BVH_BLOCK_ROOT if blocks else 0)
+        builder, wide = scene_tree(self.bvh_quality)
         ranges = self.scene.object_ranges()
         # the Tri records as (triangle, vertex, xyz + a word): v0 id v1 pad v2 pad
         nodes_all, tri_words = [], np.zeros((len(v), 3, 4), np.float32)
@@ -231,7 +228,7 @@ class CompiledScene:
             n_binary += len(bvh.nodes)
             if wide:
                 tree = collapse(bvh.nodes, node_offset=n_nodes, tri_offset=a)
-                nodes, root = (quantise(tree.nodes) if quantised else tree.nodes), ~(n_nodes | flags)
+                nodes, root = tree.nodes, ~n_nodes
                 stack_need = max(stack_need, tree.stack_need)
                 depth = max(depth, tree.depth)
             else:
@@ -253,21 +250,17 @@ class CompiledScene:
         tris = tri_words.reshape(len(v), -1).view(Tri)[:, 0]
         if not wide and depth > BVH_STACK_SIZE:
             raise OclgiError(f"BVH depth {depth} exceeds the traversal stack ({BVH_STACK_SIZE})")
-        if wide and n_nodes >= BVH_BLOCK_ROOT:
-            raise OclgiError(f"the wide BVH addresses fewer than {BVH_BLOCK_ROOT} nodes")
         if wide and stack_need > WIDE_STACK:
             raise OclgiError(f"the wide BVH needs a traversal stack of {stack_need} entries, more than the "
                              f"kernels' {WIDE_STACK}")
         self.bvh_depth = depth  # levels of the traversed layout
         self.bvh_wide = wide
-        self.bvh_quantised = quantised
-        self.bvh_blocks = blocks
         self.bvh_stack_need = stack_need if wide else depth
         # the traversed layout's nodes: what the device reads and the fingerprint hashes
         self._nodes = np.concatenate(nodes_all)
-        # the leaves' triangle blocks, after the nodes in the nodes' buffer
+        # a wide tree's leaves as triangle blocks, after the nodes in the nodes' buffer
         self._leaf_blocks = np.zeros(0, np.uint8)
-        if blocks:
+        if wide:
             self._nodes, self._leaf_blocks = leaf_blocks(self._nodes, tris)
         self.n_nodes = len(self._nodes)
         self.n_binary_nodes = n_binary
