@@ -179,13 +179,12 @@ class Engine:
     default OCLGI_DEVICE / PYOPENCL_CTX / the PoCL CPU device.
     ``local_size``: work-group size of the kernels (None: the runtime's
     choice); results do not depend on it.
-    ``bvh``: the scene trees, "sah8b" (the default: a binned SAH tree
-    collapsed into 8-wide nodes traversed with float8 slab tests, about a
-    third of the binary tree's node visits, its leaves tested 4 triangles
-    at a time; "sah8" tests them one by one, "sah8q"/"sah8qb" quantise the
-    child boxes; oclgi/accel/bvh_build.py QUALITIES), "sah" (the binary SAH tree),
-    "lbvh8" or "lbvh" (Morton order: a faster build, more nodes per ray);
-    the hits are the same up to ties between equally near triangles.
+    ``bvh``: the scene trees (oclgi/accel/bvh_build.py QUALITIES), "sah8b"
+    (the default: a binned SAH tree collapsed into 8-wide nodes traversed
+    with float8 slab tests, about a third of the binary tree's node visits,
+    its leaves tested 4 triangles at a time), "sah" (the binary SAH tree) or
+    "lbvh" (the binary tree in Morton order: a faster build, more nodes per
+    ray); the hits are the same up to ties between equally near triangles.
     """
 
     def __init__(self, scene: Scene, device: str | None = None, local_size: int | None = None,
@@ -204,6 +203,7 @@ class Engine:
             raise OclgiError(f"bvh must be one of {', '.join(QUALITIES)}, got {bvh!r}")
         _check_float32(scene)
         self.scene = scene
+        self.device_spec = device  # what a process of its own opens the same device with (oclgi/viewer/render_process.py)
         self.ctx, self.queue = create_context(device)
         if local_size is not None:
             dev = self.queue.device

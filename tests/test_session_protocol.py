@@ -7,6 +7,7 @@ is checked on the stored segments (the same buffer, the same bytes) and
 on the store's trace counter.
 """
 
+import copy
 import gc
 import os
 
@@ -250,37 +251,65 @@ def test_closing_sessions_gives_the_memory_back(engine):
                             f"{one / 2**20:.0f} MiB each"
 
 
+@pytest.fixture(scope="module")
+def lit_engine(scenes_dir):
+    """The engine's room with a point light, lamp, that the sequences move."""
+    scene = _scene(scenes_dir)
+    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=16, height=16)
+    scene.point_lights = [oclgi.PointLight(position=LAMP, intensity=(1.0, 1.0, 1.0), name="lamp")]
+    return oclgi.Engine(scene)
+
+
+LAMP = (0.0, 1.5, 0.0)
+
+
+def _place_lamp(target, position) -> None:
+    """Light ``lamp`` of an engine or a session moved to ``position``."""
+    params = target.parameters()
+    params["light.lamp.position"] = position
+    params.update()
+
+
 @pytest.mark.parametrize("kind", ["points", "camera", "photon_map"])
-def test_any_sequence_of_changes_closes_cleanly_and_stays_exact(engine, kind):
-    """Random sequences of moves, photon counts and (for the DETP kinds) an
-    estimator switch, then close: every step leaves a DETP session equal to
-    a fresh one at its pose and count (bit for bit; a Photon Map session's
-    practical update tends to recomputation, it is not equal to it), and
-    close releases every buffer the session holds once, none twice (the
-    estimator's crossing lists held the store a photon count replaced)."""
+def test_any_sequence_of_changes_closes_cleanly_and_stays_exact(lit_engine, kind):
+    """Random sequences of moves, light moves, photon counts and (for the
+    DETP kinds) an estimator switch, then close: every step leaves a DETP
+    session equal to a fresh one at its pose, light and count (bit for bit;
+    a Photon Map session's practical update tends to recomputation, it is
+    not equal to it), and close releases every buffer the session holds
+    once, none twice (the estimator's crossing lists held the store a
+    photon count replaced)."""
+    engine = lit_engine
+    reference = oclgi.Engine(copy.deepcopy(engine.scene))  # its lamp placed where the session's is, for the fresh sessions
     rng = np.random.default_rng(sum(map(ord, kind)))
     g = np.linspace(-0.5, 0.5, 8)
     pts = np.array([[x, 0.01, z, 0, 1, 0] for x in g for z in g])  # the floor around the bunny
 
-    def make(photons, method):
+    def make(on, photons, method):
         if kind == "photon_map":
-            return oclgi.PhotonMapSession(engine, pts, photons=photons, k=10)
-        return oclgi.Session(engine, None if kind == "camera" else pts, method=method, photons=photons, radius=0.05)
+            return oclgi.PhotonMapSession(on, pts, photons=photons, k=10)
+        return oclgi.Session(on, None if kind == "camera" else pts, method=method, photons=photons, radius=0.05)
 
     for trial in range(2):
-        photons, method, pose = 3_000, "detp_disc_index", np.eye(4)
-        s = make(photons, method)
-        for step in ["move", "photons", *rng.choice(["move", "photons", "method"], 4)]:  # the failing pair first
+        photons, method, pose, lamp = 3_000, "detp_disc_index", np.eye(4), LAMP
+        _place_lamp(reference, lamp)
+        s = make(engine, photons, method)
+        steps = ["move", "photons", "light", *rng.choice(["move", "photons", "method", "light"], 4)]
+        for step in steps:  # the failing pair (a move, then a photon count) first
             if step == "move":
                 pose = _shift(float(rng.uniform(-0.2, 0.2)))
                 s.move("bunny", pose)
             elif step == "photons":  # more (traced and added) or fewer (dropped)
                 photons = 4_500 if photons == 3_000 else int(rng.choice([1_500, 3_000, 6_000]))
                 s.set_photons(photons)
+            elif step == "light":
+                lamp = tuple(float(c) for c in rng.uniform((-0.4, 1.2, -0.4), (0.4, 1.7, 0.4)))
+                _place_lamp(s, lamp)
+                _place_lamp(reference, lamp)
             elif kind != "photon_map":
                 method = "detp" if method == "detp_disc_index" else "detp_disc_index"
                 s.set_estimator(method)
-            fresh = make(photons, method)
+            fresh = make(reference, photons, method)
             if not np.array_equal(pose, np.eye(4)):
                 fresh.move("bunny", pose)
             if kind != "photon_map":
@@ -290,3 +319,39 @@ def test_any_sequence_of_changes_closes_cleanly_and_stays_exact(engine, kind):
         s.close()  # no buffer released twice (pyopencl refuses a double unref)
         assert held - {id(v) for v in vars(engine.compiled).values() if isinstance(v, cl.MemoryObjectHolder)} \
             <= s.released_buffers
+
+
+def test_a_light_sessions_sequences_close_cleanly_and_stay_exact():
+    """The light session's own changes in random order (the light to a
+    precomputed position, reused, or anywhere else, recomputed; an estimator
+    switch), then close: each step equals a fresh light session moved there
+    once, bit for bit, and close releases every buffer it holds once."""
+    from oclgi.incremental.light_session import LightSession
+    from test_light_reuse import POSITIONS, box, points
+
+    engine = oclgi.Engine(box(POSITIONS[0]))
+    rng = np.random.default_rng(5)
+
+    def make(method):
+        return LightSession(engine, points(), light="lamp", positions=POSITIONS, photons=600, max_depth=6,
+                            method=method, radius=0.12)
+
+    s, method, at = make("detp_disc_index"), "detp_disc_index", POSITIONS[0]
+    for step in ["reuse", "method", "anywhere", *rng.choice(["reuse", "anywhere", "method"], 4)]:
+        if step == "reuse":
+            at = POSITIONS[int(rng.integers(len(POSITIONS)))]
+        elif step == "anywhere":
+            at = POSITIONS[0] + rng.uniform(-0.2, 0.2, 3)
+        else:
+            method = "impact" if method == "detp_disc_index" else "detp_disc_index"
+            s.set_estimator(method)
+        if step != "method":
+            assert s.move_light(at).reused == (step == "reuse")
+        fresh = make(method)
+        fresh.move_light(at)
+        assert s.accumulators().tobytes() == fresh.accumulators().tobytes(), step
+        fresh.close()
+    held = {id(b) for b in _buffers(s)}
+    s.close()
+    assert held - {id(v) for v in vars(engine.compiled).values() if isinstance(v, cl.MemoryObjectHolder)} \
+        <= s.released_buffers

@@ -122,7 +122,19 @@ def test_a_page_past_max_pages_is_told_and_closed(viewer):
         viewer.ledger = saved
 
 
-def test_another_pages_move_is_answered_during_a_render_and_a_closed_page_stops_its_render(viewer):
+@pytest.mark.parametrize("where", ["server", "process"])
+def test_another_pages_move_is_answered_during_a_render_and_a_closed_page_stops_its_render(viewer, where,
+                                                                                            monkeypatch):
+    """A render in the server's process yields between its batches; one in a
+    process of its own (oclgi/viewer/render_process.py) runs beside the
+    server, and is killed when its page goes away."""
+    import multiprocessing
+
+    import oclgi.viewer.render_process as render_process
+
+    if where == "process":
+        monkeypatch.setattr(render_process, "IN_PROCESS_PIXELS", 0)
+
     async def test(client):
         ws_a, page_a, _ = await _page(client, viewer)
         ws_b, page_b, _ = await _page(client, viewer)
@@ -144,6 +156,11 @@ def test_another_pages_move_is_answered_during_a_render_and_a_closed_page_stops_
         assert progress["traced"] < progress["paths"]
         await ws_a.close()  # the render stops within a batch: the device is free again at once
         await sync(ws_b, page_b, 8)
+        for _ in range(100):  # its process, if any, is gone
+            if not multiprocessing.active_children():
+                break
+            await asyncio.sleep(0.05)
+        assert not multiprocessing.active_children()
         await ws_b.close()
 
     _run(viewer, test)

@@ -361,9 +361,15 @@ async def render(ws, page, ident, width=24, height=16):
     return done, progress, png, radiance
 
 
-def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer):
+@pytest.mark.parametrize("where", ["server", "process"])
+def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer, where, monkeypatch):
+    """In the server's process, or (large renders, oclgi/viewer/render_process.py) in one of its own."""
     import oclgi
+    import oclgi.viewer.render_process as render_process
     from oclgi.io import png_bytes
+
+    if where == "process":
+        monkeypatch.setattr(render_process, "IN_PROCESS_PIXELS", 0)
 
     async def test(client):
         ws, page, _ = await connect(client, viewer)

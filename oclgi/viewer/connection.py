@@ -25,7 +25,9 @@ on the server, and the server must never fall behind a drag:
   Count) opens a session of the other kind at the current poses and
   lights, and closes the old one;
 - a render is the engine's image at the session's poses and lights from
-  the page's camera, batch by batch with progress messages between;
+  the page's camera, batch by batch with progress messages between; a
+  large one in a process of its own (oclgi/viewer/render_process.py), so
+  that it never holds other pages' moves;
 - a flood (more than MAX_MESSAGES_PER_SECOND requests in a second) is
   refused, with one error a second, and the session is left as it was;
   a ``sync`` is still answered, so the page learns where things stand.
@@ -221,11 +223,10 @@ class Connection:
         self.segments = int(new.store.path_len().sum())
         return {"switched": True, "seconds": {"total": time.perf_counter() - t0}}
 
-    def _render_run(self, fields: dict):
-        """The run of the engine's image from the page's camera at the
-        session's poses and lights (``Engine.render``'s steps), booked in
-        the server's budget; (engine, run), its batches of RENDER_BATCH paths
-        left to step."""
+    def _render_plan(self, fields: dict):
+        """The engine's image from the page's camera at the session's poses
+        and lights (``Engine.render``'s steps), booked in the server's
+        budget: (the engine at those poses and lights, camera, run arguments)."""
         from .. import budget
         from ..scene.scene import Camera
 
@@ -245,9 +246,24 @@ class Connection:
                                   k=args.get("k"))
         self.viewer.ledger.book((self, "render"), need.device_total + need.host,
                                 f"a {cam.width}x{cam.height} render")
+        return engine, cam, args
+
+    def _render_run(self, fields: dict):
+        """(engine, run) of the render in this process, its batches of RENDER_BATCH paths left to step."""
+        engine, cam, args = self._render_plan(fields)
         run = engine.render_run(cam, **args)
         run.set_batch(min(run.batch, RENDER_BATCH))
         return engine, run
+
+    def _render_job(self, fields: dict) -> dict:
+        """The render as a job for a process of its own (oclgi/viewer/render_process.py)."""
+        from .render_process import job_of
+
+        engine, cam, args = self._render_plan(fields)
+        poses = {name: engine.pose_matrix(name) for name in self.viewer.movable}
+        camera = dict(position=cam.position, look_at=cam.look_at, up=cam.up, fov=cam.fov, width=cam.width,
+                      height=cam.height)
+        return job_of(engine, poses, self.lights, camera, args, RENDER_BATCH)
 
     def _apply(self, req: Request) -> dict:
         info = {"kind": req.kind}
@@ -401,40 +417,79 @@ class Connection:
     async def _send_render(self, req: Request) -> None:
         """Render, with a ``render_progress`` message a batch (at most ten a
         second), then ``rendered`` and the image (RENDER_MAGIC: uint32 id
-        index, width, height, PNG length; the PNG; float32 radiance[H][W][3])."""
-        ident, last, t0 = req.fields["id"], 0.0, time.perf_counter()
+        index, width, height, PNG length; the PNG; float32 radiance[H][W][3]).
+        A render of more than IN_PROCESS_PIXELS runs in a process of its own."""
+        from .render_process import IN_PROCESS_PIXELS
+
+        ident, t0 = req.fields["id"], time.perf_counter()
         await self.send_json({"type": "render_started", "id": ident, "width": req.fields["width"],
                               "height": req.fields["height"]})
+        big = req.fields["width"] * req.fields["height"] > IN_PROCESS_PIXELS
         try:
-            engine, run = await self.viewer.device(self._render_run, req.fields)
-            while not run.done:  # a batch a call: other pages' requests run in between
-                if self.ws.closed:
-                    return  # the page went away: its render stops here
-                first = run.traced == 0
-                await self.viewer.device(run.step)
-                if first:  # the estimator's own check of the run (a Photon Map outgrowing the device)
-                    await self.viewer.device(run.estimator.first_batch, run.traced, run.paths.count, run.segments)
-                now = time.monotonic()
-                if now - last >= 0.1 or run.done:
-                    last = now
-                    await self.send_json({"type": "render_progress", "id": ident, "traced": int(run.traced),
-                                          "paths": int(run.paths.count)})
-            image = await self.viewer.device(lambda: engine.render_result(run, run.finish()))
+            image = await (self._render_elsewhere(req) if big else self._render_here(req))
         except OclgiError as exc:
             await self.error(str(exc), "render")
             return
         finally:
             self.viewer.ledger.release((self, "render"))
+        if image is None:
+            return  # the page went away: its render stopped
+        radiance, pixels = image
         p = self.session.params
         done = {"seconds": time.perf_counter() - t0, "method": p.method, "photons": int(p.photons)}
-        png = png_bytes(image.pixels)
-        h, w = image.radiance.shape[:2]
+        png = await asyncio.get_running_loop().run_in_executor(None, png_bytes, pixels)  # seconds at 4096^2
+        h, w = radiance.shape[:2]
         self.renders += 1
         await self.send_json({"type": "rendered", "id": ident, "index": self.renders, "width": w, "height": h,
                               "seconds": done["seconds"], "method": done["method"], "photons": done["photons"]})
         if not self.ws.closed:
             await self.ws.send_bytes(RENDER_HEADER.pack(RENDER_MAGIC, self.renders, w, h, len(png)) + png
-                                     + np.ascontiguousarray(image.radiance, "<f4").tobytes())
+                                     + np.ascontiguousarray(radiance, "<f4").tobytes())
+
+    async def _progress(self, ident, traced: int, paths: int) -> None:
+        await self.send_json({"type": "render_progress", "id": ident, "traced": traced, "paths": paths})
+
+    async def _render_here(self, req: Request):
+        """(radiance, pixels) rendered on the device's thread a batch a call, or None if the page went away."""
+        ident, last = req.fields["id"], 0.0
+        engine, run = await self.viewer.device(self._render_run, req.fields)
+        while not run.done:  # a batch a call: other pages' requests run in between
+            if self.ws.closed:
+                return None  # the page went away: its render stops here
+            first = run.traced == 0
+            await self.viewer.device(run.step)
+            if first:  # the estimator's own check of the run (a Photon Map outgrowing the device)
+                await self.viewer.device(run.estimator.first_batch, run.traced, run.paths.count, run.segments)
+            now = time.monotonic()
+            if now - last >= 0.1 or run.done:
+                last = now
+                await self._progress(ident, int(run.traced), int(run.paths.count))
+        image = await self.viewer.device(lambda: engine.render_result(run, run.finish()))
+        return image.radiance, image.pixels
+
+    async def _render_elsewhere(self, req: Request):
+        """(radiance, pixels) rendered by a process of its own, or None if
+        the page went away (the process is then killed, as when the page's
+        task is cancelled)."""
+        from .render_process import RenderProcess
+
+        job = await self.viewer.device(self._render_job, req.fields)
+        worker = RenderProcess(job)
+        try:
+            while True:
+                msg = await worker.receive(lambda: not self.ws.closed)
+                if msg is None:
+                    if self.ws.closed:
+                        return None
+                    raise OclgiError("the render's process ended without an image (killed, or out of memory?)")
+                if msg[0] == "progress":
+                    await self._progress(req.fields["id"], msg[1], msg[2])
+                elif msg[0] == "error":
+                    raise OclgiError(msg[1])
+                else:
+                    return msg[1], msg[2]
+        finally:
+            worker.stop()
 
     def close(self):
         """Stop the work and close the session (now, in the device's thread,
