@@ -248,3 +248,18 @@ def test_real_limits_are_read():
     one, total = budget.device_limits(queue.device)
     assert 0 < one <= total
     assert budget.host_available() > 0
+
+
+def test_an_impact_count_render_past_the_hosts_memory_is_refused_first(engine, monkeypatch):
+    """An 8192x8192 Impact Count render on a CPU device peaked at 14.6 GiB
+    (bench/README.md): its estimate (device and host together, 14.8 GiB)
+    holds the peak, and a host with less available refuses it before any
+    work; with the estimate available it would run."""
+    monkeypatch.setattr(budget, "device_limits", lambda dev: (1 << 50, 1 << 50))
+    monkeypatch.setattr(budget, "shares_host_memory", lambda dev: True)
+    need = budget.render_need(8192, 8192, "impact", 1000, 10, engine.batch_bytes)
+    assert need.device_total + need.host >= 14.6 * GIB  # the measured peak
+    monkeypatch.setattr(budget, "host_available", lambda: 12 * GIB)
+    with pytest.raises(OclgiError, match=r"^a 8192x8192 image needs about [\d.]+ GiB of host memory \(12.0 GiB is "
+                                         r"available\); use a smaller width/height"):
+        engine.render(width=8192, height=8192, method="impact", photons=1000)
