@@ -11,8 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import PageModel, open_viewer, page_headers, receive_until, reference_colours, sync
+from viewer_client import connect, open_viewer, receive_until, reference_colours, run_pages, sync
 
 from oclgi.errors import OclgiError
 from oclgi.viewer.ledger import Ledger, parse_size, session_bytes
@@ -25,13 +24,6 @@ def viewer(scenes_dir):
     return open_viewer(scenes_dir / "cornell_bunny.toml", photons=PHOTONS, edge=0.4)
 
 
-def _run(viewer, test):
-    async def main():
-        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
-            await test(client)
-    asyncio.run(main())
-
-
 def _given_back(viewer):
     """Every page's share of the budget given back: the sessions close on the
     device's thread, after the work it was doing when the pages went."""
@@ -40,15 +32,6 @@ def _given_back(viewer):
             return
         time.sleep(0.05)
     raise AssertionError(f"still booked: {viewer.ledger.held}")
-
-
-async def _page(client, viewer):
-    ws = await client.ws_connect("/socket")
-    page = PageModel(len(viewer.tess.vertices))
-    hello = await receive_until(ws, page, lambda m: m["type"] in ("hello", "error"))
-    if hello["type"] == "hello":
-        page.apply(await ws.receive_bytes(timeout=120))
-    return ws, page, hello
 
 
 def test_the_ledger_books_and_refuses_by_the_limit():
@@ -81,9 +64,9 @@ def test_pages_past_the_budget_get_an_error_and_stay_exact(viewer):
     home = reference_colours(viewer, {})
     try:
         async def test(client):
-            ws, page, hello = await _page(client, viewer)
+            ws, page, hello = await connect(client, viewer)
             assert hello["type"] == "hello"
-            ws2, _, refused = await _page(client, viewer)
+            ws2, _, refused = await connect(client, viewer)
             assert refused["type"] == "error" and "memory budget" in refused["message"], refused
             more = next(n for n in range(PHOTONS, 100 * PHOTONS, PHOTONS)
                         if session_bytes(n, viewer.run.max_depth, len(viewer.points)) > viewer.ledger.limit)
@@ -98,7 +81,7 @@ def test_pages_past_the_budget_get_an_error_and_stay_exact(viewer):
             await ws.close()
             await ws2.close()
 
-        _run(viewer, test)
+        run_pages(viewer, test)
         _given_back(viewer)
     finally:
         viewer.ledger = saved
@@ -109,15 +92,15 @@ def test_a_page_past_max_pages_is_told_and_closed(viewer):
     viewer.ledger = Ledger(saved.limit, max_pages=1)
     try:
         async def test(client):
-            ws, _, hello = await _page(client, viewer)
-            ws2, _, refused = await _page(client, viewer)
+            ws, _, hello = await connect(client, viewer)
+            ws2, _, refused = await connect(client, viewer)
             assert hello["type"] == "hello" and refused["type"] == "error"
             assert "at most 1 pages at once (--max-pages)" in refused["message"]
             msg = await ws2.receive(timeout=30)
             assert msg.type.name in ("CLOSE", "CLOSED", "CLOSING")
             await ws.close()
 
-        _run(viewer, test)
+        run_pages(viewer, test)
     finally:
         viewer.ledger = saved
 
@@ -136,8 +119,8 @@ def test_another_pages_move_is_answered_during_a_render_and_a_closed_page_stops_
         monkeypatch.setattr(render_process, "IN_PROCESS_PIXELS", 0)
 
     async def test(client):
-        ws_a, page_a, _ = await _page(client, viewer)
-        ws_b, page_b, _ = await _page(client, viewer)
+        ws_a, page_a, _ = await connect(client, viewer)
+        ws_b, page_b, _ = await connect(client, viewer)
         view = {"type": "render", "id": 1, "width": 96, "height": 96,
                 "camera": {"position": [0, 1, 3.9], "look_at": [0, 1, 0], "up": [0, 1, 0], "fov": 39.3}}
         # photons for many batches: the render's run takes the session's count, so raise it first
@@ -163,5 +146,5 @@ def test_another_pages_move_is_answered_during_a_render_and_a_closed_page_stops_
         assert not multiprocessing.active_children()
         await ws_b.close()
 
-    _run(viewer, test)
+    run_pages(viewer, test)
     _given_back(viewer)

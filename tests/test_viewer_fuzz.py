@@ -5,14 +5,12 @@ answers, and the page's colours equal the API's at the session's state
 (its poses, lights, estimator and photons, as it reports them) bit for bit.
 A deterministic slice runs in ``make test``, a longer one in the full suite."""
 
-import asyncio
 import json
 import math
 
 import numpy as np
 import pytest
-from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import PageModel, open_viewer, page_headers, receive_until, reference_colours, sync
+from viewer_client import PageModel, connect, open_viewer, reference_colours, run_pages, sync
 
 PHOTONS = 4_000
 GARBAGE = [None, True, "x", "", [], {}, [1, 2], {"a": 1}, -1, 0, 1e308, -1e308, 2**70, "NaN", 1.5, 3]
@@ -71,10 +69,7 @@ class FuzzedPage(PageModel):
 
 
 async def _case(client, viewer, rng, n_messages):
-    ws = await client.ws_connect("/socket")
-    page = FuzzedPage(len(viewer.tess.vertices))
-    await receive_until(ws, page, lambda m: m["type"] == "hello")
-    page.apply(await ws.receive_bytes(timeout=120))
+    ws, page, _ = await connect(client, viewer, FuzzedPage)
     for _ in range(n_messages):
         await ws.send_str(_message(rng, viewer))
     state = await sync(ws, page, 10_001)  # the server answers, after everything it was sent
@@ -99,12 +94,11 @@ async def _case(client, viewer, rng, n_messages):
 def _fuzz(viewer, seed, cases, n_messages):
     rng = np.random.default_rng(seed)
 
-    async def main():
-        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
-            for _ in range(cases):
-                await _case(client, viewer, rng, n_messages)
+    async def test(client):
+        for _ in range(cases):
+            await _case(client, viewer, rng, n_messages)
 
-    asyncio.run(main())
+    run_pages(viewer, test)
 
 
 def test_generated_messages_leave_the_session_exact(viewer):

@@ -3,15 +3,12 @@ at the scene file's precomputed positions by the light session's reuse,
 elsewhere recomputed, after an object moved by the session itself; each
 update says which, and the page equals the API's solution in each case."""
 
-import asyncio
 import json
 
 import numpy as np
 import pytest
 
-from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import (PHOTONS, PageModel, open_viewer, page_headers, receive_until, reference_colours,
-                           sync)
+from viewer_client import PHOTONS, PageModel, open_viewer, receive_until, reference_colours, run_pages, sync
 
 PATH = [[-0.4, 1.6, 0.1], [0.3, 1.7, -0.2], [0.0, 1.5, 0.4]]
 FREE = (0.2, 1.4, 0.2)
@@ -32,13 +29,6 @@ def viewer(scenes_dir, tmp_path_factory):
     v = open_viewer(path)
     yield v
     v.executor.shutdown(wait=True)
-
-
-def run(test, viewer):
-    async def main():
-        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
-            await test(client)
-    asyncio.run(main())
 
 
 async def light(ws, page, position, ident):
@@ -106,4 +96,4 @@ def test_a_light_dragged_by_reuse_on_its_path_recomputed_elsewhere_and_after_a_m
         assert after["seq"] == done["seq"] and after["lights"] == done["lights"]
         assert np.array_equal(page.half, before)
         await ws.close()
-    run(test, viewer)
+    run_pages(viewer, test)

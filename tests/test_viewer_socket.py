@@ -10,9 +10,8 @@ import struct
 import numpy as np
 import pytest
 
-from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
-from viewer_client import (PHOTONS, PageModel, expected_radiance, open_viewer, page_headers, receive_until,
-                           reference_colours, sync)
+from viewer_client import (PHOTONS, PageModel, connect, expected_radiance, open_viewer, receive_until,
+                           reference_colours, run_pages, sync)
 
 
 @pytest.fixture(scope="module")
@@ -29,18 +28,7 @@ def home(viewer):
 
 
 def run(test, viewer):
-    async def main():
-        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
-            await test(client)
-    asyncio.run(main())
-
-
-async def connect(client, viewer):
-    ws = await client.ws_connect("/socket")
-    page = PageModel(len(viewer.tess.vertices))
-    hello = await receive_until(ws, page, lambda m: m["type"] == "hello")
-    page.apply(await ws.receive_bytes(timeout=120))  # the first frame: every colour
-    return ws, page, hello
+    run_pages(viewer, test)
 
 
 def bunny_at(dx, dz, angle=0.0):

@@ -4,6 +4,7 @@ and the reference a page must equal: a fresh session at the same pose."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 import struct
@@ -28,6 +29,27 @@ def open_viewer(scene_path, photons: int = PHOTONS, edge: float = EDGE):
 def page_headers(viewer) -> dict:
     """What the page's requests carry: the server's token (oclgi/viewer/guard.py)."""
     return {"Authorization": f"token {viewer.guard.token}"}
+
+
+def run_pages(viewer, test) -> None:
+    """``await test(client)`` against the viewer's application, every request carrying the token."""
+    from aiohttp.test_utils import TestClient, TestServer  # aiohttp: setup.cfg's test extra
+
+    async def main():
+        async with TestClient(TestServer(viewer.app()), headers=page_headers(viewer)) as client:
+            await test(client)
+    asyncio.run(main())
+
+
+async def connect(client, viewer, page_type=None):
+    """A page's socket: (ws, page, its hello, or the error that refused it);
+    the first frame (every colour) applied."""
+    ws = await client.ws_connect("/socket")
+    page = (page_type or PageModel)(len(viewer.tess.vertices))
+    hello = await receive_until(ws, page, lambda m: m["type"] in ("hello", "error"))
+    if hello["type"] == "hello":
+        page.apply(await ws.receive_bytes(timeout=120))
+    return ws, page, hello
 
 
 def as_shown(colours: np.ndarray, e: int) -> np.ndarray:
