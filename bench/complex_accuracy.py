@@ -48,24 +48,16 @@ Usage: ``.venv/bin/python bench/complex_accuracy.py [--seconds 10]
 
 from __future__ import annotations
 
-import argparse
 import hashlib
-import os
 import platform
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import complex_scenes  # noqa: E402
-import oclgi  # noqa: E402
-from oclgi.study import mitsuba as mitsuba_reference  # noqa: E402
-
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "bench" / "results"
+import complex_scenes
+import oclgi
+from common import RESULTS, ROOT, arguments, cached_pair, concat, cpu_timed, device
+from oclgi.study import mitsuba as mitsuba_reference
 
 METHODS = [
     ("DETP, fixed radius", "detp_disc_index", {}),
@@ -93,27 +85,22 @@ def scene_setups(leaves: int, n_points: int, rng, names=SCENES):
     """(name, scene, points, part of each point, counts) for the scenes
     ``names``; each scene's points drawn from ``rng`` in SCENES' order,
     so a scene's points do not depend on which others are run."""
-    out = []
     k = n_points // 8
     rooms = {"floor": (0, 3 * k, "up"), "walls": (1, 3 * k, "up"), "stone": (2, n_points - 6 * k, "up")}
+    result = []
     for name in SCENES:
         if name == "foliage":
+            scene = complex_scenes.foliage(leaves)
             groups = {"ground": (0, 3 * k, "up"), "wood": (1, k, "up"), "leaves": (2, n_points - 4 * k, "both")}
-            out.append((name, complex_scenes.foliage(leaves), groups))
         else:
-            out.append((name, getattr(complex_scenes, name)(), rooms))
-    result = []
-    for name, scene, groups in out:
+            scene, groups = getattr(complex_scenes, name)(), rooms
         parts, pts = [], []
         for part, (mesh, count, side) in groups.items():
             # draw twice as many, keep the first that Mitsuba can measure
-            q = complex_scenes.points(scene, {tuple(complex_scenes.part(scene, mesh)): (2 * count, side)}, rng)
-            pts.append(q)
+            pts.append(complex_scenes.points(scene, {tuple(complex_scenes.part(scene, mesh)): (2 * count, side)}, rng))
             parts += [part] * (2 * count)
-        cat = oclgi.QueryPoints(np.concatenate([q.positions for q in pts]), np.concatenate([q.normals for q in pts]),
-                                np.concatenate([q.barys for q in pts]))
         if name in names:
-            result.append((name, scene, cat, np.array(parts), {p: g[1] for p, g in groups.items()}))
+            result.append((name, scene, concat(pts), np.array(parts), {p: g[1] for p, g in groups.items()}))
     return result
 
 
@@ -122,18 +109,19 @@ def measurable(scene, pts, variant) -> np.ndarray:
     the normal (what oclgi.study.mitsuba.irradiance refuses)."""
     mi = mitsuba_reference.load_mitsuba(variant)
     mscene = mi.load_dict(mitsuba_reference.scene_dict(mi, scene))
-    p = pts.xyz.astype(np.float64)
-    n = pts.normals[:, :3].astype(np.float64)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    diag = scene.diagonal
-    o = p + 1e-5 * diag * n
+    p, n = _unit(pts)
     ok = np.empty(len(p), bool)
-    for i in range(len(p)):
-        ray = mi.Ray3f(mi.Point3f(*map(float, o[i])), mi.Vector3f(*map(float, n[i])))
-        ray.maxt = 1.2e-3 * diag
-        si = mscene.ray_intersect(ray)
-        ok[i] = not bool(np.asarray(si.is_valid()).reshape(-1)[0])
+    for i, o in enumerate(p + 1e-5 * scene.diagonal * n):
+        ray = mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, n[i])))
+        ray.maxt = 1.2e-3 * scene.diagonal
+        ok[i] = not bool(np.asarray(mscene.ray_intersect(ray).is_valid()).reshape(-1)[0])
     return ok
+
+
+def _unit(pts):
+    """The points' positions and unit normals, float64."""
+    n = pts.normals[:, :3].astype(np.float64)
+    return pts.xyz.astype(np.float64), n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 BURIED_RAYS = 64  # hemisphere rays per point of the buried-point test
@@ -156,9 +144,7 @@ def back_share(engine, pts, sheets=(), rays: int = BURIED_RAYS) -> np.ndarray:
     from oclgi.accel.bvh import closest_hits
 
     scene = engine.scene
-    p = pts.xyz.astype(np.float64)
-    n = pts.normals[:, :3].astype(np.float64)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    p, n = _unit(pts)
     s = int(np.sqrt(rays))
     u1, u2 = np.meshgrid((np.arange(s) + 0.5) / s, (np.arange(s) + 0.5) / s, indexing="ij")
     u1, u2 = u1.ravel(), u2.ravel()
@@ -166,27 +152,21 @@ def back_share(engine, pts, sheets=(), rays: int = BURIED_RAYS) -> np.ndarray:
                              np.sqrt(1 - u1)])  # cosine-distributed about z
     t = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
     t /= np.linalg.norm(t, axis=1, keepdims=True)
-    b = np.cross(n, t)
-    d = (local[None, :, :1] * t[:, None] + local[None, :, 1:2] * b[:, None] + local[None, :, 2:] * n[:, None])
-    d = d.reshape(-1, 3)
+    d = (local[None, :, :1] * t[:, None] + local[None, :, 1:2] * np.cross(n, t)[:, None]
+         + local[None, :, 2:] * n[:, None]).reshape(-1, 3)
     o = np.repeat(p + 1e-5 * scene.diagonal * n, len(local), axis=0)
     _, _, _, tri = closest_hits(engine.queue, engine.compiled, o, d)
     hit = tri >= 0
-    one_sided = np.ones(len(scene.materials), bool)
-    one_sided[list(sheets)] = False
+    one_sided = ~np.isin(np.arange(len(scene.materials)), sheets)
     back = np.zeros(len(d), bool)
-    ng = scene.triangle_normals()[tri[hit]]
-    back[hit] = (np.einsum("ij,ij->i", ng, d[hit]) > 0) & one_sided[scene.tri_material[tri[hit]]]
+    back[hit] = ((np.einsum("ij,ij->i", scene.triangle_normals()[tri[hit]], d[hit]) > 0)
+                 & one_sided[scene.tri_material[tri[hit]]])
     return back.reshape(len(p), len(local)).mean(axis=1)
 
 
-def choose(pts, parts, counts, ok):
-    keep = []
-    for part, count in counts.items():
-        idx = np.nonzero((parts == part) & ok)[0][:count]
-        keep.append(idx)
-    keep = np.concatenate(keep)
-    return pts.subset(keep), parts[keep]
+def first(parts, counts, ok) -> np.ndarray:
+    """Of each part, the first ``counts[part]`` points that are ``ok``."""
+    return np.concatenate([np.nonzero((parts == p) & ok)[0][:c] for p, c in counts.items()])
 
 
 def reference(name, scene, pts, spp, variant, out: Path):
@@ -194,39 +174,21 @@ def reference(name, scene, pts, spp, variant, out: Path):
     scene_key = scene.vertices.tobytes() + scene.faces.tobytes() + repr(scene.materials).encode() + \
         repr(scene.lights).encode() + str(scene.settings.max_depth).encode()
     key = hashlib.sha1(scene_key + pts.positions.tobytes() + pts.normals.tobytes() + str(spp).encode()).hexdigest()[:12]
-    path = out / f"{name}_{key}.npz"
-    if path.exists():
-        got = np.load(path)
-        return got["a"], got["b"], float(got["seconds"])
-    t0 = time.perf_counter()
-    a = mitsuba_reference.irradiance(scene, pts.xyz, pts.normals[:, :3], spp=spp, seed=0, variant=variant)
-    b = mitsuba_reference.irradiance(scene, pts.xyz, pts.normals[:, :3], spp=spp, seed=1, variant=variant)
-    seconds = time.perf_counter() - t0
-    out.mkdir(parents=True, exist_ok=True)
-    np.savez(path, a=a, b=b, seconds=seconds)
-    return a, b, seconds
+    return cached_pair(out / f"{name}_{key}.npz", lambda seed: mitsuba_reference.irradiance(
+        scene, pts.xyz, pts.normals[:, :3], spp=spp, seed=seed, variant=variant))
 
 
 def errors(e, ref, floor):
-    rel = np.abs(e - ref) / np.maximum(ref, floor)
+    """Each point's relative error and whether it is off by 2x (the module's docstring)."""
     ratio = np.maximum(e, floor) / np.maximum(ref, floor)
-    off = (ratio > 2) | (ratio < 0.5)
-    return rel, off
-
-
-def _cpu():
-    """CPU seconds of this process and its threads (PoCL's)."""
-    t = os.times()
-    return t.user + t.system
+    return np.abs(e - ref) / np.maximum(ref, floor), (ratio > 2) | (ratio < 0.5)
 
 
 def timed(engine, pts, method, options, photons):
     """(2-core seconds, irradiance): the CPU time of the run over 2 cores, so
     that other work on a shared machine does not count (the wall time is
     printed with it)."""
-    t0, c0 = time.perf_counter(), _cpu()
-    est = engine.irradiance(pts, method=method, photons=int(photons), **options)
-    wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    wall, cpu, est = cpu_timed(engine.irradiance, pts, method=method, photons=int(photons), **options)
     print(f"  {method} {options}: {int(photons):,} photons, {wall:.1f} s wall, {cpu:.1f} s CPU", flush=True)
     return cpu / CORES, est.irradiance[:, :3].mean(axis=1).astype(np.float64)
 
@@ -255,29 +217,19 @@ def equal_time(engine, pts, method, options, seconds, probe):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--points", type=int, default=256)
-    ap.add_argument("--spp", type=int, default=4096)
-    ap.add_argument("--leaves", type=int, default=46_000)
-    ap.add_argument("--scenes", default=",".join(SCENES), help="of " + ", ".join(SCENES))
-    ap.add_argument("--variant", default="llvm_ad_rgb")
-    ap.add_argument("--probe", type=int, default=200_000, help="photons of the first timing probe")
-    ap.add_argument("--out", type=Path, default=ROOT / "out" / "complex_accuracy")
-    ap.add_argument("--results", type=Path, default=RESULTS / "complex_accuracy.md")
-    ap.add_argument("--methods", default="", help="only the methods whose label contains this text "
-                    "(e.g. 'gather')")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--references-only", action="store_true", help="compute (and cache) Mitsuba's references only")
-    args = ap.parse_args()
-    if args.quick:
-        args.points, args.spp, args.seconds, args.probe = 64, 512, 3.0, 50_000
+    args = arguments(__doc__, seconds=10.0, points=256, spp=4096, leaves=46_000,
+                     scenes=(",".join(SCENES), "of " + ", ".join(SCENES)), variant="llvm_ad_rgb",
+                     probe=(200_000, "photons of the first timing probe"), out=ROOT / "out" / "complex_accuracy",
+                     results=RESULTS / "complex_accuracy.md",
+                     methods=("", "only the methods whose label contains this text (e.g. 'gather')"),
+                     quick=dict(points=64, spp=512, seconds=3.0, probe=50_000),
+                     references_only=(False, "compute (and cache) Mitsuba's references only"))
     rng = np.random.default_rng(16)
     lines = ["# Accuracy on complex geometry against Mitsuba 3", "",
              f"`bench/complex_accuracy.py --seconds {args.seconds:g} --points {args.points} --spp {args.spp} "
              + (f"--methods {args.methods!r} " if args.methods else "") +
              f"--leaves {args.leaves}`; {platform.machine()}, PoCL device: "
-             f"{oclgi.Engine(complex_scenes.arcade()).queue.device.name}.", "",
+             f"{device().name}.", "",
              f"Relative error |E - E_ref| / max(E_ref, f), f = {SHADOW_FLOOR:.0%} of the scene's mean reference "
              "irradiance (a point in full shadow is right within 5% of the mean); off by 2x: "
              "max(E, f) / max(E_ref, f) outside [1/2, 2]. Equal time: each method at the photon count a linear "
@@ -285,7 +237,6 @@ def main():
              f"time being the run's CPU seconds over {CORES} cores (the machine is shared; serial host work, "
              "e.g. the k-nearest index's build, counts at half its wall time); estimation from tracing to "
              "resolve, adaptive radii's pilot included, the scene's BVH and the kernels' build excluded.", ""]
-    summary = []
     names = args.scenes.split(",")
     if not set(names) <= set(SCENES):
         raise SystemExit(f"--scenes: of {', '.join(SCENES)}, got {args.scenes!r}")
@@ -295,9 +246,9 @@ def main():
         share = back_share(engine, pts, SHEETS.get(name, ()))
         inside = share > BURIED_SHARE
         # what the draw would have kept without the buried-point test: the points it drops
-        first = np.concatenate([np.nonzero((parts == p) & ok)[0][:c] for p, c in counts.items()])
-        dropped = [(str(parts[i]), float(share[i])) for i in first if inside[i]]
-        pts, parts = choose(pts, parts, counts, ok & ~inside)
+        dropped = [(str(parts[i]), float(share[i])) for i in first(parts, counts, ok) if inside[i]]
+        keep = first(parts, counts, ok & ~inside)
+        pts, parts = pts.subset(keep), parts[keep]
         a, b, ref_seconds = reference(name, scene, pts, args.spp, args.variant, args.out)
         ref = (a + b).mean(axis=1) / 2
         ref_err = np.abs(a - b).mean(axis=1) / 2
@@ -320,9 +271,8 @@ def main():
                   "| method | photons | 2-core s | median | p90 | worst | off by 2x | " +
                   " | ".join(f"{p} median / off 2x" for p in counts) + " |",
                   "|---|---|---|---|---|---|---|" + "---|" * len(counts)]
-        for label, method, options in METHODS:
-            if args.methods not in label:
-                continue
+        goals = []
+        for label, method, options in (m for m in METHODS if args.methods in m[0]):
             print(f"{name}: {label}", flush=True)
             try:
                 engine.estimator(pts, engine.run_params(method, 1000, None), **options)
@@ -336,18 +286,15 @@ def main():
                    f"| {rel.max():.0%} | {int(off.sum())} | {per_part} |")
             print(row, flush=True)
             lines.append(row)
-            summary.append((name, label, photons, seconds, np.median(rel), np.percentile(rel, 90), rel.max(),
-                            int(off.sum())))
+            goals.append((label, np.median(rel), int(off.sum())))
         radii = engine.estimator(pts, engine.run_params("detp_disc_index", 1000, None),
                                  radius_mode="adaptive").radii / scene.radius  # the points' own
         lines += ["", "Adaptive radii over d, median (10% / 90%) per part: " + ", ".join(
             f"{p} {np.median(radii[parts == p]):.2f} ({np.percentile(radii[parts == p], 10):.2f} / "
             f"{np.percentile(radii[parts == p], 90):.2f})" for p in counts) + "."]
-        mine = [r for r in summary if r[0] == name]
         lines += ["", "Goals (issue 16: median <= 2%, no point off by 2x, in <= 10 s on 2 cores): " + "; ".join(
             f"{label}: median {'met' if med <= 0.02 else 'missed'} ({med:.2%}), "
-            f"{'none' if n_off == 0 else n_off} off by 2x" for _, label, _, _, med, _, _, n_off in mine) + "."]
-        lines.append("")
+            f"{'none' if n_off == 0 else n_off} off by 2x" for label, med, n_off in goals) + ".", ""]
     if args.references_only:
         return
     args.results.parent.mkdir(parents=True, exist_ok=True)

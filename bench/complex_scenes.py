@@ -71,12 +71,9 @@ def cylinder(base, axis, radius, segments=16, rings=1, caps=True):
     ring = np.cos(phi)[:, None] * t + np.sin(phi)[:, None] * b
     hs = np.linspace(0, 1, rings + 1)
     verts = (base + hs[:, None, None] * axis + radius * ring[None]).reshape(-1, 3)
-    faces = []
-    for r in range(rings):
-        for s in range(segments):
-            i, j = r * segments + s, r * segments + (s + 1) % segments
-            faces += [(i, j, j + segments), (i, j + segments, i + segments)]
-    parts = [(verts, np.array(faces))]
+    i = np.arange(rings * segments)  # each quad: i, j along a ring, i + segments, j + segments on the next
+    j = i - i % segments + (i + 1) % segments
+    parts = [(verts, np.stack([i, j, j + segments, i, j + segments, i + segments], 1).reshape(-1, 3))]
     if caps:
         for end, sign in ((0, -1), (rings, 1)):
             centre = base + hs[end] * axis
@@ -99,22 +96,26 @@ def arch(centre, span_axis, up, major, minor, segments=24, sides=10):
         radial = np.cos(t) * e1 + np.sin(t) * e2
         ring = c + major * radial + minor * (np.cos(ph)[:, None] * radial + np.sin(ph)[:, None] * e3)
         out.append(ring)
-    verts = np.concatenate(out)
-    faces = []
-    for r in range(segments):
-        for s in range(sides):
-            i, j = r * sides + s, r * sides + (s + 1) % sides
-            faces += [(i, j + sides, j), (i, i + sides, j + sides)]
-    return verts, np.array(faces)
+    i = np.arange(segments * sides)  # each quad: i, j round a ring, i + sides, j + sides on the next
+    j = i - i % sides + (i + 1) % sides
+    return np.concatenate(out), np.stack([i, j + sides, j, i, i + sides, j + sides], 1).reshape(-1, 3)
 
 
 def merge(parts):
-    verts, faces, base = [], [], 0
-    for v, f in parts:
-        verts.append(v)
-        faces.append(np.asarray(f) + base)
-        base += len(v)
-    return np.concatenate(verts), np.concatenate(faces)
+    """One mesh of the (vertices, faces) ``parts``."""
+    base = np.cumsum([0] + [len(v) for v, _ in parts])
+    return np.concatenate([v for v, _ in parts]), np.concatenate([np.asarray(f) + b for (_, f), b in zip(parts, base)])
+
+
+def mesh(name, geometry, grey, **extra) -> dict:
+    """A scene dict's mesh: (vertices, faces) or a list of them, merged; a grey albedo."""
+    v, f = merge(geometry) if isinstance(geometry, list) else geometry
+    return {"name": name, "vertices": v, "faces": f, "albedo": [grey] * 3, **extra}
+
+
+def scene(name, meshes, **extra) -> oclgi.Scene:
+    return oclgi.load_dict({"name": name, "mesh": meshes, "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
+                            **extra})
 
 
 def leaves(rng, n, centre, radii, side=(0.06, 0.12)):
@@ -145,16 +146,9 @@ def foliage(n_leaves: int = 46_000, seed: int = 16) -> oclgi.Scene:
         d = np.array([np.cos(ang), 0.7, np.sin(ang)])
         wood.append(cylinder([0, 2.2 + 0.07 * k, 0], 1.3 * d / np.linalg.norm(d), 0.05, 12, 4))
     crown = leaves(rng, n_leaves, [0, 3.5, 0], [1.7, 1.1, 1.7])
-    return oclgi.load_dict({
-        "name": f"foliage{n_leaves}",
-        "mesh": [
-            {"name": "ground", "vertices": ground[0], "faces": ground[1], "albedo": [0.35, 0.35, 0.35]},
-            {"name": "wood", "vertices": merge(wood)[0], "faces": merge(wood)[1], "albedo": [0.3, 0.3, 0.3]},
-            {"name": "leaves", "vertices": crown[0], "faces": crown[1], "albedo": [0.5, 0.5, 0.5]},
-        ],
-        "sun": [{"direction": [0.35, -1.0, 0.25], "irradiance": [3.0, 3.0, 3.0]}],
-        "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
-    })
+    return scene(f"foliage{n_leaves}", [mesh("ground", ground, 0.35), mesh("wood", wood, 0.3),
+                                        mesh("leaves", crown, 0.5)],
+                 sun=[{"direction": [0.35, -1.0, 0.25], "irradiance": [3.0, 3.0, 3.0]}])
 
 
 def arcade() -> oclgi.Scene:
@@ -168,7 +162,7 @@ def arcade() -> oclgi.Scene:
     front = grid([W, 0, D], [-W, 0, 0], [0, H, 0], n, n // 2)  # z = D, normal -z
     left = grid([0, 0, D], [0, 0, -D], [0, H, 0], n, n // 2)  # x = 0, normal +x
     right = grid([W, 0, 0], [0, 0, D], [0, H, 0], n, n // 2)  # x = W, normal -x
-    walls = merge([back, front, left, right, ceiling])
+    walls = [back, front, left, right, ceiling]
     xs = np.linspace(1.5, 8.5, 6)
     zc = 1.4
     solids = [cylinder([x, 0, zc], [0, 3.0, 0], 0.2, 32, 6) for x in xs]
@@ -177,17 +171,8 @@ def arcade() -> oclgi.Scene:
                for a, b in zip(xs[:-1], xs[1:])]
     solids.append(box([W - 0.55, 0.0, 3.8], [W - 0.15, 3.0, 4.2], 4))  # a pillar 0.15 from the wall
     light = grid([4.0, H - 0.01, 3.0], [2.0, 0, 0], [0, 0, 1.5], 1, 1)  # normal -y: faces down
-    return oclgi.load_dict({
-        "name": "arcade",
-        "mesh": [
-            {"name": "floor", "vertices": floor[0], "faces": floor[1], "albedo": [0.5, 0.5, 0.5]},
-            {"name": "walls", "vertices": walls[0], "faces": walls[1], "albedo": [0.6, 0.6, 0.6]},
-            {"name": "stone", "vertices": merge(solids)[0], "faces": merge(solids)[1], "albedo": [0.55, 0.55, 0.55]},
-            {"name": "light", "vertices": light[0], "faces": light[1], "albedo": [0, 0, 0],
-             "emission": [12.0, 12.0, 12.0]},
-        ],
-        "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
-    })
+    return scene("arcade", [mesh("floor", floor, 0.5), mesh("walls", walls, 0.6), mesh("stone", solids, 0.55),
+                            mesh("light", light, 0.0, emission=[12.0, 12.0, 12.0])])
 
 
 def courtyard() -> oclgi.Scene:
@@ -205,18 +190,16 @@ def courtyard() -> oclgi.Scene:
     walls += [grid([0, H, 0], [W, 0, 0], [0, 0, g], 80, 12), grid([0, H, D - g], [W, 0, 0], [0, 0, g], 80, 12),
               grid([0, H, g], [g, 0, 0], [0, 0, D - 2 * g], 12, 40),
               grid([W - g, H, g], [g, 0, 0], [0, 0, D - 2 * g], 12, 40)]
-    stone = []
     # the first floor's gallery slab (0.3 thick) and a parapet 0.3 in front of the columns
     slab_lo, slab_hi = H1 - 0.3, H1
-    for lo, hi in (([0, slab_lo, 0], [W, slab_hi, g]), ([0, slab_lo, D - g], [W, slab_hi, D]),
-                   ([0, slab_lo, g], [g, slab_hi, D - g]), ([W - g, slab_lo, g], [W, slab_hi, D - g])):
-        stone.append(box(lo, hi, 16))
+    stone = [box(lo, hi, 16) for lo, hi in (([0, slab_lo, 0], [W, slab_hi, g]), ([0, slab_lo, D - g], [W, slab_hi, D]),
+                                            ([0, slab_lo, g], [g, slab_hi, D - g]),
+                                            ([W - g, slab_lo, g], [W, slab_hi, D - g]))]
     t = 0.15
-    for lo, hi in (([g - 0.3, H1, g - 0.3 - t], [W - g + 0.3, H1 + 1.0, g - 0.3]),
-                   ([g - 0.3, H1, D - g + 0.3], [W - g + 0.3, H1 + 1.0, D - g + 0.3 + t]),
-                   ([g - 0.3 - t, H1, g - 0.3], [g - 0.3, H1 + 1.0, D - g + 0.3]),
-                   ([W - g + 0.3, H1, g - 0.3], [W - g + 0.3 + t, H1 + 1.0, D - g + 0.3])):
-        stone.append(box(lo, hi, 8))
+    stone += [box(lo, hi, 8) for lo, hi in (([g - 0.3, H1, g - 0.3 - t], [W - g + 0.3, H1 + 1.0, g - 0.3]),
+                                            ([g - 0.3, H1, D - g + 0.3], [W - g + 0.3, H1 + 1.0, D - g + 0.3 + t]),
+                                            ([g - 0.3 - t, H1, g - 0.3], [g - 0.3, H1 + 1.0, D - g + 0.3]),
+                                            ([W - g + 0.3, H1, g - 0.3], [W - g + 0.3 + t, H1 + 1.0, D - g + 0.3]))]
     # the column ring, 2 m bays: 8 columns along x, 6 along z (corners shared)
     xs, zs = np.linspace(g, W - g, 8), np.linspace(g, D - g, 6)
     ring = [(x, g) for x in xs] + [(x, D - g) for x in xs] + [(g, z) for z in zs[1:-1]] + [(W - g, z) for z in zs[1:-1]]
@@ -230,19 +213,8 @@ def courtyard() -> oclgi.Scene:
             major, minor = half - rc, 0.12
             centre = [0.5 * (ax + bx), y1 - major - minor, 0.5 * (az + bz)]
             stone.append(arch(centre, span / (2 * half), [0, 1, 0], major, minor, 32, 12))
-    floor_v, floor_f = floor
-    walls_v, walls_f = merge(walls)
-    stone_v, stone_f = merge(stone)
-    return oclgi.load_dict({
-        "name": "courtyard",
-        "mesh": [
-            {"name": "floor", "vertices": floor_v, "faces": floor_f, "albedo": [0.45, 0.45, 0.45]},
-            {"name": "walls", "vertices": walls_v, "faces": walls_f, "albedo": [0.6, 0.6, 0.6]},
-            {"name": "stone", "vertices": stone_v, "faces": stone_f, "albedo": [0.55, 0.55, 0.55]},
-        ],
-        "sun": [{"direction": [0.45, -1.0, 0.3], "irradiance": [3.0, 3.0, 3.0]}],
-        "photons": {"count": 1_000_000, "seed": 1, "max_depth": 8},
-    })
+    return scene("courtyard", [mesh("floor", floor, 0.45), mesh("walls", walls, 0.6), mesh("stone", stone, 0.55)],
+                 sun=[{"direction": [0.45, -1.0, 0.3], "irradiance": [3.0, 3.0, 3.0]}])
 
 
 def part(scene, k: int) -> np.ndarray:
@@ -268,9 +240,6 @@ def points(scene, groups: dict, rng) -> QueryPoints:
             nrm *= np.where(rng.random(count) < 0.5, 1.0, -1.0)[:, None]
         tri_all.append(tri), p_all.append(p), n_all.append(nrm)
     tri, p, nrm = np.concatenate(tri_all), np.concatenate(p_all), np.concatenate(n_all)
-    pos = np.zeros((len(p), 4), np.float32)
-    pos[:, :3] = p
+    pos, n4 = (np.pad(a.astype(np.float32), ((0, 0), (0, 1))) for a in (p, nrm))
     pos[:, 3] = tri.astype(np.int32).view(np.float32)
-    n4 = np.zeros((len(p), 4), np.float32)
-    n4[:, :3] = nrm
     return QueryPoints(pos, n4, np.zeros((len(p), 2), np.float32))

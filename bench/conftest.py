@@ -23,12 +23,11 @@ import contextlib
 import importlib.metadata
 import os
 import time
-import warnings
 
 import numpy as np
 import pytest
 
-import oclgi
+from common import box, device, engine
 
 
 def pytest_addoption(parser):
@@ -62,39 +61,20 @@ def compiled_with(engine, quality):
     return _TREES[key]
 
 
-def _engine(desc) -> oclgi.Engine:
-    """An engine on a shipped scene file (its name) or a scene dict."""
-    with warnings.catch_warnings():
-        # Sponza has one zero-area triangle; the scene drops it with a warning.
-        warnings.simplefilter("ignore", oclgi.OclgiWarning)
-        if isinstance(desc, str):
-            scene = oclgi.load_file(oclgi.scene_path(desc))
-        else:
-            scene = oclgi.load_dict(desc, base_dir=oclgi.scene_path("."))
-    return oclgi.Engine(scene, progress=False)
-
-
-def _box(lo, hi):
-    """The 12 triangles of an axis-aligned box (surfaces are two-sided)."""
-    (x0, y0, z0), (x1, y1, z1) = lo, hi
-    v = [(x, y, z) for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    f = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
-    return np.array(v, float), np.array(f)
+def lit_mesh(name, path, light, intensity, *meshes):
+    """An engine on a grey mesh file (and ``meshes``) lit by a white point light."""
+    return engine({"name": name, "mesh": [{"path": path, "albedo": [0.7, 0.7, 0.7]}, *meshes],
+                   "point_light": [{"position": light, "intensity": [intensity] * 3}]})
 
 
 @pytest.fixture(scope="session")
 def cornell():
-    return _engine("cornell_box.toml")
+    return engine("cornell_box.toml")
 
 
 @pytest.fixture(scope="session")
 def bunny():
-    return _engine({
-        "name": "bunny",
-        "mesh": [{"path": "stanford-bunny/bun_zipper.ply", "albedo": [0.7, 0.7, 0.7]}],
-        "point_light": [{"position": [0.0, 0.3, 0.2], "intensity": [1.0, 1.0, 1.0]}],
-    })
+    return lit_mesh("bunny", "stanford-bunny/bun_zipper.ply", [0.0, 0.3, 0.2], 1.0)
 
 
 @pytest.fixture(scope="session")
@@ -103,10 +83,10 @@ def bunny_in_box(bunny):
     # floor of a 3 x 3 x 3 box. Reuse the loaded arrays (the PLY is slow to parse).
     s = bunny.scene
     verts = s.vertices * 10.0 + np.array([0.0, -0.33, 0.0])
-    box_v, box_f = _box((-1.5, 0.0, -1.5), (1.5, 3.0, 1.5))
+    box_v, box_f = box((-1.5, 0.0, -1.5), (1.5, 3.0, 1.5))
     # Light quad 1 x 1 just under the ceiling, normal (0, -1, 0): it emits downwards.
     light_v = np.array([(-0.5, 2.95, -0.5), (0.5, 2.95, -0.5), (0.5, 2.95, 0.5), (-0.5, 2.95, 0.5)])
-    return _engine({
+    return engine({
         "name": "bunny_in_box",
         "mesh": [
             {"vertices": verts, "faces": s.faces, "albedo": [0.7, 0.7, 0.7]},
@@ -120,18 +100,10 @@ def bunny_in_box(bunny):
 @pytest.fixture(scope="session")
 def sponza():
     # Sponza ships without materials: one grey albedo, a point light in the atrium.
-    return _engine({
-        "name": "sponza",
-        "mesh": [{"path": "sponza-dabrovic/sponza.zip", "albedo": [0.7, 0.7, 0.7]}],
-        "point_light": [{"position": [0.0, 6.0, 0.0], "intensity": [50.0, 50.0, 50.0]}],
-    })
+    return lit_mesh("sponza", "sponza-dabrovic/sponza.zip", [0.0, 6.0, 0.0], 50.0)
 
 
-_LOADAVG_AT_START = []
-
-
-def pytest_sessionstart(session):
-    _LOADAVG_AT_START[:] = os.getloadavg()
+_LOADAVG_AT_START = list(os.getloadavg())  # this file is read as the session starts
 
 
 @pytest.fixture
@@ -150,18 +122,17 @@ def cores_used(benchmark):
     return meter
 
 
-def pytest_benchmark_update_machine_info(config, machine_info):
-    from oclgi.cl.device import choose_device
+def _version(pkg):
+    try:
+        return importlib.metadata.version(pkg)
+    except importlib.metadata.PackageNotFoundError:
+        return None
 
-    dev = choose_device()
-    machine_info["opencl_device"] = dev.name
-    machine_info["opencl_platform"] = dev.platform.version
-    machine_info["opencl_compute_units"] = dev.max_compute_units
-    machine_info["cpu_count"] = os.cpu_count()
-    machine_info["loadavg_at_start"] = _LOADAVG_AT_START
-    for pkg in ("oclgi", "pyopencl", "numpy", "embreex"):
-        try:
-            machine_info[f"{pkg}_version"] = importlib.metadata.version(pkg)
-        except importlib.metadata.PackageNotFoundError:
-            machine_info[f"{pkg}_version"] = None
-    machine_info["loadavg_at_end"] = os.getloadavg()
+
+def pytest_benchmark_update_machine_info(config, machine_info):
+    dev = device()
+    machine_info.update(opencl_device=dev.name, opencl_platform=dev.platform.version,
+                        opencl_compute_units=dev.max_compute_units, cpu_count=os.cpu_count(),
+                        loadavg_at_start=_LOADAVG_AT_START,
+                        **{f"{pkg}_version": _version(pkg) for pkg in ("oclgi", "pyopencl", "numpy", "embreex")},
+                        loadavg_at_end=os.getloadavg())

@@ -26,32 +26,17 @@ shrinks every size about tenfold, for a smoke run).
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import platform
 import time
-import warnings
-from pathlib import Path
 
 import numpy as np
 
-import oclgi
-from oclgi.estimators import METHODS
+from common import RESULTS, arguments, engine, figure, surface_points, write
 
-RESULTS = Path(__file__).resolve().parent / "results"
-ACCELERATED = [m for m in ("detp_sphere_cache", "detp_disc_index", "detp_ray_map") if m in METHODS]
+ACCELERATED = ["detp_sphere_cache", "detp_disc_index", "detp_ray_map"]
 MODEL_NP_EXPONENT = {"detp": 1.0, "detp_sphere_cache": 1 / 3, "detp_disc_index": 1 / 3}
-
-
-def surface_points(scene, n, rng):
-    """n points uniform over the scene's area, each with a random side."""
-    areas = scene.triangle_areas()
-    tri = rng.choice(len(areas), size=n, p=areas / areas.sum())
-    b = rng.dirichlet([1, 1, 1], n)
-    p = np.einsum("rk,rkc->rc", b, scene.vertices[scene.faces[tri]])
-    nrm = scene.triangle_normals()[tri] * np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
-    return oclgi.query_points(p, nrm)
 
 
 def spacing_radius(scene, n_points, fraction=0.25):
@@ -61,11 +46,9 @@ def spacing_radius(scene, n_points, fraction=0.25):
 
 class Study:
     def __init__(self, quick: bool):
-        self.quick = quick
+        self.s = 0.1 if quick else 1.0  # every size's scale
         self.rng = np.random.default_rng(2026)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", oclgi.OclgiWarning)
-            self.engine = oclgi.Engine(oclgi.load_file(oclgi.scene_path("cornell_box.toml")), progress=False)
+        self.engine = engine("cornell_box.toml")
         self.scene = self.engine.scene
         self.rows = []
         self._points = {}
@@ -78,24 +61,19 @@ class Study:
     def run(self, experiment, method, n_points, photons, radius, **options):
         est = self.engine.irradiance(self.points(n_points), method=method, photons=photons, radius=radius,
                                      count_work=True, **options)
-        row = {
-            "experiment": experiment, "method": method, "n_P": n_points, "photons": photons,
-            "n_R": est.stats.segments, "radius": radius, "options": options,
-            "seconds": est.stats.seconds["estimate"], **est.work,
-        }
+        row = {"experiment": experiment, "method": method, "n_P": n_points, "photons": photons,
+               "n_R": est.stats.segments, "radius": radius, "options": options,
+               "seconds": est.stats.seconds["estimate"], **est.work}
         self.rows.append(row)
         print(f"{experiment:10s} {method:18s} n_P={n_points:>8,} n_R={row['n_R']:>9,} d={radius:.4g} "
               f"{options} t={row['t']:,} u={row['u']:,} {row['seconds']:.3f}s", flush=True)
-        return row, est
 
     # -- experiments ---------------------------------------------------------
     def scaling(self):
-        s = 0.1 if self.quick else 1.0
-        photons = int(200_000 * s)
+        s, photons = self.s, int(200_000 * self.s)
         for method in ["detp"] + ACCELERATED:
             sizes = [1_000, 4_000, 16_000] if method == "detp" else [1_000, 10_000, 100_000, 1_000_000]
-            sizes = [max(200, int(n * s)) for n in sizes]
-            for n_p in sizes:
+            for n_p in [max(200, int(n * s)) for n in sizes]:
                 self.run("scale_nP", method, n_p, photons, spacing_radius(self.scene, n_p))
             n_p = max(200, int(10_000 * s))
             counts = [10_000, 50_000, 200_000] if method == "detp" else [10_000, 50_000, 200_000, 500_000]
@@ -103,30 +81,20 @@ class Study:
                 self.run("scale_nR", method, n_p, max(1000, int(ph * s)), spacing_radius(self.scene, n_p))
 
     def q_sweep(self):
-        if "detp_sphere_cache" not in METHODS:
-            return
-        s = 0.1 if self.quick else 1.0
-        n_p = max(500, int(100_000 * s))
+        n_p = max(500, int(100_000 * self.s))
         for q in (0.4, 0.5, 0.6, 0.65, 2 / 3, 0.7, 0.75, 0.8, 0.9):
-            self.run("q_sweep", "detp_sphere_cache", n_p, int(100_000 * s), spacing_radius(self.scene, n_p), q=q)
+            self.run("q_sweep", "detp_sphere_cache", n_p, int(100_000 * self.s), spacing_radius(self.scene, n_p), q=q)
 
     def disc_size(self):
-        s = 0.1 if self.quick else 1.0
-        n_p = max(500, int(50_000 * s))
-        photons = int(100_000 * s)
-        diag = self.scene.diagonal
-        for label, radius in (("small", spacing_radius(self.scene, n_p)), ("large", 0.05 * diag)):
+        n_p, photons = max(500, int(50_000 * self.s)), int(100_000 * self.s)
+        for label, radius in (("small", spacing_radius(self.scene, n_p)), ("large", 0.05 * self.scene.diagonal)):
             for method in ["detp"] + ACCELERATED:
                 if method == "detp" and n_p * photons > 2e9:
                     continue
                 self.run(f"disc_{label}", method, n_p, photons, radius)
 
     def ordering(self):
-        if "detp_sphere_cache" not in METHODS:
-            return
-        s = 0.1 if self.quick else 1.0
-        n_p = max(500, int(20_000 * s))
-        photons = int(50_000 * s)
+        n_p, photons = max(500, int(20_000 * self.s)), int(50_000 * self.s)
         radius = 0.1 * self.scene.diagonal / 2  # the thesis' test: 10% of the scene radius
         self.run("ordering", "detp", n_p, photons, radius)
         for order in ("hilbert", "morton", "none"):
@@ -151,13 +119,9 @@ def summarise(rows):
         a, b = by("scale_nP", m), by("scale_nR", m)
         if len(a) < 2 or len(b) < 2:
             continue
-        e = {
-            "nP_work": fit_exponent([r["n_P"] for r in a], [r["t"] + r["u"] for r in a]),
-            "nP_time": fit_exponent([r["n_P"] for r in a], [r["seconds"] for r in a]),
-            "nR_work": fit_exponent([r["n_R"] for r in b], [r["t"] + r["u"] for r in b]),
-            "nR_time": fit_exponent([r["n_R"] for r in b], [r["seconds"] for r in b]),
-        }
-        exps[m] = e
+        of = {"work": lambda r: r["t"] + r["u"], "time": lambda r: r["seconds"]}
+        e = exps[m] = {f"n{x}_{y}": fit_exponent([r[f"n_{x}"] for r in rs], [f(r) for r in rs])
+                       for x, rs in (("P", a), ("R", b)) for y, f in of.items()}
         model = MODEL_NP_EXPONENT.get(m)
         md.append(f"| {m} | {e['nP_work']:.2f} | {e['nP_time']:.2f} | {model if model is None else f'{model:.2f}'} "
                   f"| {e['nR_work']:.2f} | {e['nR_time']:.2f} |")
@@ -166,13 +130,10 @@ def summarise(rows):
     if q:
         md += ["", "## Sphere cache: Q sweep", "",
                "| Q | t | u | t + u | seconds | model 1/(Q^2(1-Q)) |", "|---:|---:|---:|---:|---:|---:|"]
-        for r in q:
-            qq = r["options"]["q"]
-            md.append(f"| {qq:.3f} | {r['t']:,} | {r['u']:,} | {r['t'] + r['u']:,} | {r['seconds']:.3f} "
-                      f"| {1 / (qq * qq * (1 - qq)):.2f} |")
-        best = min(q, key=lambda r: r["t"] + r["u"])
-        md.append(f"\nLeast counted work at Q = {best['options']['q']:.3f}; least time at "
-                  f"Q = {min(q, key=lambda r: r['seconds'])['options']['q']:.3f}.")
+        md += [f"| {qq:.3f} | {r['t']:,} | {r['u']:,} | {r['t'] + r['u']:,} | {r['seconds']:.3f} "
+               f"| {1 / (qq * qq * (1 - qq)):.2f} |" for r in q for qq in [r["options"]["q"]]]
+        md.append(f"\nLeast counted work at Q = {min(q, key=lambda r: r['t'] + r['u'])['options']['q']:.3f}; least "
+                  f"time at Q = {min(q, key=lambda r: r['seconds'])['options']['q']:.3f}.")
 
     for label in ("small", "large"):
         d = [r for r in rows if r["experiment"] == f"disc_{label}"]
@@ -198,20 +159,13 @@ def summarise(rows):
         base = next(r["seconds"] for r in o if r["method"] == "detp")
         md += ["", "## Ordering (speedup over plain DETP)", "", "| method | order | t + u | seconds | speedup |",
                "|---|---|---:|---:|---:|"]
-        for r in o:
-            md.append(f"| {r['method']} | {r['options'].get('order', '-')} | {r['t'] + r['u']:,} "
-                      f"| {r['seconds']:.3f} | {base / r['seconds']:.1f}x |")
+        md += [f"| {r['method']} | {r['options'].get('order', '-')} | {r['t'] + r['u']:,} "
+               f"| {r['seconds']:.3f} | {base / r['seconds']:.1f}x |" for r in o]
     return "\n".join(md) + "\n", exps
 
 
 def plots(rows):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out = []
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig, axes = figure(1, 2, figsize=(11, 4.2))
     for m in sorted({r["method"] for r in rows}):
         a = [r for r in rows if r["experiment"] == "scale_nP" and r["method"] == m]
         if a:
@@ -224,7 +178,7 @@ def plots(rows):
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(RESULTS / "detp_scaling.png", dpi=110)
-    out.append("detp_scaling.png")
+    out = ["detp_scaling.png"]
 
     q = [r for r in rows if r["experiment"] == "q_sweep"]
     if q:
@@ -233,7 +187,7 @@ def plots(rows):
         secs = np.array([r["seconds"] for r in q])
         grid = np.linspace(0.38, 0.92, 200)
         model = 1 / (grid**2 * (1 - grid))
-        fig, ax = plt.subplots(figsize=(6, 4.2))
+        fig, ax = figure(figsize=(6, 4.2))
         ax.plot(qs, work / work.min(), "o-", label="counted t + u (relative)")
         ax.plot(qs, secs / secs.min(), "s-", label="time (relative)")
         ax.plot(grid, model / model.min(), "k--", label="model 1/(Q^2 (1-Q)) (relative)")
@@ -248,11 +202,8 @@ def plots(rows):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="about tenfold smaller sizes (smoke run)")
-    ap.add_argument("--only", nargs="*", help="experiments to run (scaling q_sweep disc_size ordering)")
-    args = ap.parse_args()
-    RESULTS.mkdir(exist_ok=True)
+    args = arguments(__doc__, quick=(False, "about tenfold smaller sizes (smoke run)"),
+                     only=dict(nargs="*", help="experiments to run (scaling q_sweep disc_size ordering)"))
     study = Study(args.quick)
     t0 = time.perf_counter()
     for name in args.only or ["scaling", "q_sweep", "disc_size", "ordering"]:
@@ -261,9 +212,8 @@ def main():
     dev = study.engine.queue.device
     meta = {"machine": platform.processor() or platform.machine(), "device": dev.name.strip(),
             "driver": dev.driver_version, "quick": args.quick, "seconds": time.perf_counter() - t0}
-    (RESULTS / "detp_study.json").write_text(json.dumps({"meta": meta, "rows": study.rows, "exponents": exps},
-                                                        indent=1))
-    (RESULTS / "detp_study.md").write_text(md)
+    write("detp_study.json", json.dumps({"meta": meta, "rows": study.rows, "exponents": exps}, indent=1))
+    write("detp_study.md", md)
     print(md)
     print("plots:", ", ".join(plots(study.rows)))
 

@@ -23,7 +23,6 @@ barriers, so they include the reduction.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -33,10 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the tests' rigid motions
+import oclgi
+from common import ROOT, arguments
+from oclgi import distributed
+
+sys.path.insert(0, str(ROOT / "tests"))  # the tests' rigid motions
 from test_instances import _rigid  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 
 
@@ -49,24 +51,7 @@ def _comm():
     return MPI.COMM_WORLD
 
 
-def _bunny_scene():
-    import oclgi
-
-    return oclgi.load_dict({
-        "mesh": [
-            {"path": str(SCENES / "cornell-box" / "CornellBox-Original.obj")},
-            {"path": str(SCENES / "stanford-bunny" / "bun_zipper.ply"), "movable": True, "name": "bunny",
-             "transform": {"scale": 4.0, "translate": [0.3, -0.13, 0.3]}, "albedo": [0.8, 0.8, 0.8]},
-        ],
-        "camera": {"position": [0, 1, 3.94], "look_at": [0, 1, 0], "fov": 39.3},
-        "photons": {"seed": 21, "max_depth": 10},
-    }, base_dir=SCENES)
-
-
 def worker_scaling(photons: int, side: int) -> dict:
-    import oclgi
-    from oclgi import distributed
-
     comm = _comm()
     engine = oclgi.Engine(distributed.load_scene(comm, SCENES / "cornell_box.toml"))
     pts = engine.camera_points(width=side, height=side) if comm.rank == 0 else None
@@ -85,11 +70,16 @@ def worker_scaling(photons: int, side: int) -> dict:
 
 
 def worker_session(photons: int, side: int, moves: int, drag: bool) -> dict:
-    import oclgi
-    from oclgi import distributed
-
     comm = _comm()
-    engine = oclgi.Engine(_bunny_scene())
+    engine = oclgi.Engine(oclgi.load_dict({
+        "mesh": [
+            {"path": str(SCENES / "cornell-box" / "CornellBox-Original.obj")},
+            {"path": str(SCENES / "stanford-bunny" / "bun_zipper.ply"), "movable": True, "name": "bunny",
+             "transform": {"scale": 4.0, "translate": [0.3, -0.13, 0.3]}, "albedo": [0.8, 0.8, 0.8]},
+        ],
+        "camera": {"position": [0, 1, 3.94], "look_at": [0, 1, 0], "fov": 39.3},
+        "photons": {"seed": 21, "max_depth": 10},
+    }, base_dir=SCENES))
     pts = engine.camera_points(width=side, height=side) if comm.rank == 0 else None
     t0 = time.perf_counter()
     session = distributed.Session(engine, pts, comm, method="detp_disc_index", photons=photons, radius=0.05)
@@ -117,8 +107,7 @@ def worker_session(photons: int, side: int, moves: int, drag: bool) -> dict:
 
 
 def worker(argv):
-    what = argv[0]
-    if what == "scaling":
+    if argv[0] == "scaling":
         out = worker_scaling(int(argv[1]), int(argv[2]))
     else:
         out = worker_session(int(argv[1]), int(argv[2]), int(argv[3]), argv[4] == "drag")
@@ -145,17 +134,10 @@ def launch(ranks: int, *args, threads: int | None = None) -> dict:
 def main():
     if sys.argv[1:2] == ["--worker"]:
         return worker(sys.argv[2:])
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--photons", type=int, default=2_000_000)
-    ap.add_argument("--side", type=int, default=64, help="camera points per side")
-    ap.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
-    ap.add_argument("--session-photons", type=int, default=200_000)
-    ap.add_argument("--moves", type=int, default=20)
-    ap.add_argument("--only", choices=["scaling", "session"], help="one part only")
-    ap.add_argument("--json", type=Path)
-    a = ap.parse_args()
-    load = os.getloadavg()[0]
-    print(f"{os.cpu_count()} cores, load average {load:.2f} at the start\n")
+    a = arguments(__doc__, photons=2_000_000, side=(64, "camera points per side"),
+                  ranks=dict(type=int, nargs="+", default=[1, 2]), session_photons=200_000, moves=20,
+                  only=dict(choices=["scaling", "session"], help="one part only"), json=dict(type=Path))
+    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at the start\n")
 
     results = {"scaling": [], "session": []}
     if a.only != "session":
@@ -169,8 +151,7 @@ def main():
 
 def scaling(a, results):
     print(f"Strong scaling: detp_disc_index, Cornell box, {a.photons:,} photons, {a.side}x{a.side} points")
-    print("| PoCL threads per rank | ranks | wall s | speed-up | trace s (rank 0) | reduce s |")
-    print("|---|---|---|---|---|---|")
+    print("| PoCL threads per rank | ranks | wall s | speed-up | trace s (rank 0) | reduce s |\n" + "|---" * 6 + "|")
     for threads in (None, 1):
         base = None
         for k in a.ranks:
@@ -186,8 +167,8 @@ def session(a, results):
     print(f"\nDistributed session: Cornell box and bunny, {a.session_photons:,} photons, "
           f"{a.side}x{a.side} fixed points, {a.moves} moves (changed rows: all ranks')")
     print("| moves | ranks | move wall s (median) | reduce s (median) | bytes sent per move (median, max) | "
-          "a full Reduce's bytes | changed rows (median) | paths re-traced by rank 0 (median) |")
-    print("|---|---|---|---|---|---|---|---|")
+          "a full Reduce's bytes | changed rows (median) | paths re-traced by rank 0 (median) |\n"
+          "|---|---|---|---|---|---|---|---|")
     for kind in ("jumps", "drag"):
         for k in a.ranks:
             r = launch(k, "session", a.session_photons, a.side, a.moves, kind)

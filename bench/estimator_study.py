@@ -35,23 +35,20 @@ counts and reference shrunk tenfold, 3 seeds, 100 points; a smoke run).
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
 import oclgi
+from common import RESULTS, ROOT, arguments, concat, device, timed
 from oclgi.io import atomic_path
 from oclgi.study import Config, equal_time, random_surface_points, run_study
 from oclgi.study.reference import Reference
 from oclgi.study.report import write_all
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = Path(__file__).resolve().parent / "results"
 RADIUS = 0.03
 REF_RADIUS = 0.02
 K = 50
@@ -78,8 +75,7 @@ def meshed_cornell_box() -> list:
     # 30-31 = 32-33): a ray hits one copy, so Impact Count would read zero on the other
     corners = np.sort(box.vertices[box.faces].reshape(len(box.faces), -1), axis=1)
     _, first = np.unique(corners, axis=0, return_index=True)
-    keep = np.zeros(len(box.faces), bool)
-    keep[first] = True
+    keep = np.isin(np.arange(len(box.faces)), first)
     for m in np.unique(box.tri_material):
         faces = box.faces[(box.tri_material == m) & keep]
         used, local = np.unique(faces, return_inverse=True)
@@ -110,18 +106,7 @@ def points(engine, n, rng):
     n_box = sum(len(m["faces"]) for m in meshed_cornell_box())
     on_bunny = random_surface_points(s, n // 2, rng, triangles=np.arange(n_box, s.n_triangles))
     anywhere = random_surface_points(s, n - n // 2, rng)
-    return oclgi.QueryPoints(*(np.concatenate([getattr(on_bunny, a), getattr(anywhere, a)])
-                               for a in ("positions", "normals", "barys")), kind="random")
-
-
-def machine() -> dict:
-    from oclgi.cl.device import create_context
-
-    _, queue = create_context()
-    dev = queue.device
-    return {"device": dev.name.strip(), "platform": dev.platform.version.strip(),
-            "compute_units": dev.max_compute_units, "python": platform.python_version(),
-            "loadavg": [round(x, 2) for x in os.getloadavg()]}
+    return concat([on_bunny, anywhere], kind="random")
 
 
 def run(name: str, quick: bool) -> dict:
@@ -134,15 +119,16 @@ def run(name: str, quick: bool) -> dict:
     rng = np.random.default_rng(2009)
     pts = points(engine, 100 if quick else 300, rng)
     ref = Reference("detp", photons=int(64_000_000 * scale), radius=REF_RADIUS, runs=4)
-    t0 = time.perf_counter()
-    result = run_study(engine, configs, points=pts, seeds=3 if quick else 8, reference=ref)
-    print(f"{name}: {time.perf_counter() - t0:.0f} s, {engine.scene.n_triangles:,} triangles")
+    t, result = timed(run_study, engine, configs, points=pts, seeds=3 if quick else 8, reference=ref)
+    print(f"{name}: {t:.0f} s, {engine.scene.n_triangles:,} triangles")
     stem = f"estimator_study_{name}"
     write_all(result, RESULTS, stem=stem, plots=True, prefix=f"{stem}_")
-    out = result.to_json()
-    out["triangles"] = engine.scene.n_triangles
-    out["machine"] = machine()
-    out["equal_time_fit"] = equal_time(result, mode="fit").rows
+    dev = device()
+    out = {**result.to_json(), "triangles": engine.scene.n_triangles,
+           "machine": {"device": dev.name.strip(), "platform": dev.platform.version.strip(),
+                       "compute_units": dev.max_compute_units, "python": platform.python_version(),
+                       "loadavg": [round(x, 2) for x in os.getloadavg()]},
+           "equal_time_fit": equal_time(result, mode="fit").rows}
     with atomic_path(RESULTS / f"{stem}.json") as tmp:
         tmp.write_text(json.dumps(out, indent=1, default=float))
     print(result.to_markdown())
@@ -150,10 +136,7 @@ def run(name: str, quick: bool) -> dict:
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--scenes", default="cornell,bunny")
-    args = ap.parse_args()
+    args = arguments(__doc__, quick=False, scenes="cornell,bunny")
     t0 = time.perf_counter()
     for name in args.scenes.split(","):
         run(name, args.quick)

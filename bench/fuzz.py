@@ -63,15 +63,14 @@ class Campaign:
             kept = self.causes[f.signature]
             saved = None
             if len(kept) < KEEP_PER_CAUSE:
-                saved = outcome.case.save(self.out / "reproducers" / f.kind.replace(" ", "-")
-                                          / f"{fmt}-{self.done:04d}", outcome)
-            kept.append((fmt, str(saved) if saved else None, f.detail))
+                saved = str(outcome.case.save(self.out / "reproducers" / f.kind.replace(" ", "-")
+                                              / f"{fmt}-{self.done:04d}", outcome))
+            kept.append((fmt, saved, f.detail))
             self.failures.append({"format": fmt, "kind": f.kind, "signature": f.signature,
-                                  "command": outcome.case.command(), "reproducer": str(saved) if saved else None,
-                                  "detail": f.detail[-2000:]})
+                                  "command": outcome.case.command(), "reproducer": saved, "detail": f.detail[-2000:]})
         if self.done % 50 == 0:
-            bad = sum(1 for _ in self.failures)
-            print(f"  {self.done} cases, {bad} failures, {time.perf_counter() - self.t0:.0f}s", file=sys.stderr)
+            print(f"  {self.done} cases, {len(self.failures)} failures, {time.perf_counter() - self.t0:.0f}s",
+                  file=sys.stderr)
 
     def run(self, fmt: str, n: int, seed_value: int) -> None:
         @settings(max_examples=n, database=None, deadline=None, phases=[Phase.generate],
@@ -85,14 +84,11 @@ class Campaign:
 
     def tables(self, header: str) -> str:
         cols = ["cases", "exit 0", "exit 2", *KINDS]
-        lines = [header, "", "| format | " + " | ".join(cols) + " | seconds |",
-                 "|---|" + "---:|" * (len(cols) + 1)]
-        total = Counter()
-        for fmt, row in self.rows.items():
-            total.update(row)
-            lines.append(f"| {fmt} | " + " | ".join(str(row[c]) for c in cols) + f" | {self.seconds[fmt]:.0f} |")
-        lines.append("| **all** | " + " | ".join(str(total[c]) for c in cols)
-                     + f" | {sum(self.seconds.values()):.0f} |")
+        total = sum(self.rows.values(), Counter())
+        lines = [header, "", "| format | " + " | ".join(cols) + " | seconds |", "|---|" + "---:|" * (len(cols) + 1),
+                 *(f"| {fmt} | " + " | ".join(str(row[c]) for c in cols) + f" | {self.seconds[fmt]:.0f} |"
+                   for fmt, row in self.rows.items()),
+                 "| **all** | " + " | ".join(str(total[c]) for c in cols) + f" | {sum(self.seconds.values()):.0f} |"]
         if self.broken:
             lines += ["", f"The generator of {', '.join(self.broken)} failed: those rows are short."]
         lines += ["", f"{len(self.causes)} distinct causes of failure:", "",

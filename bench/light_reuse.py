@@ -33,18 +33,15 @@ Usage: ``.venv/bin/python bench/light_reuse.py [--paths N] [--frames 4,16,64]
 
 from __future__ import annotations
 
-import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
 import oclgi
+from common import RESULTS, ROOT, arguments, figure, timed, write
 from oclgi.tracing.light_reuse import LightReuse
 from oclgi.tracing.light_reweight import Reweighting
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "bench" / "results"
 BOX = str(ROOT / "scenes" / "cornell-box" / "CornellBox-Original.obj")
 RADIUS = 0.06
 MAX_DEPTH = 12
@@ -84,46 +81,38 @@ def rel_ms(e, ref) -> float:
 def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: int = 11) -> dict:
     positions = circle(frames, span)
     n = paths // frames
-    t0 = time.perf_counter()
-    reuse = LightReuse(engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
-    setup = time.perf_counter() - t0
+    setup, reuse = timed(LightReuse, engine, "lamp", positions, photons=n, seed=seed, max_depth=MAX_DEPTH)
     est = reuse.estimator(pts, method=method, radius=RADIUS)
     rw_est = rw = None
     if method == "detp_disc_index":  # the tails' stored pairs re-weighted (oclgi/tracing/light_reweight.py)
         rw_est = reuse.estimator(pts, method=method, radius=RADIUS)
         rw = Reweighting(reuse, rw_est)
-    rw_s = []
     err_frames = sorted(set(np.linspace(0, frames - 1, ERROR_FRAMES).round().astype(int).tolist()))
-    connect, frame_s, direct_s, errs_reuse, errs_rec, rec_s, rec_trace, refs = [], [], [], [], [], [], [], {}
+    secs = {k: [] for k in ("connect", "frame", "rw", "direct", "rec")}  # wall seconds, a list per frame
+
+    def clock(key, fn, *args, **kwargs):
+        t, out = timed(fn, *args, **kwargs)
+        secs[key].append(t)
+        return out
+
+    def recompute(photons, seed):
+        return engine.irradiance(pts, method=method, photons=photons, radius=RADIUS, seed=seed, max_depth=MAX_DEPTH)
+
+    errs_reuse, errs_rec, rec_trace, refs = [], [], [], {}
     for j in range(frames):
-        t1 = time.perf_counter()
-        for _ in reuse.batches(j):
-            engine.queue.finish()
-        connect.append(time.perf_counter() - t1)
-        t1 = time.perf_counter()
-        e = reuse.estimate(j, est)
-        frame_s.append(time.perf_counter() - t1)
+        clock("connect", lambda: [engine.queue.finish() for _ in reuse.batches(j)])
+        e = clock("frame", reuse.estimate, j, est)
         if rw is not None:
-            t1 = time.perf_counter()
-            e_rw = reuse.estimate(j, rw_est, reweighting=rw)
-            rw_s.append(time.perf_counter() - t1)
+            e_rw = clock("rw", reuse.estimate, j, rw_est, reweighting=rw)
             assert np.array_equal(e_rw.accumulators, e.accumulators), "a re-weighted frame differs"
         # the direct light alone: what a frame would still estimate if the
         # tails' contributions were kept per point and only re-weighted
-        t1 = time.perf_counter()
-        for batch in reuse.batches(j, tails=False):
-            est.accumulate(batch)
-        engine.queue.finish()
-        direct_s.append(time.perf_counter() - t1)
+        clock("direct", lambda: ([est.accumulate(b) for b in reuse.batches(j, tails=False)], engine.queue.finish()))
         with reuse.light_at(j):
-            t1 = time.perf_counter()
-            r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS, seed=seed + 1,
-                                  max_depth=MAX_DEPTH)
-            rec_s.append(time.perf_counter() - t1)
+            r = clock("rec", recompute, n * frames, seed + 1)
             rec_trace.append(r.stats.seconds["trace"])
             if j in err_frames:
-                ref = refs[j] = engine.irradiance(pts, method=method, photons=REF_FACTOR * n * frames,
-                                                  radius=RADIUS, seed=seed + 2, max_depth=MAX_DEPTH).irradiance
+                ref = refs[j] = recompute(REF_FACTOR * n * frames, seed + 2).irradiance
                 errs_reuse.append(rel_ms(e.irradiance, ref))
                 errs_rec.append(rel_ms(r.irradiance, ref))
     for k in range(1, ERROR_SEEDS):  # more animations, for the errors alone
@@ -131,23 +120,21 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
         for j in err_frames:
             errs_reuse.append(rel_ms(other.estimate(j, est).irradiance, refs[j]))
             with other.light_at(j):
-                r = engine.irradiance(pts, method=method, photons=n * frames, radius=RADIUS,
-                                      seed=seed + 10 * k + 1, max_depth=MAX_DEPTH)
-            errs_rec.append(rel_ms(r.irradiance, refs[j]))
+                errs_rec.append(rel_ms(recompute(n * frames, seed + 10 * k + 1).irradiance, refs[j]))
+    mean = {k: float(np.mean(v)) if v else float("nan") for k, v in secs.items()}
     # the references' own error (1/REF_FACTOR of a recomputation's squared error) adds: take it out
     ref_ms = float(np.mean(errs_rec)) / REF_FACTOR
-    err_reuse = float(np.sqrt(max(np.mean(errs_reuse) - ref_ms, 1e-30)))
-    err_rec = float(np.sqrt(max(np.mean(errs_rec) - ref_ms, 1e-30)))
+    err_reuse, err_rec = (float(np.sqrt(max(np.mean(x) - ref_ms, 1e-30))) for x in (errs_reuse, errs_rec))
     seg_per_path = reuse.segments / reuse.n_paths
-    reuse_frame = setup / frames + float(np.mean(frame_s))  # the store's cost spread over the frames
-    reuse_trace = (reuse.seconds["trace"] + reuse.seconds["weights"]) / frames + float(np.mean(connect))
-    rec_frame = float(np.mean(rec_s))
+    reuse_frame = setup / frames + mean["frame"]  # the store's cost spread over the frames
+    reuse_trace = (reuse.seconds["trace"] + reuse.seconds["weights"]) / frames + mean["connect"]
+    rec_frame = mean["rec"]
     eq_paths = (err_rec / err_reuse) ** 2  # recomputation's paths for reuse's error, relative to N
-    direct_frame = setup / frames + float(np.mean(direct_s))
-    rw_frame = (setup + rw.seconds) / frames + float(np.mean(rw_s)) if rw is not None else float("nan")
+    direct_frame = setup / frames + mean["direct"]
+    rw_frame = (setup + rw.seconds) / frames + mean["rw"] if rw is not None else float("nan")
     return {"method": method, "span": span, "F": frames, "n": n, "paths": n * frames, "L": seg_per_path,
             "store_trace_s": reuse.seconds["trace"], "weights_s": reuse.seconds["weights"], "setup_s": setup,
-            "connect_s": float(np.mean(connect)), "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
+            "connect_s": mean["connect"], "reuse_frame_s": reuse_frame, "rec_frame_s": rec_frame,
             "rec_trace_s": float(np.mean(rec_trace)), "err_reuse": err_reuse, "err_rec": err_rec,
             "tracing_speedup": float(np.mean(rec_trace)) / reuse_trace,
             "speedup_equal_paths": rec_frame / reuse_frame,
@@ -158,9 +145,7 @@ def study(engine, frames: int, paths: int, pts, method: str, span: float, seed: 
             "rw_frame_s": rw_frame, "rw_equal_error": rec_frame * eq_paths / rw_frame}
 
 
-def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    out = RESULTS / "light_reuse.md"
+def report(rows: list[dict], paths: int, points: int, seconds: float):
     header = ("| method | span m | F | n/pos | L (seg/path) | store trace s | weights s | reuse frame ms | "
               "recompute frame ms | err reuse | err recompute | tracing speedup (model L) | speedup, equal paths | "
               "speedup, equal error (Sbert: up to F) | variance gain | direct-only frame ms | "
@@ -182,31 +167,22 @@ def write(rows: list[dict], paths: int, points: int, seconds: float) -> Path:
              "the estimator and one pass over the pairs), its frames equal to reuse's bit for bit (asserted), the "
              "pairs' search spread over the F frames like the store's trace.")
     lines = ["# Light reuse against per-frame recomputation (bench/light_reuse.py)", "", setting, "", header,
-             "|---" * 20 + "|"]
-    for r in rows:
-        lines.append(f"| {r['method']} | {r['span']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | {r['store_trace_s']:.2f} | "
-                     f"{r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | {r['rec_frame_s'] * 1e3:.0f} | "
-                     f"{r['err_reuse']:.4f} | {r['err_rec']:.4f} | {r['tracing_speedup']:.2f} ({r['L']:.2f}) | "
-                     f"{r['speedup_equal_paths']:.2f} | {r['speedup_equal_error']:.2f} ({r['F']}) | "
-                     f"{r['variance_gain']:.2f} | {r['direct_frame_s'] * 1e3:.0f} | "
-                     f"{r['bound_equal_error']:.2f} | {r['pairs']:,} | {r['rw_frame_s'] * 1e3:.0f} | "
-                     f"{r['rw_equal_error']:.2f} |")
-    lines += ["", notes, ""]
-    out.write_text("\n".join(lines))
-    return out
+             "|---" * 20 + "|", *(f"| {r['method']} | {r['span']} | {r['F']} | {r['n']:,} | {r['L']:.2f} | "
+                                  f"{r['store_trace_s']:.2f} | {r['weights_s']:.2f} | {r['reuse_frame_s'] * 1e3:.0f} | "
+                                  f"{r['rec_frame_s'] * 1e3:.0f} | {r['err_reuse']:.4f} | {r['err_rec']:.4f} | "
+                                  f"{r['tracing_speedup']:.2f} ({r['L']:.2f}) | {r['speedup_equal_paths']:.2f} | "
+                                  f"{r['speedup_equal_error']:.2f} ({r['F']}) | {r['variance_gain']:.2f} | "
+                                  f"{r['direct_frame_s'] * 1e3:.0f} | {r['bound_equal_error']:.2f} | {r['pairs']:,} | "
+                                  f"{r['rw_frame_s'] * 1e3:.0f} | {r['rw_equal_error']:.2f} |" for r in rows),
+             "", notes, ""]
+    return write("light_reuse.md", "\n".join(lines))
 
 
-def plot(rows: list[dict]) -> Path:
+def plot(rows: list[dict]):
     """Speedups against F with the models: the tracing part against the
     thesis' L, the whole frame at equal error (plain reuse and re-weighted)
     against Sbert et al.'s bound F."""
-    import matplotlib
-
-    from matplotlib.figure import Figure
-
-    del matplotlib  # the figure is drawn on its own canvas: the user's backend is untouched
-    fig = Figure(figsize=(10, 4))
-    ax_t, ax_e = fig.subplots(1, 2)
+    fig, (ax_t, ax_e) = figure(1, 2, figsize=(10, 4))
     fs = sorted({r["F"] for r in rows})
     for key in sorted({(r["method"], r["span"]) for r in rows}):
         sel = [r for r in rows if (r["method"], r["span"]) == key]
@@ -222,27 +198,20 @@ def plot(rows: list[dict]) -> Path:
     ax_e.axhline(2.0, color="grey", ls="--", lw=0.8, label="goal: 2x")
     for ax, title in ((ax_t, "tracing speedup"), (ax_e, "frame speedup at equal error")):
         ax.set_xscale("log", base=2)
-        ax.set_xlabel("frames F")
-        ax.set_title(title)
+        ax.set(xlabel="frames F", title=title)
         ax.legend(fontsize=7)
     ax_e.set_yscale("log", base=2)
-    out = RESULTS / "light_reuse.png"
-    fig.savefig(out, dpi=110, bbox_inches="tight")
+    fig.savefig(out := RESULTS / "light_reuse.png", dpi=110, bbox_inches="tight")
     return out
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--paths", type=int, default=64_000, help="paths per frame, N (default 64000)")
-    ap.add_argument("--frames", default="4,16,64", help="frame counts F (default 4,16,64)")
-    ap.add_argument("--spans", default="0.5:detp_disc_index,impact;0.1:detp_disc_index",
-                    help="the light path's radii (m), each with its methods (default "
-                         "0.5:detp_disc_index,impact;0.1:detp_disc_index)")
-    ap.add_argument("--quick", action="store_true", help="N = 8000, F = 4,16")
-    args = ap.parse_args()
+    args = arguments(__doc__, paths=(64_000, "paths per frame, N (default 64000)"),
+                     frames=("4,16,64", "frame counts F (default 4,16,64)"),
+                     spans=("0.5:detp_disc_index,impact;0.1:detp_disc_index", "the light path's radii (m), each "
+                            "with its methods (default 0.5:detp_disc_index,impact;0.1:detp_disc_index)"),
+                     quick=dict(paths=8000, frames="4,16"))
     paths, frames = args.paths, [int(f) for f in args.frames.split(",")]
-    if args.quick:
-        paths, frames = 8000, [4, 16]
     spans = [(float(a), b.split(",")) for a, b in (part.split(":") for part in args.spans.split(";"))]
     t0 = time.perf_counter()
     engine = oclgi.Engine(scene(paths))
@@ -260,7 +229,7 @@ def main():
             for f in frames:
                 rows.append(study(engine, f, paths, pts, method, span))
                 print({k: round(v, 4) if isinstance(v, float) else v for k, v in rows[-1].items()}, flush=True)
-    print(f"wrote {write(rows, paths, len(pts), time.perf_counter() - t0)} and {plot(rows)}")
+    print(f"wrote {report(rows, paths, len(pts), time.perf_counter() - t0)} and {plot(rows)}")
 
 
 if __name__ == "__main__":

@@ -12,14 +12,13 @@ Writes a markdown table to bench/results/memory_scaling.md (or -o).
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from common import RESULTS, ROOT, arguments
 
 CHILD = r"""
 import json, resource, sys, time
@@ -37,12 +36,9 @@ print(json.dumps({"peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--photons", default="1e6,1e7,1e8")
-    ap.add_argument("--methods", default="detp_disc_index,impact")
-    ap.add_argument("--scene", default=str(ROOT / "scenes" / "cornell_box.toml"))
-    ap.add_argument("-o", "--output", type=Path, default=ROOT / "bench" / "results" / "memory_scaling.md")
-    args = ap.parse_args()
+    args = arguments(__doc__, photons="1e6,1e7,1e8", methods="detp_disc_index,impact",
+                     scene=str(ROOT / "scenes" / "cornell_box.toml"),
+                     output=dict(short="-o", type=Path, default=RESULTS / "memory_scaling.md"))
     rows = []
     for method in args.methods.split(","):
         for photons in args.photons.split(","):
@@ -50,9 +46,8 @@ def main() -> None:
                                  capture_output=True, text=True)
             if res.returncode != 0:
                 sys.exit(f"{method} {photons}: {res.stderr.strip().splitlines()[-1]}")
-            r = json.loads(res.stdout.strip().splitlines()[-1])
-            rows.append((method, int(float(photons)), r))
-            print(f"{method:18s} {int(float(photons)):>12,} photons  peak {r['peak_mib']:8.1f} MiB  "
+            rows.append((method, n := int(float(photons)), r := json.loads(res.stdout.strip().splitlines()[-1])))
+            print(f"{method:18s} {n:>12,} photons  peak {r['peak_mib']:8.1f} MiB  "
                   f"{r['seconds']:7.1f} s  {r['segments']:,} segments", flush=True)
     device = rows[0][2]["device"] if rows else "?"
     lines = [f"# Peak memory against photon count ({time.strftime('%Y-%m-%d')}, {device}, 64x64 camera points, "

@@ -18,26 +18,14 @@ Usage: ``.venv/bin/python bench/mitsuba_compare.py [--size 256] [--photons 10000
 
 from __future__ import annotations
 
-import argparse
 import os
 import platform
 import shutil
-import time
-from pathlib import Path
 
-import oclgi
-from oclgi.study import image_compare, mitsuba as mitsuba_reference
+from common import RESULTS, ROOT, arguments, cpu_timed, engine as make_engine
 from oclgi.io import atomic_path, read_image
+from oclgi.study import image_compare, mitsuba as mitsuba_reference
 from oclgi.study.image import compare_with_mitsuba
-
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "bench" / "results"
-
-
-def _cpu():
-    """CPU seconds of this process and its threads (PoCL's and Mitsuba's)."""
-    t = os.times()
-    return t.user + t.system
 
 
 def _row(name, c: image_compare.Comparison):
@@ -47,34 +35,19 @@ def _row(name, c: image_compare.Comparison):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, default=256)
-    ap.add_argument("--photons", type=int, default=10_000_000)
-    ap.add_argument("--radius", type=float, default=0.03)
-    ap.add_argument("--spp", type=int, default=2048, help="per Mitsuba image (two are rendered)")
-    ap.add_argument("--edge-px", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=ROOT / "out" / "mitsuba_cornell")
-    ap.add_argument("--quick", action="store_true", help="64 x 64, 10^6 photons, 256 spp")
-    args = ap.parse_args()
-    if args.quick:
-        args.size, args.photons, args.radius, args.spp, args.edge_px = 64, 1_000_000, 0.05, 256, 2
+    args = arguments(__doc__, size=256, photons=10_000_000, radius=0.03, edge_px=3,
+                     spp=(2048, "per Mitsuba image (two are rendered)"), out=ROOT / "out" / "mitsuba_cornell",
+                     quick=dict(size=64, photons=1_000_000, radius=0.05, spp=256, edge_px=2))
 
-    scene = oclgi.load_file(ROOT / "scenes" / "cornell_box.toml")
-    engine = oclgi.Engine(scene, progress=False)
+    engine = make_engine(ROOT / "scenes" / "cornell_box.toml")
     s = args.size
-    c0, t0 = _cpu(), time.perf_counter()
-    summary = compare_with_mitsuba(engine, args.out, spp=args.spp, edge_px=args.edge_px, width=s, height=s,
-                                   mitsuba_seed=0, error_scale=0.1, photons=args.photons, radius=args.radius,
-                                   method="detp_disc_index")
-    cores_cmp = (_cpu() - c0) / (time.perf_counter() - t0)
-    ocl = read_image(args.out / "oclgi.exr")
-    ref0 = read_image(args.out / "mitsuba.exr")
-    c0, t0 = _cpu(), time.perf_counter()
-    ref1 = mitsuba_reference.render(engine, width=s, height=s, spp=args.spp, seed=1)
-    t_ref1 = time.perf_counter() - t0
-    cores_ref1 = (_cpu() - c0) / t_ref1
+    wall, cpu_cmp, summary = cpu_timed(compare_with_mitsuba, engine, args.out, spp=args.spp, edge_px=args.edge_px,
+                                       width=s, height=s, mitsuba_seed=0, error_scale=0.1, photons=args.photons,
+                                       radius=args.radius, method="detp_disc_index")
+    ocl, ref0 = (read_image(args.out / name) for name in ("oclgi.exr", "mitsuba.exr"))
+    t_ref1, cpu_ref1, ref1 = cpu_timed(mitsuba_reference.render, engine, width=s, height=s, spp=args.spp, seed=1)
 
-    mask = image_compare.edge_mask(engine.camera_points(width=s, height=s), args.edge_px, scene=scene)
+    mask = image_compare.edge_mask(engine.camera_points(width=s, height=s), args.edge_px, scene=engine.scene)
     vs0 = image_compare.compare(ocl, ref0, mask, scale=0.1)
     vs_mean = image_compare.compare(ocl, 0.5 * (ref0 + ref1), mask, scale=0.1)
     noise = image_compare.compare(ref1, ref0, mask, scale=0.1)
@@ -84,34 +57,25 @@ def main():
     o, m = summary["oclgi"], summary["mitsuba"]
     spp = m["spp"]
     md = [
-        "# Cornell box: oclgi against Mitsuba 3",
-        "",
+        "# Cornell box: oclgi against Mitsuba 3", "",
         f"{s} x {s} pixels; oclgi {o['method']}, {o['photons']:,} photons ({o['segments']:,} segments), "
         f"radius {o['radius']}, max_depth {o['max_depth']}; Mitsuba {m['version']} `{m['variant']}`, "
         f"`path` integrator, max_depth {m['max_depth']}, {m['sampler']} sampler, {spp} spp per image. "
-        f"Pixels within {args.edge_px} of an edge left out: {vs0.compared:,} of {s * s:,} compared.",
-        "",
-        "Relative error of luminance over the compared pixels; channel ratios are mean(test) / mean(reference).",
-        "",
+        f"Pixels within {args.edge_px} of an edge left out: {vs0.compared:,} of {s * s:,} compared.", "",
+        "Relative error of luminance over the compared pixels; channel ratios are mean(test) / mean(reference).", "",
         "| test against reference | mean | median | p95 | signed mean | R / G / B ratio |",
         "|---|---:|---:|---:|---:|---:|",
         _row(f"oclgi vs Mitsuba seed 0 ({spp} spp)", vs0),
         _row(f"oclgi vs mean of seeds 0 and 1 ({2 * spp} spp)", vs_mean),
-        _row(f"Mitsuba seed 1 vs seed 0 (the reference's noise, {spp} spp each)", noise),
-        "",
-        "| renderer | seconds |",
-        "|---|---:|",
+        _row(f"Mitsuba seed 1 vs seed 0 (the reference's noise, {spp} spp each)", noise), "",
+        "| renderer | seconds |", "|---|---:|",
         f"| oclgi (camera points, trace, estimate, shade) | {o['seconds']:.1f} |",
-        f"| Mitsuba, one image of {spp} spp | {m['seconds']:.1f} (seed 1: {t_ref1:.1f}) |",
-        "",
-        f"Cores used (process CPU time / wall time; 2 = both cores to itself): {cores_cmp:.2f} over both "
-        f"renders of the comparison, {cores_ref1:.2f} over Mitsuba's second image.",
-        "",
+        f"| Mitsuba, one image of {spp} spp | {m['seconds']:.1f} (seed 1: {t_ref1:.1f}) |", "",
+        f"Cores used (process CPU time / wall time; 2 = both cores to itself): {cpu_cmp / wall:.2f} over both "
+        f"renders of the comparison, {cpu_ref1 / t_ref1:.2f} over Mitsuba's second image.", "",
         f"Machine: {os.cpu_count()} cores, {platform.processor() or platform.machine()}; OpenCL "
-        f"device `{o['device']}` ({engine.queue.device.platform.version.strip()}).",
-        "",
-        "![relative error](mitsuba_cornell_error.png)",
-        "",
+        f"device `{o['device']}` ({engine.queue.device.platform.version.strip()}).", "",
+        "![relative error](mitsuba_cornell_error.png)", "",
     ]
     with atomic_path(RESULTS / "mitsuba_cornell.md") as tmp:
         tmp.write_text("\n".join(md), encoding="utf-8")

@@ -28,18 +28,14 @@ Usage: ``.venv/bin/python bench/photon_map_drift.py [--frames N] [--quick]``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
-import time
-from pathlib import Path
 
 import numpy as np
 
 import oclgi
-
-RESULTS = Path(__file__).resolve().parent / "results"
+from common import RESULTS, arguments, concat, engine as make_engine, figure, timed, write
 
 
 def surface_points(scene, obj, n, rng, towards=None):
@@ -55,11 +51,6 @@ def surface_points(scene, obj, n, rng, towards=None):
     q = oclgi.query_points(p, nrm)
     q.positions[:, 3] = tri.astype(np.int32).view(np.float32)
     return q
-
-
-def concat(*qs):
-    cat = lambda f: np.concatenate([getattr(q, f) for q in qs])  # noqa: E731
-    return oclgi.QueryPoints(cat("positions"), cat("normals"), cat("barys"))
 
 
 def pose(i, frames, radius=0.3):
@@ -84,24 +75,17 @@ def errors(got, ref):
     return float(np.sqrt(np.mean(np.square(d))) / scale), float(np.abs(d).max() / np.mean(ref))
 
 
-def machine(engine):
-    dev = engine.queue.device
-    return {"device": dev.name.strip(), "platform": dev.platform.version.split(",")[0].strip(), "cores": os.cpu_count(),
-            "load_average": os.getloadavg()}
-
-
 def run(frames, photons, n_room, n_bunny, noise_every, seed2=2):
-    scene = oclgi.load_file(oclgi.scene_path("cornell_bunny.toml"))
-    engine = oclgi.Engine(scene, progress=False)
+    engine = make_engine("cornell_bunny.toml")
+    scene = engine.scene
     # Placed once by a move, so that the last frame (the identity again) is the
     # first frame's scene bit for bit: a move computes the object's world normals
     # on the device, loading computed them on the host, and they differ in the
     # last bits.
     engine.move("bunny", np.eye(4))
     rng = np.random.default_rng(11)
-    bunny = scene.object_id("bunny")
     room = surface_points(scene, 0, n_room, rng, towards=[0, 1, 0])
-    pts = concat(room, surface_points(scene, bunny, n_bunny, rng))
+    pts = concat([room, surface_points(scene, scene.object_id("bunny"), n_bunny, rng)])
     kw = dict(photons=photons, k=50, estimator="k-1")
     practical = oclgi.PhotonMapSession(engine, pts, **kw)
     exact = oclgi.PhotonMapSession(engine, pts, mode="exact", **kw)
@@ -114,9 +98,7 @@ def run(frames, photons, n_room, n_bunny, noise_every, seed2=2):
         st_p = practical.move("bunny", m)
         st_e = exact.move("bunny", m)
         st_s = static_only.move("bunny", m)
-        t0 = time.perf_counter()
-        ref = practical.recompute()
-        t_full = time.perf_counter() - t0
+        t_full, ref = timed(practical.recompute)
         e_p = practical.irradiance()
         assert np.array_equal(exact.accumulators(), ref.accumulators), f"frame {i}: exact mode differs"
         assert np.array_equal(e_p[n_room:], ref.irradiance[n_room:]), f"frame {i}: bunny points differ"
@@ -139,9 +121,11 @@ def run(frames, photons, n_room, n_bunny, noise_every, seed2=2):
               + (f" | noise rms {row['noise_rms']:.4f} max {row['noise_max']:.3f}" if "noise_rms" in row else "")
               + f" | practical {st_p.seconds['total'] * 1e3:.0f} ms, exact {st_e.seconds['total'] * 1e3:.0f} ms"
               f" ({st_e.points} searched), recompute {t_full * 1e3:.0f} ms", flush=True)
+    dev = engine.queue.device
     return {"scene": "cornell_bunny.toml", "photons": photons, "k": 50, "estimator": "k-1",
             "impacts": n_impacts, "room_points": n_room, "bunny_points": n_bunny, "frames": frames,
-            "machine": machine(engine), "rows": rows}
+            "machine": {"device": dev.name.strip(), "platform": dev.platform.version.split(",")[0].strip(),
+                        "cores": os.cpu_count(), "load_average": os.getloadavg()}, "rows": rows}
 
 
 def summary(res):
@@ -151,8 +135,7 @@ def summary(res):
     return {
         "drift_rms_max": max(r["drift_rms"] for r in rows),
         "drift_rms_median": float(np.median([r["drift_rms"] for r in rows])),
-        "drift_max_max": max(r["drift_max"] for r in rows),
-        "drift_rms_last": rows[-1]["drift_rms"],
+        "drift_max_max": max(r["drift_max"] for r in rows), "drift_rms_last": rows[-1]["drift_rms"],
         "noise_rms_mean": float(np.mean([r["noise_rms"] for r in noise])),
         "noise_max_mean": float(np.mean([r["noise_max"] for r in noise])),
         "frozen_rms_max": max(r["frozen_rms"] for r in rows),
@@ -160,11 +143,10 @@ def summary(res):
         "stage_median_seconds": {k: float(np.median([r["seconds"]["practical_stages"].get(k, 0.0) for r in rows]))
                                  for k in rows[0]["seconds"]["practical_stages"]},
         "exact_points_searched_median": float(np.median([r["exact_points_searched"] for r in rows])),
-        "paths_median": float(np.median([r["paths"] for r in rows])),
-    }
+        "paths_median": float(np.median([r["paths"] for r in rows]))}
 
 
-def write(res):
+def report(res):
     s = res["summary"] = summary(res)
     rows, ms = res["rows"], s["median_seconds"]
     n_pts = res["room_points"] + res["bunny_points"]
@@ -192,22 +174,15 @@ def write(res):
            + ", ".join(f"{k} {v * 1e3:.1f}" for k, v in s["stage_median_seconds"].items()), "",
            "| frame | drift RMS | drift max | noise RMS | noise max | frozen RMS | room points differing | paths |",
            "|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for r in rows:
-        if "noise_rms" in r:
-            md.append(f"| {r['frame']} | {r['drift_rms']:.4f} | {r['drift_max']:.3f} | {r['noise_rms']:.4f} | "
-                      f"{r['noise_max']:.3f} | {r['frozen_rms']:.4f} | {r['points_differing']} | {r['paths']} |")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "photon_map_drift.md").write_text("\n".join(md) + "\n")
-    (RESULTS / "photon_map_drift.json").write_text(json.dumps(res, indent=1))
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    md += [f"| {r['frame']} | {r['drift_rms']:.4f} | {r['drift_max']:.3f} | {r['noise_rms']:.4f} | "
+           f"{r['noise_max']:.3f} | {r['frozen_rms']:.4f} | {r['points_differing']} | {r['paths']} |"
+           for r in rows if "noise_rms" in r]
+    write("photon_map_drift.md", "\n".join(md) + "\n")
+    write("photon_map_drift.json", json.dumps(res, indent=1))
 
     f = [r["frame"] for r in rows]
     nf = [r["frame"] for r in rows if "noise_rms" in r]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig, axes = figure(1, 2, figsize=(10, 3.8))
     for ax, key, title in ((axes[0], "rms", "relative RMS error"), (axes[1], "max", "largest error / mean E")):
         ax.plot(f, [r[f"drift_{key}"] for r in rows], "o-", ms=3, label="practical vs recomputation")
         ax.plot(nf, [r[f"noise_{key}"] for r in rows if "noise_rms" in r], "s--", ms=4,
@@ -224,15 +199,12 @@ def write(res):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=80)
-    ap.add_argument("--photons", type=int, default=None, help="default: the scene's (10^5)")
-    ap.add_argument("--quick", action="store_true", help="20 frames, 2x10^4 photons")
-    args = ap.parse_args()
+    args = arguments(__doc__, frames=80, photons=dict(type=int, help="default: the scene's (10^5)"),
+                     quick=(False, "20 frames, 2x10^4 photons"))
     frames = 20 if args.quick else args.frames
     photons = args.photons or (20_000 if args.quick else 100_000)
     res = run(frames, photons, n_room=4000, n_bunny=400, noise_every=max(frames // 16, 1))
-    write(res)
+    report(res)
 
 
 if __name__ == "__main__":

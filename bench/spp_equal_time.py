@@ -32,21 +32,12 @@ variant, an LLVM of at least 16 (Debian 12: ``apt-get install libllvm19``).
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
-import time
-from pathlib import Path
-
 import numpy as np
 
-import oclgi
-from oclgi.study import mitsuba as mitsuba_reference
+from common import RESULTS, ROOT, engine as make_engine, machine_line, timed, write
 from oclgi.study.image_compare import dilate, discontinuities
-from reference_images import reference_pair, rel_rms
+from reference_images import add_row, mitsuba_sweep, parse_args, plot, reference_pair, rel_rms
 
-ROOT = Path(__file__).resolve().parents[1]
-RESULTS = ROOT / "bench" / "results"
 SCENE = ROOT / "scenes" / "cornell_box.toml"
 REGIONS = ("all", "edges", "interior")
 
@@ -60,22 +51,10 @@ def at_time(points, t: float) -> float:
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, default=96)
-    ap.add_argument("--ref-spp", type=int, default=4096, help="per reference image (two are rendered)")
-    ap.add_argument("--variant", default="llvm_ad_rgb")
-    ap.add_argument("--photons", default="1e5,2.5e5,5e5,1e6,2e6,4e6")
-    ap.add_argument("--spp", default="4,16,64,256")
-    ap.add_argument("--out", type=Path, default=ROOT / "out" / "spp_equal_time")
-    ap.add_argument("--quick", action="store_true")
-    args = ap.parse_args()
-    if args.quick:
-        args.size, args.ref_spp, args.photons, args.spp = 48, 256, "1e5,4e5", "4,16"
-    photons = [int(float(x)) for x in args.photons.split(",")]
-    spps = [int(x) for x in args.spp.split(",")]
+    args = parse_args(__doc__, "spp_equal_time", 4096, "1e5,2.5e5,5e5,1e6,2e6,4e6", "4,16,64,256",
+                      (256, "1e5,4e5", "4,16"))
     s = args.size
-    engine = oclgi.Engine(oclgi.load_file(SCENE), progress=False)
-
+    engine = make_engine(SCENE)
     ref_a, ref_b, ref_seconds = reference_pair(engine, s, args.ref_spp, args.variant, args.out)
     ref = 0.5 * (ref_a + ref_b)
     points = engine.camera_points(width=s, height=s)
@@ -84,24 +63,17 @@ def main():
     regions = {"all": covered, "edges": edges, "interior": covered & ~dilate(edges, 1)}
     ref_error = {k: rel_rms(ref_a, ref_b, m) / 2.0 for k, m in regions.items()}  # the mean's: 1/sqrt(2) of a half's
 
+    def error(img):
+        return {k: rel_rms(img, ref, m) for k, m in regions.items()}
+
     rows = []  # (renderer, budget, seconds, {region: error})
     for spp in (1, 4):
-        engine.render(width=s, height=s, photons=photons[0], spp=spp)  # warm-up: kernel builds
-    for n in photons:  # alternating, so that a change in the machine's load touches both alike
+        engine.render(width=s, height=s, photons=args.photons[0], spp=spp)  # warm-up: kernel builds
+    for n in args.photons:  # alternating, so that a change in the machine's load touches both alike
         for spp in (1, 4):
-            t = time.perf_counter()
-            r = engine.render(width=s, height=s, photons=n, spp=spp)
-            sec = time.perf_counter() - t
-            rows.append((f"oclgi --spp {spp}", f"{n:,} photons", sec, {k: rel_rms(r.radiance, ref, m)
-                                                                        for k, m in regions.items()}))
-            print(*rows[-1], flush=True)
-    mitsuba_reference.render(engine, width=s, height=s, spp=4, seed=0, variant=args.variant)  # warm-up: JIT
-    for spp in spps:
-        t = time.perf_counter()
-        img = mitsuba_reference.render(engine, width=s, height=s, spp=spp, seed=7, variant=args.variant)
-        rows.append((f"Mitsuba 3 path ({args.variant})", f"{spp:,} spp", time.perf_counter() - t,
-                     {k: rel_rms(img, ref, m) for k, m in regions.items()}))
-        print(*rows[-1], flush=True)
+            t, r = timed(engine.render, width=s, height=s, photons=n, spp=spp)
+            add_row(rows, f"oclgi --spp {spp}", f"{n:,} photons", t, error(r.radiance))
+    mitsuba_sweep(rows, engine, s, args.spp, args.variant, error)
 
     names = list(dict.fromkeys(r[0] for r in rows))
     curves = {(name, k): [(t, e[k]) for a, _, t, e in rows if a == name] for name in names for k in REGIONS}
@@ -109,50 +81,26 @@ def main():
     four = [r for r in rows if r[0] == "oclgi --spp 4"]
     equal = [(t, k, {name: at_time(curves[name, k], t) for name in names}) for _, _, t, _ in four for k in REGIONS]
 
-    dev = engine.queue.device
     lines = [
-        "# Image error at equal time, one and four samples per pixel (Cornell box)",
-        "",
+        "# Image error at equal time, one and four samples per pixel (Cornell box)", "",
         f"{s} x {s} pixels: {int(covered.sum())} covered, {int(edges.sum())} on edges, "
         f"{int(regions['interior'].sum())} interior; `detp_disc_index`, the scene's radius; reference: Mitsuba 3 "
         f"`{args.variant}` path tracer, 2 x {args.ref_spp:,} spp ({ref_seconds:.0f} s), its own relative RMS "
         "error about " + ", ".join(f"{ref_error[k]:.4f} ({k})" for k in REGIONS) + ". Wall-clock seconds of "
-        "the whole render.",
-        "",
-        f"Machine: {dev.name.strip()} ({dev.max_compute_units} compute units), "
-        f"{platform.processor() or platform.machine()}, load average {os.getloadavg()[0]:.2f}.",
-        "",
-        "| renderer | budget | seconds | all | edges | interior |",
-        "|---|---|---:|---:|---:|---:|",
-        *[f"| {a} | {b} | {t:.2f} | " + " | ".join(f"{e[k]:.4f}" for k in REGIONS) + " |" for a, b, t, e in rows],
-        "",
+        "the whole render.", "",
+        machine_line(engine.queue.device), "",
+        "| renderer | budget | seconds | all | edges | interior |", "|---|---|---:|---:|---:|---:|",
+        *[f"| {a} | {b} | {t:.2f} | " + " | ".join(f"{e[k]:.4f}" for k in REGIONS) + " |" for a, b, t, e in rows], "",
         "Equal time (each curve interpolated in log-log at the time of each `--spp 4` render; blank: outside "
-        "that curve's range):",
-        "",
+        "that curve's range):", "",
         "| seconds | pixels | " + " | ".join(names) + " |",
         "|---:|---|" + "---:|" * len(names),
         *[f"| {t:.2f} | {k} | " + " | ".join("" if np.isnan(v[n]) else f"{v[n]:.4f}" for n in names) + " |"
-          for t, k, v in equal],
-        "",
+          for t, k, v in equal], "",
     ]
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    (RESULTS / "spp_equal_time.md").write_text("\n".join(lines))
-    try:
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(10, 3.6))
-        for ax, k in zip(fig.subplots(1, 3), REGIONS):
-            for name in names:
-                ax.loglog(*zip(*curves[name, k]), "o-", label=name)
-            ax.axhline(ref_error[k], color="grey", ls=":", label="reference's own error")
-            ax.set_title(f"{k} pixels")
-            ax.set_xlabel("seconds")
-        fig.axes[0].set_ylabel("relative RMS error")
-        fig.axes[0].legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(RESULTS / "spp_equal_time.png", dpi=110)
-    except ImportError:
-        pass
+    write("spp_equal_time.md", "\n".join(lines))
+    plot(RESULTS / "spp_equal_time.png", [(f"{k} pixels", {name: curves[name, k] for name in names}, ref_error[k])
+                                          for k in REGIONS], "relative RMS error", (10, 3.6), 110)
     print("\n".join(lines))
 
 

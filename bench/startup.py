@@ -24,7 +24,6 @@ folder). Usage: ``.venv/bin/python bench/startup.py [--rounds 5] [--tree DIR]``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -33,10 +32,10 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+from common import RESULTS, ROOT, arguments, device, timed
+
 WORKLOADS = {"default scene": [], "20,000 photons": ["--photons", "20000"]}
 
 
@@ -53,13 +52,12 @@ def _env(tree: Path | None, cache: Path) -> dict:
 
 
 def _oclgi(env, *args) -> float:
-    t0 = time.perf_counter()
     # from a neutral folder: `python -m` puts the working folder first on the path
-    res = subprocess.run([sys.executable, "-m", "oclgi", *args], env=env, capture_output=True, text=True,
-                         cwd=tempfile.gettempdir())
+    t, res = timed(subprocess.run, [sys.executable, "-m", "oclgi", *args], env=env, capture_output=True, text=True,
+                   cwd=tempfile.gettempdir())
     if res.returncode != 0:
         raise SystemExit(f"oclgi {' '.join(args)} failed:\n{res.stderr}")
-    return time.perf_counter() - t0
+    return t
 
 
 def measure(tree: Path | None, rounds: int, has_warm: bool) -> dict:
@@ -84,13 +82,6 @@ def measure(tree: Path | None, rounds: int, has_warm: bool) -> dict:
     return out
 
 
-def _device() -> str:
-    from oclgi.cl.device import choose_device
-
-    dev = choose_device()
-    return f"{dev.name.strip()} ({dev.max_compute_units} units, {dev.platform.version.split(' ')[2]})"
-
-
 def markdown(results: dict, meta: dict) -> str:
     lines = [f"# Start-up: cold and warm `oclgi render` ({meta['label']})", "",
              f"Machine: {meta['cpu']}, {meta['cores']} cores; OpenCL device {meta['device']}; "
@@ -108,20 +99,19 @@ def markdown(results: dict, meta: dict) -> str:
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--tree", type=Path, help="another checkout of oclgi to time (default: this one)")
-    ap.add_argument("--label", default=None, help="what is timed, for the report (default: the tree's commit)")
-    ap.add_argument("-o", "--output", type=Path, default=ROOT / "bench" / "results")
-    args = ap.parse_args()
+    args = arguments(__doc__, rounds=5, output=dict(short="-o", type=Path, default=RESULTS),
+                     tree=dict(type=Path, help="another checkout of oclgi to time (default: this one)"),
+                     label=dict(help="what is timed, for the report (default: the tree's commit)"))
     tree = args.tree.resolve() if args.tree else None
     src = tree or ROOT
     commit = subprocess.run(["git", "-C", str(src), "rev-parse", "--short", "HEAD"], capture_output=True,
                             text=True).stdout.strip()
     has_warm = (src / "oclgi" / "warm.py").exists()
     results = measure(tree, args.rounds, has_warm)
+    dev = device()
     meta = {"label": args.label or f"commit {commit}", "commit": commit, "rounds": args.rounds,
-            "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(), "device": _device(),
+            "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "device": f"{dev.name.strip()} ({dev.max_compute_units} units, {dev.platform.version.split(' ')[2]})",
             "loadavg": os.getloadavg()}
     try:
         with open("/proc/cpuinfo") as f:
@@ -131,8 +121,8 @@ def main():
     args.output.mkdir(parents=True, exist_ok=True)
     stem = "startup" if tree is None else f"startup_{commit}"
     (args.output / f"{stem}.json").write_text(json.dumps({"meta": meta, "seconds": results}, indent=1))
-    (args.output / f"{stem}.md").write_text(markdown(results, meta))
-    print(markdown(results, meta))
+    (args.output / f"{stem}.md").write_text(md := markdown(results, meta))
+    print(md)
 
 
 if __name__ == "__main__":

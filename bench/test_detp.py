@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import oclgi
+from common import surface_points
 from oclgi.estimators import METHODS
 
 DETP_METHODS = [m for m in METHODS if m.startswith("detp")]
@@ -21,15 +21,7 @@ _plain = {}
 
 @pytest.fixture(scope="module")
 def workload(cornell, scale):
-    rng = np.random.default_rng(11)
-    scene = cornell.scene
-    n = scale(20_000)
-    areas = scene.triangle_areas()
-    tri = rng.choice(len(areas), size=n, p=areas / areas.sum())
-    b = rng.dirichlet([1, 1, 1], n)
-    p = np.einsum("rk,rkc->rc", b, scene.vertices[scene.faces[tri]])
-    nrm = scene.triangle_normals()[tri] * np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
-    return oclgi.query_points(p, nrm), scale(100_000)
+    return surface_points(cornell.scene, scale(20_000), np.random.default_rng(11)), scale(100_000)
 
 
 @pytest.mark.parametrize("method", DETP_METHODS)

@@ -44,7 +44,6 @@ more neighbours until k pass it. Nothing is asserted about time.
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pyopencl as cl
@@ -52,6 +51,7 @@ import pytest
 import scipy
 from scipy.spatial import cKDTree
 
+from common import timed
 from oclgi import queries
 from oclgi.accel.point_index import KnnIndex, query_order
 from oclgi.cl.constants import FRONT_COS_EPS
@@ -80,9 +80,7 @@ class KnnData:
     """Impacts and query points of one scene, and the indexes built on them."""
 
     def __init__(self, engine, n_impacts, n_queries):
-        self.engine = engine
-        self.queue = engine.queue
-        self.workers = engine.queue.device.max_compute_units
+        self.engine, self.queue, self.workers = engine, engine.queue, engine.queue.device.max_compute_units
         self.pos, self.dirs = self._impacts(engine, n_impacts)
         cam = engine.scene.camera if engine.scene.camera is not None else BUNNY_CAMERA
         side = math.isqrt(n_queries - 1) + 1
@@ -132,9 +130,6 @@ class KnnData:
     def index(self, kind):
         return self.indexes[kind] if kind in self.indexes else self.build(kind)
 
-    def coord_scale(self):
-        return float(np.abs(self.pos).max())
-
 
 @pytest.fixture(scope="module")
 def knn_data(request, scale):
@@ -175,12 +170,10 @@ def distance_agreement(data, knn, front_only):
     qp, qn = data.qp[sample], data.qn[sample]
     _, d2 = knn.neighbours(qp, qn, K, front_only)
     tree = data.index("ckdtree")
-    if front_only:
-        ref = front_reference(tree, data.dirs, qp, qn, K, data.workers)
-    else:
-        ref, _ = tree.query(qp, K, workers=data.workers)
+    ref = (front_reference(tree, data.dirs, qp, qn, K, data.workers) if front_only
+           else tree.query(qp, K, workers=data.workers)[0])
     # oclgi's d2 is float32 from float32 coordinates: a few ulps of the coordinates
-    ok = np.isclose(np.sqrt(d2.astype(np.float64)), ref, rtol=1e-5, atol=4e-7 * data.coord_scale())
+    ok = np.isclose(np.sqrt(d2.astype(np.float64)), ref, rtol=1e-5, atol=4e-7 * float(np.abs(data.pos).max()))
     return float(np.mean(ok.all(axis=1))), len(sample)
 
 
@@ -226,9 +219,7 @@ def test_knn_search(benchmark, knn_data, cores_used, scene, index, front_only):
     ckd_seconds = []
 
     def run_ckdtree():
-        t0 = time.perf_counter()
-        tree.query(data.qp_sorted, K, workers=data.workers)
-        ckd_seconds.append(time.perf_counter() - t0)
+        ckd_seconds.append(timed(tree.query, data.qp_sorted, K, workers=data.workers)[0])
 
     benchmark.group = f"knn search: {scene}"
     tree.query(data.qp_sorted, K, workers=data.workers)  # untimed: the first queries of a run were slower
@@ -237,11 +228,7 @@ def test_knn_search(benchmark, knn_data, cores_used, scene, index, front_only):
         benchmark.pedantic(search, setup=run_ckdtree, rounds=ROUNDS, warmup_rounds=1)
 
     # end to end, numpy to numpy with ids and distances, as cKDTree.query returns them
-    neighbours_seconds = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        knn.neighbours(data.qp, data.qn, K, front_only)
-        neighbours_seconds.append(time.perf_counter() - t0)
+    neighbours_seconds = [timed(knn.neighbours, data.qp, data.qn, K, front_only)[0] for _ in range(3)]
 
     rk2 = np.empty(n, np.float32)
     cl.enqueue_copy(queue, rk2, r2)

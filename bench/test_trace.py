@@ -65,5 +65,4 @@ def test_photon_trace(benchmark, request, scale, cores_used, scene, tree):
                 segments=segments, segments_per_path=round(segments / n_paths, 3))
     if benchmark.stats:  # absent under --benchmark-disable
         seconds = benchmark.stats.stats.median
-        info["msegments_per_s"] = round(segments / seconds / 1e6, 3)
-        info["kpaths_per_s"] = round(n_paths / seconds / 1e3, 1)
+        info.update(msegments_per_s=round(segments / seconds / 1e6, 3), kpaths_per_s=round(n_paths / seconds / 1e3, 1))

@@ -31,20 +31,17 @@ dynamic,interactive,segments] [--frames N] [--scenes cornell,sponza] [--quick]``
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import resource
 import time
-from pathlib import Path
 
 import numpy as np
 import trimesh
 
 import oclgi
-from oclgi.estimators import METHODS
+from common import RESULTS, arguments, box, engine as make_engine, figure, write
 
-RESULTS = Path(__file__).resolve().parent / "results"
 R0 = math.sqrt(3.0)
 
 
@@ -54,24 +51,17 @@ def model_speedup(f):
 
 
 def room_engine(f, photons, width):
-    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
-    tri = v[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    out = np.einsum("ij,ij->i", n, tri.mean(axis=1)) > 0
-    faces[out] = faces[out][:, ::-1]
+    v, faces = box((-1, -1, -1), (1, 1, 1))  # wound outwards: reversed, the walls face (and emit) into the room
     ball = trimesh.creation.icosphere(subdivisions=4)
-    scene = oclgi.load_dict({
+    return make_engine({
         "mesh": [
-            {"vertices": v, "faces": faces, "albedo": [0.5] * 3, "emission": [1, 1, 1]},
+            {"vertices": v, "faces": faces[:, ::-1], "albedo": [0.5] * 3, "emission": [1, 1, 1]},
             {"vertices": ball.vertices * f * R0, "faces": ball.faces, "movable": True, "name": "ball",
              "albedo": [0.5] * 3},
         ],
         "camera": {"position": [0, 0, 0.999], "look_at": [0, 0, 0], "fov": 90, "width": width, "height": width},
         "photons": {"count": photons, "seed": 3, "max_depth": 12},
     })
-    return oclgi.Engine(scene, progress=False)
 
 
 def random_pose(rng, f):
@@ -84,14 +74,12 @@ def random_pose(rng, f):
 
 def speedup_vs_f(method, quick, rng):
     rows = []
-    photons = 20_000 if quick else 200_000
-    width = 48 if quick else 128
+    photons, width = (20_000, 48) if quick else (200_000, 128)
     for f in (0.05, 0.1, 0.15, 0.2, 0.3, 0.4):
         engine = room_engine(f, photons, width)
         t0 = time.perf_counter()
         session = oclgi.Session(engine, method=method, radius=0.02, count_work=True)
-        full_s = session.setup_seconds
-        full_work = session.estimator.work()
+        full_s, full_work = session.setup_seconds, session.estimator.work()
         n_r = int(session.segments()[1].sum())
         upd, rec, pts = [], [], []
         for _ in range(3 if quick else 8):
@@ -103,15 +91,13 @@ def speedup_vs_f(method, quick, rng):
             pts.append(st.points)
         secs = float(np.median([u[0] for u in upd]))
         work = {k: float(np.median([u[1][k] for u in upd])) for k in upd[0][1]}
-        rows.append({
+        rows.append(r := {
             "f": f, "n_R": n_r, "n_Rec_over_n_R": float(np.median(rec)) / 2 / n_r,
             "dynamic_points": float(np.median(pts)), "points": width * width,
             "full_seconds": full_s, "update_seconds": secs, "speedup_time": full_s / secs,
             "full_work": full_work, "update_work": work,
             "speedup_work": (full_work["t"] + full_work["u"]) / max(work["t"] + work["u"], 1),
-            "model": float(model_speedup(f)), "wall": time.perf_counter() - t0,
-        })
-        r = rows[-1]
+            "model": float(model_speedup(f)), "wall": time.perf_counter() - t0})
         print(f"f={f:.2f} n_Rec/n_R={r['n_Rec_over_n_R']:.4f} (f^2={f * f:.4f}) dynamic={r['dynamic_points']:.0f} "
               f"S_time={r['speedup_time']:.2f} S_work={r['speedup_work']:.2f} model={r['model']:.2f}", flush=True)
     return rows
@@ -126,8 +112,7 @@ def scaled_pose(scene, name, f, base, offset=(0.0, 0.0, 0.0)):
     """World-from-loaded matrix that scales object ``name`` to radius
     f r_0 (r_0: half the diagonal of the static geometry) and stands it with
     the centre of its base at ``base + offset``."""
-    obj = scene.object_id(name)
-    static = scene.tri_object != obj
+    static = scene.tri_object != scene.object_id(name)
     r0, _, _ = _box_radius(scene.vertices[scene.faces[static]].reshape(-1, 3))
     rd, lo, hi = _box_radius(scene.vertices[scene.faces[~static]].reshape(-1, 3))
     s = f * r0 / rd
@@ -159,8 +144,7 @@ def scene_engine(name, side):
     data, base, path_r = SCENES[name]
     data = json.loads(json.dumps(data))
     data["camera"].update(width=side, height=side)
-    scene = oclgi.load_dict(data, base_dir=oclgi.scene_path("."))
-    return oclgi.Engine(scene, progress=False), base, path_r
+    return make_engine(data), base, path_r
 
 
 def photons_for(engine, segments):
@@ -186,24 +170,21 @@ def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", s
     session = oclgi.Session(engine, method=method, photons=photons, radius=0.03 if name == "cornell" else 0.3,
                             dynamic=dynamic, **options)
     n_r = int(session.segments()[1].sum())
-    rss, stages, totals, pts, paths = [], {}, [], [], []
+    rss, stats = [], []
     # the poses first, as a user interface hands them over: finding the
     # bunny's scale reads every vertex of the scene (milliseconds in Sponza)
     poses = [circle(engine.scene, f, base, path_r, frames, i) for i in range(frames + 1)]
     for i in range(1, frames + 1):
-        st = session.move("bunny", poses[i])
-        totals.append(st.seconds["total"])
-        pts.append(st.points)
-        paths.append(st.paths)
-        for k, v in st.seconds.items():
-            stages.setdefault(k, []).append(v)
+        stats.append(session.move("bunny", poses[i]))
         if i % max(frames // 20, 1) == 0:
             rss.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
-    med = float(np.median(totals))
+    med = float(np.median([st.seconds["total"] for st in stats]))
+    stages = {k: float(np.median([st.seconds[k] for st in stats if k in st.seconds]))
+              for k in dict.fromkeys(k for st in stats for k in st.seconds)}
     return {"scene": name, "f": f, "dynamic": dynamic, "n_R": n_r, "photons": photons, "points": side * side,
             "frames": frames, "tree": tree, "median_update_s": med, "updates_per_s": 1 / med,
-            "dynamic_points_median": float(np.median(pts)), "paths_median": float(np.median(paths)),
-            "stage_median_s": {k: float(np.median(v)) for k, v in stages.items()},
+            "dynamic_points_median": float(np.median([st.points for st in stats])),
+            "paths_median": float(np.median([st.paths for st in stats])), "stage_median_s": stages,
             "max_rss_mib_samples": rss, "setup_s": session.setup_seconds}
 
 
@@ -211,38 +192,32 @@ def static_constants(quick, rng):
     """The static points' constants: counted work of an update per changed
     segment and per cbrt(n_S), disc indexing vs the sphere cache (model: 2
     vs 8.08 per recomputed segment, i.e. 1 vs 4.04 per segment streamed)."""
-    rows = []
-    f = 0.1
-    photons = 20_000 if quick else 100_000
-    sizes = (1_000, 8_000) if quick else (1_000, 8_000, 64_000)
-    engine = room_engine(f, photons, 16)
-    for n_s in sizes:
+    rows, f = [], 0.1
+    engine = room_engine(f, 20_000 if quick else 100_000, 16)
+    for n_s in (1_000, 8_000) if quick else (1_000, 8_000, 64_000):
         # random points on the room's walls (static), normals inwards
         face = rng.integers(0, 6, n_s)
         p = rng.uniform(-0.999, 0.999, (n_s, 3))
         axis, sign = face // 2, np.where(face % 2 == 0, -1.0, 1.0)
         p[np.arange(n_s), axis] = sign
-        nrm = np.zeros((n_s, 3))
-        nrm[np.arange(n_s), axis] = -sign
+        walls = np.hstack([p, np.where(np.eye(3)[axis] > 0, -sign[:, None], 0.0)])
         for method in ("detp_disc_index", "detp_sphere_cache"):
             engine.move("ball", np.eye(4))
-            session = oclgi.Session(engine, np.hstack([p, nrm]), method=method, radius=0.02, count_work=True)
+            session = oclgi.Session(engine, walls, method=method, radius=0.02, count_work=True)
             work, streamed, secs = {"t": 0, "u": 0, "nodes": 0}, 0, []
             for _ in range(3 if quick else 6):
                 before = session.work()
                 st = session.move("ball", random_pose(rng, f))
                 after = session.work()
-                for k in work:
-                    work[k] += after[k] - before[k]
+                work = {k: v + after[k] - before[k] for k, v in work.items()}
                 streamed += st.segments_removed + st.segments_added
                 secs.append(st.seconds.get("subtract", 0) + st.seconds.get("add", 0))
             c = np.cbrt(n_s)
-            rows.append({"n_S": n_s, "method": method, "streamed": streamed, **work,
-                         "t_per_seg_cbrt": work["t"] / streamed / c, "u_per_seg_cbrt": work["u"] / streamed / c,
-                         "tu_per_seg_cbrt": (work["t"] + work["u"]) / streamed / c,
-                         "nodes_per_seg": work["nodes"] / streamed,
-                         "estimate_s_per_seg": float(np.sum(secs)) / streamed})
-            r = rows[-1]
+            rows.append(r := {"n_S": n_s, "method": method, "streamed": streamed, **work,
+                              "t_per_seg_cbrt": work["t"] / streamed / c, "u_per_seg_cbrt": work["u"] / streamed / c,
+                              "tu_per_seg_cbrt": (work["t"] + work["u"]) / streamed / c,
+                              "nodes_per_seg": work["nodes"] / streamed,
+                              "estimate_s_per_seg": float(np.sum(secs)) / streamed})
             print(f"n_S={n_s} {method}: (t+u)/(seg cbrt n_S)={r['tu_per_seg_cbrt']:.2f} "
                   f"t={r['t_per_seg_cbrt']:.2f} u={r['u_per_seg_cbrt']:.2f} nodes/seg={r['nodes_per_seg']:.1f} "
                   f"{r['estimate_s_per_seg'] * 1e9:.0f} ns/seg", flush=True)
@@ -269,69 +244,60 @@ def dynamic_points(quick, frames=8):
                               count_work=count)
             s.dynamic_pass = mode
             n_r = int(s.segments()[1].sum())
-            dyn_work, times, n_d, n_rec = {"t": 0, "u": 0, "nodes": 0}, [], [], []
+            dyn_work, stats = {"t": 0, "u": 0, "nodes": 0}, []
             for i in range(1, frames + 1):
                 before = s.dynamic_work or {"t": 0, "u": 0, "nodes": 0}
-                st = s.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, i))
+                stats.append(s.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, i)))
                 after = s.dynamic_work or before
-                for k in dyn_work:
-                    dyn_work[k] += after[k] - before[k]
-                times.append(st.seconds)
-                n_d.append(st.points)
-                n_rec.append(st.segments_removed)
+                dyn_work = {k: v + after[k] - before[k] for k, v in dyn_work.items()}
             if count:
                 work = {k: v / frames for k, v in dyn_work.items()}
                 continue
-            row = {"label": label, "n_R": n_r, "n_D": float(np.median(n_d)), "n_Rec": float(np.median(n_rec)),
-                   "work": work, "points_s": float(np.median([t.get("points", 0) for t in times])),
-                   "find_s": float(np.median([t["find"] for t in times])),
-                   "total_s": float(np.median([t["total"] for t in times]))}
-            rows.append(row)
+            rows.append(row := {"label": label, "n_R": n_r, "n_D": float(np.median([st.points for st in stats])),
+                                "n_Rec": float(np.median([st.segments_removed for st in stats])), "work": work,
+                                "points_s": float(np.median([st.seconds.get("points", 0) for st in stats])),
+                                "find_s": float(np.median([st.seconds["find"] for st in stats])),
+                                "total_s": float(np.median([st.seconds["total"] for st in stats]))})
             print(f"{label}: n_D={row['n_D']:.0f} work={work} points {row['points_s'] * 1e3:.1f} ms "
                   f"find {row['find_s'] * 1e3:.1f} ms total {row['total_s'] * 1e3:.1f} ms", flush=True)
     return rows
 
 
-def _table(title, columns, rows):
-    """A markdown section: ``columns`` is a list of (header, cell function);
-    the first column is left-aligned, the others right-aligned."""
-    md = ["", f"## {title}", "", "| " + " | ".join(h for h, _ in columns) + " |",
-          "|---|" + "---:|" * (len(columns) - 1)]
-    return md + ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in rows]
+def _table(title, header, rows, row):
+    """A markdown section: ``header``'s columns (the first left-aligned, the
+    others right-aligned) and ``row(r)``'s cells for each of ``rows``."""
+    return (["", f"## {title}", "", f"| {header} |", "|---|" + "---:|" * header.count(" | ")]
+            + [f"| {row(r)} |" for r in rows])
+
+
+STAGES = ("points", "find", "subtract", "retrace", "add", "total")
 
 
 def markdown(res):
     md = [f"# Incremental update study ({res.get('method', '')})"]
     if res.get("speedup"):
-        md += _table("Speedup vs f (room with a ball)", [
-            ("f", lambda r: f"{r['f']:.2f}"), ("n_Rec/n_R", lambda r: f"{r['n_Rec_over_n_R']:.4f}"),
-            ("f^2", lambda r: f"{r['f'] ** 2:.4f}"), ("dynamic points", lambda r: f"{r['dynamic_points']:.0f}"),
-            ("full s", lambda r: f"{r['full_seconds']:.3f}"), ("update s", lambda r: f"{r['update_seconds']:.4f}"),
-            ("S (time)", lambda r: f"{r['speedup_time']:.1f}"), ("S (work)", lambda r: f"{r['speedup_work']:.1f}"),
-            ("model S(f)", lambda r: f"{r['model']:.1f}")], res["speedup"])
+        md += _table("Speedup vs f (room with a ball)", "f | n_Rec/n_R | f^2 | dynamic points | full s | update s | "
+                     "S (time) | S (work) | model S(f)", res["speedup"], lambda r: (
+                         f"{r['f']:.2f} | {r['n_Rec_over_n_R']:.4f} | {r['f'] ** 2:.4f} | {r['dynamic_points']:.0f} | "
+                         f"{r['full_seconds']:.3f} | {r['update_seconds']:.4f} | {r['speedup_time']:.1f} | "
+                         f"{r['speedup_work']:.1f} | {r['model']:.1f}"))
     if res.get("constants"):
-        md += _table("Static points: counted work per streamed segment and cbrt(n_S)", [
-            ("n_S", lambda r: f"{r['n_S']:,}"), ("method", lambda r: r["method"]),
-            ("segments streamed", lambda r: f"{r['streamed']:,}"), ("t", lambda r: f"{r['t_per_seg_cbrt']:.2f}"),
-            ("u", lambda r: f"{r['u_per_seg_cbrt']:.2f}"), ("(t+u)", lambda r: f"{r['tu_per_seg_cbrt']:.2f}"),
-            ("nodes / segment", lambda r: f"{r['nodes_per_seg']:.1f}"),
-            ("ns / segment", lambda r: f"{r['estimate_s_per_seg'] * 1e9:.0f}")], res["constants"])
+        md += _table("Static points: counted work per streamed segment and cbrt(n_S)", "n_S | method | segments "
+                     "streamed | t | u | (t+u) | nodes / segment | ns / segment", res["constants"], lambda r: (
+                         f"{r['n_S']:,} | {r['method']} | {r['streamed']:,} | {r['t_per_seg_cbrt']:.2f} | "
+                         f"{r['u_per_seg_cbrt']:.2f} | {r['tu_per_seg_cbrt']:.2f} | {r['nodes_per_seg']:.1f} | "
+                         f"{r['estimate_s_per_seg'] * 1e9:.0f}"))
     if res.get("dynamic"):
-        md += _table("Dynamic points (Cornell box + bunny, f = 0.1)", [
-            ("dynamic points by", lambda r: r["label"]), ("n_R", lambda r: f"{r['n_R']:,}"),
-            ("n_D", lambda r: f"{r['n_D']:.0f}"), ("n_Rec", lambda r: f"{r['n_Rec']:.0f}"),
-            ("t", lambda r: f"{r['work']['t']:,.0f}"), ("u", lambda r: f"{r['work']['u']:,.0f}"),
-            ("nodes", lambda r: f"{r['work']['nodes']:,.0f}"), ("points ms", lambda r: f"{r['points_s'] * 1e3:.1f}"),
-            ("find ms", lambda r: f"{r['find_s'] * 1e3:.1f}"), ("update ms", lambda r: f"{r['total_s'] * 1e3:.1f}")],
-            res["dynamic"])
+        md += _table("Dynamic points (Cornell box + bunny, f = 0.1)", "dynamic points by | n_R | n_D | n_Rec | t | u "
+                     "| nodes | points ms | find ms | update ms", res["dynamic"], lambda r: (
+                         f"{r['label']} | {r['n_R']:,} | {r['n_D']:.0f} | {r['n_Rec']:.0f} | {r['work']['t']:,.0f} | "
+                         f"{r['work']['u']:,.0f} | {r['work']['nodes']:,.0f} | {r['points_s'] * 1e3:.1f} | "
+                         f"{r['find_s'] * 1e3:.1f} | {r['total_s'] * 1e3:.1f}"))
     if res.get("rate_vs_segments"):
-        md += _table("Update rate against the number of stored segments (Cornell box + bunny, f = 0.1, "
-                     "316 x 316 pixels, 30 frames)", [
-                         ("stored segments", lambda r: f"{r['n_R']:,}"),
-                         ("updates/s", lambda r: f"{r['updates_per_s']:.1f}"),
-                         *[(f"{k} ms", (lambda k: lambda r: f"{r['stage_median_s'].get(k, 0) * 1e3:.1f}")(k))
-                           for k in ("points", "find", "subtract", "retrace", "add", "total")]],
-                     res["rate_vs_segments"])
+        md += _table("Update rate against the number of stored segments (Cornell box + bunny, f = 0.1, 316 x 316 "
+                     "pixels, 30 frames)", "stored segments | updates/s | " + " | ".join(f"{k} ms" for k in STAGES),
+                     res["rate_vs_segments"], lambda r: f"{r['n_R']:,} | {r['updates_per_s']:.1f} | " + " | ".join(
+                         f"{r['stage_median_s'].get(k, 0) * 1e3:.1f}" for k in STAGES))
     for inter in res.get("interactive", []):
         md += ["", f"## Interactive rate ({inter['scene']} + bunny, f = {inter['f']})", "",
                f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames, "
@@ -346,12 +312,7 @@ def markdown(res):
 
 
 def plot(rows, method):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4.2))
+    fig, ax = figure(figsize=(6, 4.2))
     fs = np.linspace(0.04, 0.45, 200)
     ax.semilogy(fs, model_speedup(fs), "k--", label="model S(f)")
     ax.semilogy([r["f"] for r in rows], [r["speedup_time"] for r in rows], "o-", label="measured, time")
@@ -365,25 +326,19 @@ def plot(rows, method):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--method", default="detp_disc_index" if "detp_disc_index" in METHODS else "detp")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--parts", default="speedup,constants,dynamic,interactive,segments",
-                    help="comma-separated: speedup, constants, dynamic, interactive, segments (the others "
-                         "keep their last results)")
-    ap.add_argument("--frames", type=int, default=100, help="frames of the interactive benchmark")
-    ap.add_argument("--scenes", default="cornell,sponza", help="scenes of the interactive benchmark")
-    ap.add_argument("--disc-tree", choices=("wide", "binary"), default=None,
-                    help="the disc index's tree in the interactive benchmark (default: the estimator's, wide)")
-    args = ap.parse_args()
+    args = arguments(__doc__, method="detp_disc_index", quick=False,
+                     parts=("speedup,constants,dynamic,interactive,segments", "comma-separated: speedup, constants, "
+                            "dynamic, interactive, segments (the others keep their last results)"),
+                     frames=(100, "frames of the interactive benchmark"),
+                     scenes=("cornell,sponza", "scenes of the interactive benchmark"),
+                     disc_tree=dict(choices=("wide", "binary"), help="the disc index's tree in the interactive "
+                                    "benchmark (default: the estimator's, wide)"))
     parts = set(args.parts.split(","))
     rng = np.random.default_rng(7)
     path = RESULTS / "update_study.json"
     res = json.loads(path.read_text()) if path.exists() else {}
-    res.setdefault("interactive", [])
-    if isinstance(res["interactive"], dict):
+    if isinstance(res.get("interactive"), dict):  # as earlier versions wrote it
         res["interactive"] = [res["interactive"]]
-    res.pop("rows", None)
     res.update(method=args.method, quick=args.quick)
     if "speedup" in parts:
         res["speedup"] = speedup_vs_f(args.method, args.quick, rng)
@@ -398,10 +353,9 @@ def main():
     if "interactive" in parts:
         res["interactive"] = [interactive(name, args.method, args.quick, args.frames, tree=args.disc_tree)
                               for name in args.scenes.split(",")]
-    RESULTS.mkdir(exist_ok=True)
-    path.write_text(json.dumps(res, indent=1))
-    (RESULTS / "update_study.md").write_text(markdown(res))
-    print(markdown(res))
+    write("update_study.json", json.dumps(res, indent=1))
+    write("update_study.md", md := markdown(res))
+    print(md)
 
 
 if __name__ == "__main__":

@@ -24,28 +24,24 @@ store). ``python bench/viewer_drag.py [--scenes cornell,sponza] [--moves N]
 
 from __future__ import annotations
 
-import argparse
 import asyncio
+import contextlib
 import json
 import os
 import sys
 import threading
-import time
-from pathlib import Path
 
 import numpy as np
 
 import oclgi
+from common import ROOT, arguments, load, timed, write
 from oclgi.scene.tessellate import tessellate
 from oclgi.viewer.server import Viewer
+from update_study import SCENES, photons_for, scaled_pose
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(ROOT / "tests"))
 from browser import Browser  # noqa: E402
-from update_study import SCENES, photons_for, scaled_pose  # noqa: E402
 
-RESULTS = HERE / "results"
 RADIUS = {"cornell": 0.03, "sponza": 0.3}  # the disc radius of bench/update_study.py's interactive rate
 EDGE = {"cornell": 0.06, "sponza": 0.6}  # two disc radii between vertices
 
@@ -88,25 +84,20 @@ def scene_with_bunny(name: str, f: float = 0.1):
     that the tessellation has it there)."""
     data, base, path_r = SCENES[name]
     data = json.loads(json.dumps(data))
-    scene = oclgi.load_dict(data, base_dir=oclgi.scene_path("."))
-    m = scaled_pose(scene, "bunny", f, base)
+    m = scaled_pose(load(data), "bunny", f, base)
     bunny = next(mesh for mesh in data["mesh"] if mesh.get("name") == "bunny")
     bunny["transform"] = {"scale": float(m[0, 0]), "translate": m[:3, 3].tolist()}
-    return oclgi.load_dict(data, base_dir=oclgi.scene_path(".")), path_r
+    return load(data), path_r
 
 
 def serve_in_thread(viewer):
-    box = {}
-    ready = threading.Event()
+    box, ready = {}, threading.Event()
 
     def run():
-        loop = asyncio.new_event_loop()
-        box["loop"] = loop
+        loop = box["loop"] = asyncio.new_event_loop()
         box["task"] = loop.create_task(viewer.serve("127.0.0.1", 0, lambda url: (box.update(url=url), ready.set())))
-        try:
+        with contextlib.suppress(asyncio.CancelledError):
             loop.run_until_complete(box["task"])
-        except asyncio.CancelledError:
-            pass
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
@@ -115,18 +106,11 @@ def serve_in_thread(viewer):
     return box, thread
 
 
-def stop(box, thread):
-    box["loop"].call_soon_threadsafe(box["task"].cancel)
-    thread.join(30)
-
-
 def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> dict:
     scene, path_r = scene_with_bunny(name)
     engine = oclgi.Engine(scene, progress=False)
     photons = photons_for(engine, segments)
-    t0 = time.perf_counter()
-    tess = tessellate(scene, EDGE[name])
-    tess_s = time.perf_counter() - t0
+    tess_s, tess = timed(tessellate, scene, EDGE[name])
     viewer = Viewer(engine, tess, "detp_disc_index", photons, RADIUS[name])
     box, thread = serve_in_thread(viewer)
     try:
@@ -141,37 +125,37 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
                 return hello, seq, cont
         hello, seq, cont = asyncio.run(drive())
     finally:
-        stop(box, thread)
-    static = static_points_cost(viewer, path_r, moves)
+        box["loop"].call_soon_threadsafe(box["task"].cancel)
+        thread.join(30)
     ms = np.array([r["ms"] for r in seq])
-    stages = {}
-    for r in seq:
-        for k, v in r["s"].items():
-            stages.setdefault(k, []).append(1e3 * v)
-    med = {k: float(np.median(v)) for k, v in stages.items()}
+    server = np.array([1e3 * r["s"]["server"] for r in seq])
+
+    def med(value):
+        return float(np.median([value(r) for r in seq]))
+
     return {
         "scene": name, "photons": photons, "segments": hello["segments"], "vertices": len(tess.vertices),
         "dynamic_points": int(np.median([r["points"] for r in seq])), "edge": EDGE[name], "radius": RADIUS[name],
         "tessellate_s": tess_s, "setup_s": hello["setup_seconds"], "moves": moves,
-        "paths_median": float(np.median([r["paths"] for r in seq])),
-        "n_rec_median": float(np.median([r["n_rec"] for r in seq])),
+        "paths_median": med(lambda r: r["paths"]), "n_rec_median": med(lambda r: r["n_rec"]),
         "user_ms_median": float(np.median(ms)), "user_ms_p90": float(np.percentile(ms, 90)),
         "updates_per_s": 1e3 / float(np.median(ms)),
-        "stage_ms_median": med,
-        "client_ms_median": float(np.median(ms - np.array([1e3 * r["s"]["server"] for r in seq]))),
+        "stage_ms_median": {k: float(np.median([1e3 * r["s"][k] for r in seq if k in r["s"]]))
+                            for k in dict.fromkeys(k for r in seq for k in r["s"])},
+        "client_ms_median": float(np.median(ms - server)),
         # move queued -> its frame applied, less the server's time: sending, the socket both ways, decoding
-        "transfer_ms_median": float(np.median([r["frame_ms"] - 1e3 * r["s"]["server"] for r in seq])),
+        "transfer_ms_median": float(np.median(np.array([r["frame_ms"] for r in seq]) - server)),
         # frame applied -> drawn: waiting for the display frame, upload and draw
-        "draw_ms_median": float(np.median([r["ms"] - r["frame_ms"] for r in seq])),
+        "draw_ms_median": med(lambda r: r["ms"] - r["frame_ms"]),
         "continuous": cont, "continuous_per_s": cont["drawn"] / cont["seconds"],
         # the colour frames: bytes sent, vertices in them, and the bytes the float32 per-index format took
         # (16 + 16 per changed vertex, or 12 per vertex whole); the page's time to apply one
-        "frame_kb_median": float(np.median([r["frame"]["bytes"] for r in seq])) / 1024,
-        "frame_vertices_median": float(np.median([r["frame"]["vertices"] for r in seq])),
-        "float32_frame_kb_median": float(np.median([16 + min(16 * r["frame"]["vertices"], 12 * len(tess.vertices))
-                                                    for r in seq])) / 1024,
-        "apply_ms_median": float(np.median([r["frame"]["applyMs"] for r in seq])),
-        "without_dynamic_ms": static,
+        "frame_kb_median": med(lambda r: r["frame"]["bytes"]) / 1024,
+        "frame_vertices_median": med(lambda r: r["frame"]["vertices"]),
+        "float32_frame_kb_median":
+            med(lambda r: 16 + min(16 * r["frame"]["vertices"], 12 * len(tess.vertices))) / 1024,
+        "apply_ms_median": med(lambda r: r["frame"]["applyMs"]),
+        "without_dynamic_ms": static_points_cost(viewer, path_r, moves),
     }
 
 
@@ -190,8 +174,7 @@ def static_points_cost(viewer, path_r: float, moves: int) -> dict:
         r = viewer.run
         with open_session(viewer.engine, pts, method=r.method, photons=r.photons, radius=r.radius) as s:
             t = []
-            for i in range(1, moves + 1):
-                a = 2 * np.pi * i / moves
+            for a in 2 * np.pi * np.arange(1, moves + 1) / moves:
                 m = np.eye(4)
                 m[0, 3], m[2, 3] = path_r * (np.cos(a) - 1), path_r * np.sin(a)
                 t.append(s.move("bunny", m).seconds["total"])
@@ -210,44 +193,32 @@ def markdown(rows: list[dict], machine: str) -> str:
            "| scene | vertices / dynamic | photons / segments | paths re-traced | "
            + " | ".join(stages) + " | transfer | draw | user | updates/s | drag frames/s |",
            "|---|---:|---:|---:|" + "---:|" * len(stages) + "---:|---:|---:|---:|---:|"]
-    for r in rows:
-        s = r["stage_ms_median"]
-        out.append(f"| {r['scene']} + bunny | {r['vertices']:,} / {r['dynamic_points']:,} | "
-                   f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
-                   + " | ".join(f"{s.get(k, float('nan')):.1f}" for k in stages)
-                   + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | **{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |")
+    out += [f"| {r['scene']} + bunny | {r['vertices']:,} / {r['dynamic_points']:,} | "
+            f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
+            + " | ".join(f"{r['stage_ms_median'].get(k, float('nan')):.1f}" for k in stages)
+            + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | "
+            f"**{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |" for r in rows]
     out += ["", "The colour frames (median per update): float16 runs and single indices against the float32 "
             "per-index format, the vertices they carry, the page's time to apply one:", "",
             "| scene | vertices in a frame | frame KB | float32 format KB | apply ms |", "|---|---:|---:|---:|---:|"]
-    for r in rows:
-        out.append(f"| {r['scene']} + bunny | {r['frame_vertices_median']:,.0f} | {r['frame_kb_median']:.0f} | "
-                   f"{r['float32_frame_kb_median']:.0f} | {r['apply_ms_median']:.2f} |")
+    out += [f"| {r['scene']} + bunny | {r['frame_vertices_median']:,.0f} | {r['frame_kb_median']:.0f} | "
+            f"{r['float32_frame_kb_median']:.0f} | {r['apply_ms_median']:.2f} |" for r in rows]
     out += ["", "The dynamic points' cost: the same moves through the API (session.move, median ms), over the "
             "viewer's query points and over the static vertices only:", "", "| scene | query points | static only |", "|---|---:|---:|"]
-    for r in rows:
-        w = r["without_dynamic_ms"]
-        out.append(f"| {r['scene']} + bunny | {w['all']:.1f} | {w['static only']:.1f} |")
+    out += [f"| {r['scene']} + bunny | {w['all']:.1f} | {w['static only']:.1f} |"
+            for r in rows for w in [r["without_dynamic_ms"]]]
     return "\n".join(out) + "\n"
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", default="cornell,sponza")
-    ap.add_argument("--moves", type=int, default=60)
-    ap.add_argument("--segments", type=float, default=1e6)
-    ap.add_argument("--drag-seconds", type=float, default=5.0)
-    ap.add_argument("--quick", action="store_true", help="10^5 segments, 10 moves")
-    args = ap.parse_args()
-    if args.quick:
-        args.segments, args.moves, args.drag_seconds = 1e5, 10, 2.0
+    args = arguments(__doc__, scenes="cornell,sponza", moves=60, segments=1e6, drag_seconds=5.0,
+                     quick=dict(segments=1e5, moves=10, drag_seconds=2.0))
     rows = [bench_scene(name, args.moves, args.segments, args.drag_seconds) for name in args.scenes.split(",")]
     from oclgi.cl.device import describe_devices
 
     machine = f"Device: {describe_devices().splitlines()[0].strip()}; load average {os.getloadavg()[0]:.2f}."
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "viewer_drag.json").write_text(json.dumps({"machine": machine, "rows": rows}, indent=1))
-    md = markdown(rows, machine)
-    (RESULTS / "viewer_drag.md").write_text(md)
+    write("viewer_drag.json", json.dumps({"machine": machine, "rows": rows}, indent=1))
+    write("viewer_drag.md", md := markdown(rows, machine))
     print(md)
 
 

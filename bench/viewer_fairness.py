@@ -16,7 +16,6 @@ own time, the stop time).
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import os
@@ -24,8 +23,9 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+from common import ROOT, arguments
+
+sys.path.insert(0, str(ROOT / "tests"))
 from viewer_client import PageModel, open_viewer, page_headers, receive_until, sync  # noqa: E402
 
 CAMERA = {"position": [0.3, 1.1, 3.5], "look_at": [0.0, 0.9, 0.0], "up": [0, 1, 0], "fov": 42.0}
@@ -75,10 +75,10 @@ async def main(args) -> dict:
             await sync(b, pb, i)
             waits.append(time.perf_counter() - t)
             await asyncio.sleep(0.05)
-        rendered = await done
+        rendered, waits = await done, sorted(waits)
         out.update(render_s=round(time.perf_counter() - t0, 2), rendered=rendered["type"], moves=len(waits),
-                   move_sync_median_s=round(sorted(waits)[len(waits) // 2], 3), move_sync_max_s=round(max(waits), 3),
-                   move_sync_p99_s=round(sorted(waits)[int(0.99 * (len(waits) - 1))], 3))
+                   move_sync_median_s=round(waits[len(waits) // 2], 3), move_sync_max_s=round(waits[-1], 3),
+                   move_sync_p99_s=round(waits[int(0.99 * (len(waits) - 1))], 3))
         # a page that goes away mid-render: its booking goes when the render stops
         a2, pa2 = await connect(client, viewer)
         await a2.send_str(json.dumps(render))
@@ -96,8 +96,5 @@ async def main(args) -> dict:
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scene", default=str(HERE.parent / "scenes" / "cornell_bunny.toml"))
-    ap.add_argument("--size", type=int, default=4096)
-    ap.add_argument("--photons", type=int, default=100_000)
-    print(json.dumps(asyncio.run(main(ap.parse_args()))))
+    args = arguments(__doc__, scene=str(ROOT / "scenes" / "cornell_bunny.toml"), size=4096, photons=100_000)
+    print(json.dumps(asyncio.run(main(args))))
