@@ -8,6 +8,8 @@
    irradiance is E = pi Le / (1 - rho).
 """
 
+import math
+
 import numpy as np
 
 import oclgi
@@ -27,6 +29,13 @@ def grid(n_cells, half):
     return v, faces
 
 
+def quad(y, half, albedo=0.5, **keys):
+    """A mesh table: the square of half-side ``half`` in the plane y, facing
+    up (+y), its albedo grey, and ``keys``."""
+    return {"vertices": [[-half, y, -half], [half, y, -half], [half, y, half], [-half, y, half]],
+            "faces": [[0, 2, 1], [0, 3, 2]], "albedo": [albedo] * 3, **keys}
+
+
 def plane_scene(n_cells, half, albedo=0.0):
     v, f = grid(n_cells, half)
     return oclgi.load_dict({
@@ -36,18 +45,25 @@ def plane_scene(n_cells, half, albedo=0.0):
     })
 
 
+def ring_points(rho=(0.0, 0.25, 0.5, 0.75, 1.0)):
+    """Points of the plane y = 0 at the radii ``rho``, five angles each:
+    (positions, the (n, 6) points facing up)."""
+    p = np.array([(r * math.cos(a), 0.0, r * math.sin(a)) for r in rho for a in (0.0, 1.3, 2.6, 3.9, 5.2)])
+    return p, np.hstack([p, np.tile([0.0, 1.0, 0.0], (len(p), 1))])
+
+
 def exact(x, z):
     r2 = x * x + z * z + H * H
     return INTENSITY * H / r2**1.5
 
 
-def disc_mean(x0, z0, d, n=200):
-    """Mean of the exact irradiance over the disc (midpoint rule, polar)."""
+def disc_mean(x0, z0, d, n=200, f=exact):
+    """Mean of f(x, z), the exact irradiance unless given, over the disc of
+    radius d about (x0, z0) (midpoint rule, polar)."""
     r = (np.arange(n) + 0.5) / n * d
     phi = (np.arange(n) + 0.5) / n * 2 * np.pi
     rr, pp = np.meshgrid(r, phi, indexing="ij")
-    e = exact(x0 + rr * np.cos(pp), z0 + rr * np.sin(pp))
-    return float((e * rr).sum() / rr.sum())
+    return float((f(x0 + rr * np.cos(pp), z0 + rr * np.sin(pp)) * rr).sum() / rr.sum())
 
 
 def triangle_mean(tri, n=60):
@@ -59,20 +75,25 @@ def triangle_mean(tri, n=60):
     return float(exact(p[:, 0], p[:, 2]).mean())
 
 
+def box_mesh(lo, hi, inward=None):
+    """The box [lo, hi]: its 8 corners (x slowest, z fastest) and 12
+    triangles, two a face; ``inward`` True (False) winds every normal to
+    point into (out of) the box."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = np.array([[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)], float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    if inward is not None:
+        tri = v[faces]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        flip = (np.einsum("ij,ij->i", n, v.mean(axis=0) - tri.mean(axis=1)) < 0) == inward
+        faces[flip] = faces[flip][:, ::-1]
+    return v, faces
+
+
 def box(rho, le):
     """Unit cube, faces wound so that normals point inwards (emission inwards)."""
-    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    faces = []
-    for a, b, c, d in quads:
-        faces += [(a, b, c), (a, c, d)]
-    faces = np.array(faces)
-    # make every normal point to the centre
-    centre = np.array([0.5, 0.5, 0.5])
-    tri = v[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flip = np.einsum("ij,ij->i", n, centre - tri.mean(axis=1)) < 0
-    faces[flip] = faces[flip][:, ::-1]
+    v, faces = box_mesh((0, 0, 0), (1, 1, 1), inward=True)
     return oclgi.load_dict({
         "mesh": [{"vertices": v, "faces": faces, "albedo": [rho] * 3, "emission": [le] * 3}],
         "photons": {"count": 1_000_000, "seed": 11, "max_depth": 32},

@@ -5,10 +5,11 @@ import subprocess
 import sys
 
 
-def run(cwd, *args):
-    """``python -m oclgi *args`` in ``cwd`` (None: here); text output captured."""
-    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=300)
+def run(cwd, *args, env=None, timeout=300):
+    """``python -m oclgi *args`` in ``cwd`` (None: here), in the environment
+    ``env`` (None: this one); text output captured."""
+    return subprocess.run([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=timeout)
 
 
 def in_process(monkeypatch, capsys, cwd, *args):
@@ -24,3 +25,29 @@ def in_process(monkeypatch, capsys, cwd, *args):
         rc = exc.code
     out, err = capsys.readouterr()
     return subprocess.CompletedProcess(args, rc, out, err)
+
+
+def files_under(d):
+    return {p.relative_to(d) for p in d.rglob("*") if p.is_file()}
+
+
+def fails_cleanly(runner, cwd, *args, match=None):
+    """``runner(cwd, *args)`` (``run``, or ``in_process`` with its fixtures
+    bound) fails cleanly: exit status 2, stderr's last line ``oclgi: error:
+    ...`` (matching the regex ``match``, if given) after warning lines only,
+    no traceback, nothing on stdout, no file made or removed under ``cwd``.
+    Returns the error line."""
+    import re
+
+    before = files_under(cwd)
+    res = runner(cwd, *args)
+    lines = res.stderr.splitlines()
+    assert "Traceback" not in res.stderr, res.stderr
+    assert res.returncode == 2, (res.returncode, res.stderr)
+    assert lines and lines[-1].startswith("oclgi: error: "), res.stderr
+    assert all(line.startswith("oclgi: warning: ") for line in lines[:-1]), res.stderr
+    assert res.stdout == "", res.stdout
+    assert files_under(cwd) == before, "files were left behind"
+    if match is not None:
+        assert re.search(match, lines[-1]), lines[-1]
+    return lines[-1]

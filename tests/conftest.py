@@ -9,6 +9,7 @@ instead, for quick local iterations; CI never sets it.
 """
 
 import atexit
+import functools
 import os
 import shutil
 import tempfile
@@ -89,15 +90,31 @@ def scenes_dir():
     return SCENES
 
 
+@pytest.fixture(scope="session")
+def plane():
+    """The point light over a 16 x 16 cell black plane (analytic_scenes.py)."""
+    import oclgi
+    from analytic_scenes import plane_scene
+
+    return oclgi.Engine(plane_scene(n_cells=16, half=4.0))
+
+
 # -- shared by the accelerated-DETP tests: scenes, points, plain DETP's sums --
+
+@pytest.fixture(scope="session")
+def cornell(scenes_dir):
+    """The Cornell box (scenes/cornell_box.toml), one engine for the session."""
+    from exactness import cornell_engine
+
+    return cornell_engine(scenes_dir)
 
 
 @pytest.fixture(scope="session")
-def engines(scenes_dir):
+def engines(cornell, scenes_dir):
     """The Cornell box and the bunny in a box (tests/exactness.py)."""
-    from exactness import bunny_engine, cornell_engine
+    from exactness import bunny_engine
 
-    return {"cornell": cornell_engine(scenes_dir), "bunny": bunny_engine(scenes_dir)}
+    return {"cornell": cornell, "bunny": bunny_engine(scenes_dir)}
 
 
 @pytest.fixture(scope="session")
@@ -112,8 +129,6 @@ def points(engines):
 @pytest.fixture(scope="session")
 def plain(engines, points):
     """Plain DETP's accumulators, computed once per (scene, fraction, count_emitted)."""
-    import functools
-
     @functools.cache
     def get(scene, frac, count_emitted=True):
         from exactness import DETP_PHOTONS
@@ -125,3 +140,12 @@ def plain(engines, points):
         return est.accumulators
 
     return get
+
+
+@pytest.fixture
+def same_as_plain(engines, points, plain, request):
+    """``same_as_plain(scene, frac, count_emitted=True, engine=None, **options)``:
+    the test module's ``METHOD`` equals plain DETP (exactness.check_variant_same_as_plain)."""
+    from exactness import check_variant_same_as_plain
+
+    return functools.partial(check_variant_same_as_plain, engines, points, plain, request.module.METHOD)

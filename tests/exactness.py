@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyopencl as cl
+from analytic_scenes import box_mesh
 
 import oclgi
 from oclgi.cl.layout import Segment
@@ -24,9 +25,7 @@ def cornell_engine(scenes_dir) -> oclgi.Engine:
 
 def bunny_engine(scenes_dir) -> oclgi.Engine:
     """The Stanford bunny (a real, fine mesh) inside a closed box lit by an area light."""
-    box_v = np.array([[x, y, z] for x in (-1, 1) for y in (-0.2, 1.8) for z in (-1, 1)], float) * 0.25
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    box_f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    box_v, box_f = box_mesh((-0.25, -0.05, -0.25), (0.25, 0.45, 0.25))
     light_v = np.array([[-0.05, 0.44, -0.05], [0.05, 0.44, -0.05], [0.05, 0.44, 0.05], [-0.05, 0.44, 0.05]])
     light_f = np.array([[0, 1, 2], [0, 2, 3]])  # normal -y: faces down
     return oclgi.Engine(oclgi.load_dict({
@@ -40,29 +39,20 @@ def bunny_engine(scenes_dir) -> oclgi.Engine:
     }))
 
 
-def surface_points(engine: oclgi.Engine, n: int, rng) -> oclgi.QueryPoints:
-    """n random points on the scene's triangles (area-weighted), with their normals."""
+def surface_samples(engine: oclgi.Engine, n: int, rng):
+    """n random points on the scene's triangles (area-weighted): (positions,
+    their triangle's normal to a random side, the triangles)."""
     scene = engine.scene
     areas = scene.triangle_areas()
     tri = rng.choice(len(areas), size=n, p=areas / areas.sum())
     b = rng.dirichlet([1, 1, 1], n)
-    v = scene.vertices[scene.faces[tri]]
-    p = np.einsum("rk,rkc->rc", b, v)
-    nrm = scene.triangle_normals()[tri] * np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
-    return oclgi.query_points(p, nrm)
+    p = np.einsum("rk,rkc->rc", b, scene.vertices[scene.faces[tri]])
+    return p, scene.triangle_normals()[tri] * np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None], tri
 
 
-def assert_same_as_plain(engine, points, method, radius, photons=20_000, **options):
-    """Accelerated accumulators identical to plain DETP's; returns both estimates."""
-    plain = engine.irradiance(points, method="detp", radius=radius, photons=photons)
-    fast = engine.irradiance(points, method=method, radius=radius, photons=photons, **options)
-    assert plain.accumulators.any(), "the test must select some segments"
-    diff = np.nonzero((plain.accumulators != fast.accumulators).any(axis=1))[0]
-    assert len(diff) == 0, (
-        f"{method} {options} radius {radius}: {len(diff)} of {len(points)} points differ from plain DETP "
-        f"(first {diff[:5].tolist()})"
-    )
-    return plain, fast
+def surface_points(engine: oclgi.Engine, n: int, rng) -> oclgi.QueryPoints:
+    """n random points on the scene's triangles (area-weighted), with their normals."""
+    return oclgi.query_points(*surface_samples(engine, n, rng)[:2])
 
 
 def check_same(ref, got, what):
@@ -137,23 +127,39 @@ def check_replace_points(engine, method):
     est.accumulate(batch)
     ref = ESTIMATORS["detp"](engine.queue, engine.compiled, est.points, radius=d)
     ref.accumulate(batch)
-    assert ref.accumulators()[idx].any()
-    assert np.array_equal(est.accumulators(), ref.accumulators())
+    assert ref.accumulators()[idx].any() and np.array_equal(est.accumulators(), ref.accumulators())
 
 
-def check_variant_same_as_plain(engines, points, plain, method, scene, frac, count_emitted):
-    """``method`` on the shared points equals the shared plain-DETP sums (conftest.py)."""
-    e = engines[scene]
+def check_variant_same_as_plain(engines, points, plain, method, scene, frac, count_emitted=True, engine=None,
+                                **options):
+    """``method`` (with ``options``, on ``engine``: by default the scene's
+    shared one) on the shared points equals the shared plain-DETP sums
+    (conftest.py); returns its estimate."""
+    e = engine or engines[scene]
     est = e.irradiance(points[scene], method=method, radius=frac * e.scene.diagonal, photons=DETP_PHOTONS,
-                       count_emitted=count_emitted)
-    check_same(plain(scene, frac, count_emitted), est, f"{scene} radius {frac} x diagonal")
+                       count_emitted=count_emitted, **options)
+    check_same(plain(scene, frac, count_emitted), est, f"{scene} radius {frac} x diagonal {options}")
+    return est
 
 
-def check_camera_misses(engine, method):
+def check_adversarial(engine, method, seed, count_emitted, cases, **batch):
+    """``method`` with each of ``cases`` (option dicts) sums bit for bit what
+    plain DETP sums on adversarial_batch's segments (``batch``: its sizes)."""
+    pts, d, b = adversarial_batch(engine, np.random.default_rng(seed), **batch)
+    ref = run_on_batch(engine, "detp", pts, d, b, count_emitted)
+    assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
+    for opts in cases:
+        got = run_on_batch(engine, method, pts, d, b, count_emitted, **opts)
+        assert np.array_equal(got, ref), f"{opts} {batch}: {(got != ref).any(axis=1).sum()} discs differ"
+
+
+def check_camera_misses(engine, method, size=24, cases=({},)):
     """Camera points include background pixels (zero normals): an index
-    leaves them out, and they stay zero, as in plain DETP."""
-    pts = engine.camera_points(width=24, height=24)
+    leaves them out, and they stay zero, as in plain DETP (``method`` with
+    each of ``cases``, option dicts)."""
+    pts = engine.camera_points(width=size, height=size)
     assert (pts.tri < 0).any()
     ref = engine.irradiance(pts, method="detp", radius=0.05, photons=DETP_PHOTONS)
-    est = engine.irradiance(pts, method=method, radius=0.05, photons=DETP_PHOTONS)
-    check_same(ref.accumulators, est, "camera points")
+    for opts in cases:
+        est = engine.irradiance(pts, method=method, radius=0.05, photons=DETP_PHOTONS, **opts)
+        check_same(ref.accumulators, est, f"camera points {opts}")

@@ -16,17 +16,22 @@
 - Bad options give one error line.
 """
 
+import inspect
 import math
 
 import numpy as np
 import pytest
 
 import oclgi
-from analytic_scenes import disc_mean, exact, plane_scene
-from exactness import DETP_PHOTONS, surface_points
+from analytic_scenes import box_mesh, disc_mean, exact, grid, ring_points
+from exactness import DETP_PHOTONS, surface_points, surface_samples
+from oclgi.cli import _method_list
 from oclgi.errors import OclgiError
+from oclgi.estimators.base import DetpEstimator
+from oclgi.estimators.radius_options import DEFAULTS
 from oclgi.estimators.surface_patches import SurfacePatches
 from oclgi.queries import QueryPoints
+from oclgi.study import Config, run_study
 from test_session import _moves, _points, _scene
 
 ADAPTIVE = dict(radius_mode="adaptive")
@@ -42,21 +47,11 @@ def on_triangles(p, nrm, tri) -> QueryPoints:
     return QueryPoints(pos, n, np.zeros((len(p), 2), np.float32))
 
 
-def surface_points_on(engine, n, rng) -> QueryPoints:
-    """As exactness.surface_points, with each point's triangle."""
-    scene = engine.scene
-    areas = scene.triangle_areas()
-    tri = rng.choice(len(areas), size=n, p=areas / areas.sum())
-    b = rng.dirichlet([1, 1, 1], n)
-    p = np.einsum("rk,rkc->rc", b, scene.vertices[scene.faces[tri]])
-    nrm = scene.triangle_normals()[tri] * np.where(rng.random(n) < 0.5, 1.0, -1.0)[:, None]
-    return on_triangles(p, nrm, tri)
-
-
 @pytest.fixture(scope="module")
 def adaptive_points(engines):
+    """As exactness.surface_points, with each point's triangle."""
     rng = np.random.default_rng(77)
-    return {name: surface_points_on(e, 600, rng) for name, e in engines.items()}
+    return {name: on_triangles(*surface_samples(e, 600, rng)) for name, e in engines.items()}
 
 
 def _estimator(engine, pts, method="detp_disc_index", frac=0.01, **options):
@@ -80,8 +75,7 @@ def test_radii_do_not_depend_on_work_group_or_subset(engines, adaptive_points, l
     e = engines["bunny"]
     pts = adaptive_points["bunny"]
     ref = _estimator(e, pts).radii
-    other = oclgi.Engine(e.scene, local_size=local_size)
-    assert np.array_equal(_estimator(other, pts).radii, ref)
+    assert np.array_equal(_estimator(oclgi.Engine(e.scene, local_size=local_size), pts).radii, ref)
     sub = np.arange(0, len(pts), 3)
     assert np.array_equal(_estimator(e, pts.subset(sub)).radii, ref[sub])
 
@@ -164,20 +158,14 @@ def test_patches_and_boundary_distance(cl_env):
     """A unit cube: six patches (faces 90 degrees apart); a finely cut square
     is one patch whatever its tessellation; distances to the boundary (the
     device's float32, kernels/surface_patches.cl)."""
-    from analytic_scenes import grid
-
     _, queue = cl_env
     v, f = grid(8, 1.0)  # a 2 x 2 square, 128 triangles
     patches = SurfacePatches(v, f)
-    assert patches.n_patches == 1
-    assert len(patches.edges) == 4 * 8
+    assert patches.n_patches == 1 and len(patches.edges) == 4 * 8
     x = np.array([[0.0, 0, 0], [0.9, 0, 0], [0.5, 0, -0.7]])
     tri = np.zeros(3, np.int64)
     np.testing.assert_allclose(patches.boundary_distance(queue, x, tri), [1.0, 0.1, 0.3], atol=1e-6)
-    cube_v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    cube_f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
-    cube = SurfacePatches(cube_v, cube_f)
+    cube = SurfacePatches(*box_mesh((0, 0, 0), (1, 1, 1)))
     assert cube.n_patches == 6
     assert cube.boundary_distance(queue, np.array([[0.5, 0.5, 0.0]]), np.array([0]))[0] == pytest.approx(0.5)
 
@@ -186,13 +174,9 @@ def test_boundary_distance_against_a_float64_reference(cl_env, rng):
     """The device's distances equal every-edge float64 ones on a mesh of many
     patches (a cube, a fine square, a bent strip), points on random
     triangles and some on none."""
-    from analytic_scenes import grid
-
     _, queue = cl_env
     v1, f1 = grid(12, 1.5)
-    cube_v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float) + [3.0, 0.2, 0.0]
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    cube_f = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    cube_v, cube_f = box_mesh((3, 0.2, 0), (4, 1.2, 1))
     strip_v = np.array([[x, 0.3 * np.sin(x), z] for x in np.linspace(-2, 2, 9) for z in (4.0, 5.0)])
     strip_f = np.array([t for i in range(8) for t in ((2 * i, 2 * i + 1, 2 * i + 3), (2 * i, 2 * i + 3, 2 * i + 2))])
     v = np.concatenate([v1, cube_v, strip_v])
@@ -209,11 +193,6 @@ def test_boundary_distance_against_a_float64_reference(cl_env, rng):
     np.testing.assert_allclose(got[fin], want[fin], rtol=1e-5, atol=1e-6)
 
 
-@pytest.fixture(scope="module")
-def plane():
-    return oclgi.Engine(plane_scene(n_cells=16, half=4.0))
-
-
 def test_point_light_plane_adaptive(plane):
     """The adaptive estimate reads the mean irradiance over each point's own
     disc: within 8% at each point (its discs hold >= ~1,500 photons at 10^6,
@@ -221,9 +200,7 @@ def test_point_light_plane_adaptive(plane):
     central points, where the density is highest, its smaller discs are
     nearer the point value than the fixed disc's mean (which reads 4% low)."""
     d = 0.25
-    rho = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-    ang = np.array([0.0, 1.3, 2.6, 3.9, 5.2])
-    pts = np.array([(r * math.cos(a), 0.0, r * math.sin(a)) for r in rho for a in ang])
+    pts, _ = ring_points()
     scene = plane.scene
     v = scene.vertices[scene.faces]
     tri = np.array([_triangle_under(v, x, z) for x, _, z in pts])
@@ -233,8 +210,7 @@ def test_point_light_plane_adaptive(plane):
     assert (radii[:5] < 0.6 * d).all(), "the centre is denser than the mean: smaller discs"
     e = est.irradiance[:, 0]
     ref = np.array([disc_mean(x, z, r) for (x, _, z), r in zip(pts, radii)])
-    assert np.abs(e / ref - 1).max() < 0.08
-    assert abs(np.mean(e / ref) - 1) < 0.02
+    assert np.abs(e / ref - 1).max() < 0.08 and abs(np.mean(e / ref) - 1) < 0.02
     point = exact(pts[:, 0], pts[:, 2])
     fixed = plane.irradiance(qp, method="detp_disc_index", radius=d).irradiance[:, 0]
     assert abs(np.mean(e[:5] / point[:5]) - 1) < abs(np.mean(fixed[:5] / point[:5]) - 1)
@@ -282,9 +258,6 @@ def test_study_runs_the_adaptive_variant(plane):
     """``oclgi study --methods detp_disc_index:radius_mode=adaptive``: the
     method syntax gives the option, and the study runs it next to the fixed
     radius, labelled apart."""
-    from oclgi.cli import _method_list
-    from oclgi.study import Config, run_study
-
     methods = _method_list("detp_disc_index,detp_disc_index:radius_mode=adaptive")
     assert methods == [("detp_disc_index", {}), ("detp_disc_index", {"radius_mode": "adaptive"})]
     configs = [Config(m, [20_000], radius=0.25, **o) for m, o in methods]
@@ -296,10 +269,5 @@ def test_study_runs_the_adaptive_variant(plane):
 
 def test_option_defaults_agree():
     """The engine traces the pilot with radius_options.DEFAULTS: they are the signature's."""
-    import inspect
-
-    from oclgi.estimators.base import DetpEstimator
-    from oclgi.estimators.radius_options import DEFAULTS
-
     sig = inspect.signature(DetpEstimator.__init__).parameters
     assert {k: sig[k].default for k in DEFAULTS} == DEFAULTS

@@ -5,10 +5,11 @@ import pytest
 from cli_run import run
 from small_scene import MOVING_BLOCK as SCENE
 
-from oclgi.incremental.animate import poses
+import oclgi
 from oclgi.errors import OclgiError
-
-
+from oclgi.incremental.animate import poses
+from oclgi.io import read_image
+from oclgi.video import write_video
 
 
 def test_poses():
@@ -51,13 +52,10 @@ def test_animate_writes_frames_and_log(tmp_path):
     r = run(None, "animate", scene, "--path", "line:0.5,0,0", "--frames", 3, "-o", out, "--exr",
              "--dynamic", "detp_sphere_cache")
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in out.iterdir()) == [
-        "frame_0000.exr", "frame_0000.png", "frame_0001.exr", "frame_0001.png", "frame_0002.exr",
-        "frame_0002.png", "timing.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["frame_0000.exr", "frame_0000.png", "frame_0001.exr",
+                                                     "frame_0001.png", "frame_0002.exr", "frame_0002.png", "timing.csv"]
     log = (out / "timing.csv").read_text().splitlines()
-    assert log[0].startswith("frame,paths,segments_removed")
-    assert len(log) == 4
-    assert "updates/s" in r.stderr
+    assert log[0].startswith("frame,paths,segments_removed") and len(log) == 4 and "updates/s" in r.stderr
 
 
 @pytest.mark.parametrize("args,message", [
@@ -70,8 +68,7 @@ def test_animate_bad_input(tmp_path, args, message):
     scene.write_text(SCENE)
     out = tmp_path / "anim"
     r = run(None, "animate", scene, *args, "-o", out)
-    assert r.returncode == 2
-    assert message in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -87,8 +84,6 @@ def test_poses_beyond_float32_coordinates_are_refused_before_any_work():
 
 
 def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
-    import oclgi
-
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     engine = oclgi.Engine(oclgi.load_file(scene), progress=False)
@@ -103,8 +98,6 @@ def test_a_move_beyond_float32_coordinates_is_refused(tmp_path):
 def _animate_video(tmp_path, video: str, frames: int, fps: int, frame: int):
     """``animate --video`` of SCENE's block into tmp_path; (the video's path,
     frame number ``frame``'s PNG as 8-bit RGBA)."""
-    from oclgi.io import read_image
-
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "anim"
@@ -135,8 +128,6 @@ def test_animate_writes_an_mp4_of_its_frames(tmp_path):
 def test_mp4_of_odd_size_is_padded_to_even(tmp_path):
     """yuv420p needs even sides: the last column and row are repeated, not an ffmpeg failure."""
     import imageio_ffmpeg
-
-    from oclgi.video import write_video
 
     frames = [np.full((17, 33, 4), (30 * k, 100, 200, 255), np.uint8) for k in range(3)]
     path = write_video(tmp_path / "odd.mp4", frames, 10)

@@ -10,6 +10,7 @@ camera's size, ``render(exposure=-1)`` or NaN drew black or NaN pixels; a
 radius whose 1 / (scale pi d^2) is 0 in float32 gave zero irradiance.
 """
 
+import dataclasses
 import subprocess
 import sys
 import textwrap
@@ -47,7 +48,6 @@ def packed(tri=(-1, -1)):
 
 # -- QueryPoints --------------------------------------------------------------------------
 
-
 @pytest.mark.parametrize("which", [0, 1, 2])
 @pytest.mark.parametrize("dtype", [bool, complex, str, object])
 def test_query_points_refuse_non_real_arrays(which, dtype):
@@ -73,10 +73,8 @@ def test_float64_and_narrow_arrays_are_converted_by_value(engine):
     assert good.max() > 0
     pos, nrm, bary = packed()
     as64 = QueryPoints(pos[:, :3].astype(np.float64), nrm[:, :3].astype(np.float64), bary.astype(np.float64))
-    assert as64.positions.dtype == np.float32 and as64.positions.shape == (2, 4)
-    assert (as64.tri == -1).all()
-    np.testing.assert_array_equal(
-        engine.irradiance(as64, method="detp", photons=2000, radius=0.3).irradiance, good)
+    assert as64.positions.dtype == np.float32 and as64.positions.shape == (2, 4) and (as64.tri == -1).all()
+    np.testing.assert_array_equal(engine.irradiance(as64, method="detp", photons=2000, radius=0.3).irradiance, good)
     wide64 = np.concatenate([XYZN[:, :3], [[-1], [-1]]], axis=1)  # w: the triangle id by value
     q = QueryPoints(wide64, nrm.astype(np.float64), bary)
     np.testing.assert_array_equal(q.positions, pos)
@@ -162,7 +160,6 @@ def test_point_arrays_refuse_non_numbers(engine, bad):
 
 # -- Engine's methods ---------------------------------------------------------------------------
 
-
 @pytest.mark.parametrize("key, value", [("width", 0), ("height", -1), ("width", True), ("width", 2.5),
                                         ("height", 16385), ("width", "8"), ("width", np.nan)])
 def test_render_size_checked(engine, key, value):
@@ -226,7 +223,6 @@ def test_sessions_check_their_flags(engine):
 
 # -- float32: the run's derived constants ---------------------------------------------------------
 
-
 def test_radius_whose_resolve_underflows_is_refused(engine):
     """1 / (scale pi d^2) below float32's normal range: zero irradiance everywhere, silently."""
     with pytest.raises(OclgiError, match=r"^floor: the emitters' power .* give 1 / \(scale pi d\^2\), DETP's resolve "
@@ -268,8 +264,6 @@ def test_scene_built_in_python_is_checked_where_it_meets_the_engine():
     ("up", (0, np.inf, 0), r"^camera.up: expected 3 finite numbers"),
 ])
 def test_cameras_made_in_python_are_checked(engine, key, value, match):
-    import dataclasses
-
     cam = dataclasses.replace(engine.scene.camera, **{key: value})
     with pytest.raises(params.ParamError if key in ("width", "height", "fov") else OclgiError, match=match):
         engine.render(camera=cam, photons=1000)

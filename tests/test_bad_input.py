@@ -15,89 +15,27 @@ uncaught exception fails the test just as a traceback would.
 """
 
 import os
-import subprocess
 import zipfile
 
 import numpy as np
 import pytest
-from cli_run import in_process, run
-from small_scene import BOX_OBJ
+from cli_run import fails_cleanly as _fails_cleanly, in_process, run
+from small_scene import BOX_MTL, BOX_OBJ, POINTS, write_scene
 
+from oclgi import io
 from oclgi.errors import OclgiError
-
-# A floor quad and a small emissive quad above it, facing down.
-BOX_MTL = """newmtl floor
-Kd 0.5 0.5 0.5
-newmtl light
-Kd 0 0 0
-Ke 5 5 5
-"""
-SCENE = """[[mesh]]
-path = "{mesh}"
-
-[camera]
-position = [0, 0.5, 3]
-look_at = [0, 0.3, 0]
-width = 8
-height = 8
-
-[photons]
-count = {count}
-
-[estimator]
-radius = {radius}
-"""
-POINTS = "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0.5,0.01,0.5,0,1,0\n"
-
-
-def write_scene(d, obj=BOX_OBJ, mtl=BOX_MTL, mesh="box.obj", count="2000", radius="0.1", extra=""):
-    d.mkdir(parents=True, exist_ok=True)
-    if obj is not None:
-        (d / "box.obj").write_text(obj)
-    if mtl is not None:
-        (d / "box.mtl").write_text(mtl)
-    (d / "s.toml").write_text(SCENE.format(mesh=mesh, count=count, radius=radius) + extra)
-    (d / "p.csv").write_text(POINTS)
-    return d / "s.toml"
-
 
 SUB = True  # run this case in a subprocess
 INP = False  # run it in-process
-
-
-
-@pytest.fixture
-def run_inproc(monkeypatch, capsys):
-    """``oclgi.cli.main(args)`` in ``cwd``, as a CompletedProcess."""
-    return lambda cwd, *args: in_process(monkeypatch, capsys, cwd, *args)
+RENDER = ("render", "s.toml", "-o", "out/x.exr")
 
 
 @pytest.fixture
-def fails_cleanly(run_inproc):
-    return lambda tmp_path, *args, match=None, sub=SUB: _fails_cleanly(
-        run if sub else run_inproc, tmp_path, *args, match=match)
-
-
-def files_under(d):
-    return {p.relative_to(d) for p in d.rglob("*") if p.is_file()}
-
-
-def _fails_cleanly(runner, tmp_path, *args, match=None):
-    """Run ``oclgi *args`` in tmp_path; check the clean failure; return the error line."""
-    before = files_under(tmp_path)
-    res = runner(tmp_path, *args)
-    lines = res.stderr.splitlines()
-    assert "Traceback" not in res.stderr, res.stderr
-    assert res.returncode == 2, (res.returncode, res.stderr)
-    assert lines and lines[-1].startswith("oclgi: error: "), res.stderr
-    assert all(line.startswith("oclgi: warning: ") for line in lines[:-1]), res.stderr
-    assert res.stdout == "", res.stdout
-    assert files_under(tmp_path) == before, "files were left behind"
-    if match is not None:
-        import re
-
-        assert re.search(match, lines[-1]), lines[-1]
-    return lines[-1]
+def fails_cleanly(monkeypatch, capsys):
+    """Run ``oclgi *args`` in tmp_path (``sub``: in a subprocess), check the clean failure, return the error line."""
+    inproc = lambda cwd, *args: in_process(monkeypatch, capsys, cwd, *args)  # noqa: E731
+    return lambda tmp_path, *args, match=None, sub=SUB: _fails_cleanly(run if sub else inproc, tmp_path, *args,
+                                                                        match=match)
 
 
 @pytest.fixture
@@ -107,78 +45,61 @@ def scene(tmp_path):
 
 # -- scene files ----------------------------------------------------------------
 
-def test_missing_scene_file(fails_cleanly, tmp_path):
-    fails_cleanly(tmp_path, "render", "nope.toml", "-o", "out/x.exr", match=r"scene file not found: nope\.toml")
+@pytest.mark.parametrize("sub, make, name, match", [
+    (SUB, lambda d: None, "nope.toml", r"scene file not found: nope\.toml"),  # missing
+    (INP, lambda d: (d / "d.toml").mkdir(), "d.toml", "scene file not found"),  # a folder
+    (INP, lambda d: (d / "s.toml").write_bytes(b"\xff\xfe\x00garbage"), "s.toml", "not a text"),  # binary
+])
+def test_unreadable_scene_file(fails_cleanly, tmp_path, sub, make, name, match):
+    make(tmp_path)
+    fails_cleanly(tmp_path, "render", name, "-o", "out/x.exr", match=match, sub=sub)
 
 
-def test_scene_file_is_a_folder(fails_cleanly, tmp_path):
-    (tmp_path / "d.toml").mkdir()
-    fails_cleanly(tmp_path, "render", "d.toml", "-o", "out/x.exr", match="scene file not found", sub=INP)
-
-
-def test_malformed_toml(fails_cleanly, tmp_path):
-    write_scene(tmp_path)
-    (tmp_path / "s.toml").write_text("[[mesh]\npath = 'box.obj'\n")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"s\.toml: malformed TOML.*line 1")
-
-
-@pytest.mark.parametrize("nested", ["a = " + "[" * 1000 + "]" * 1000, "a = " + "{b = " * 1000 + "1" + "}" * 1000])
-def test_deeply_nested_toml(fails_cleanly, tmp_path, nested):
-    # was a RecursionError's traceback
-    write_scene(tmp_path)
-    (tmp_path / "s.toml").write_text(nested + "\n")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"s\.toml: malformed TOML: .*nested too deeply")
-
-
-def test_binary_scene_file(fails_cleanly, tmp_path):
-    (tmp_path / "s.toml").write_bytes(b"\xff\xfe\x00garbage")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="not a text", sub=INP)
+MESH = "[[mesh]]\npath = 'box.obj'\n"
+# an emitting triangle, given its vertices 1 and 2 and the last index of its face
+TRIANGLE = "[[mesh]]\nvertices = [[0, 0, 0], {}]\nfaces = [[0, 1, {}]]\nemission = [1, 1, 1]\n"
 
 
 @pytest.mark.parametrize("sub, toml, match", [
+    (SUB, "[[mesh]\npath = 'box.obj'\n", r"s\.toml: malformed TOML.*line 1"),
+    # deeply nested: was a RecursionError's traceback
+    (SUB, "a = " + "[" * 1000 + "]" * 1000 + "\n", r"s\.toml: malformed TOML: .*nested too deeply"),
+    (SUB, "a = " + "{b = " * 1000 + "1" + "}" * 1000 + "\n", r"s\.toml: malformed TOML: .*nested too deeply"),
     (SUB, "mesh = 5\n", r"mesh: expected \[\[mesh\]\]"),
     (INP, "[[mesh]]\npath = 5\n", r"mesh\[0\]\.path: expected a file name"),
-    (INP, "[[mesh]]\npath = 'box.obj'\nmaterials = 5\n", r"mesh\[0\]\.materials"),
-    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = '123'\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
-    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = [true, 0, 0]\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
-    (INP, "[[mesh]]\npath = 'box.obj'\nalbedo = [2, 0, 0]\n", r"albedo must be 3 numbers in \[0, 1\]"),
-    (INP, "[[mesh]]\npath = 'box.obj'\ncolour = [1, 0, 0]\n", r"unknown key\(s\) \['colour'\]"),
-    (INP, "[[mesh]]\npath = 'box.obj'\n[mesh.materials.nosuch]\nemission = [1, 1, 1]\n",
-     r"\['nosuch'\] not in the mesh's materials"),
-    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 'a']]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
-     r"mesh\[0\]\.vertices: expected numbers"),
-    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1]]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
-     r"mesh\[0\]\.vertices"),
-    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]\nfaces = [[0, 1, 2.5]]\nemission = [1, 1, 1]\n",
-     r"mesh\[0\]\.faces: indices must be integers"),
-    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]\nfaces = [[0, 1, 3]]\nemission = [1, 1, 1]\n",
-     r"mesh\[0\]: face indices out of range"),
-    (INP, "[[mesh]]\nvertices = [[0, 0, 0], [1, 0, nan], [0, 1, 0]]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n",
-     r"mesh\[0\]: 1 vertices have NaN or infinite"),
-    (INP, "[[mesh]]\npath = 'box.obj'\ntransform = {scale = 1e30}\n", r"coordinates reach 1e\+30"),
-    (INP, "[[mesh]]\npath = 'box.obj'\n[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 1]\n", r"camera: look_at must differ"),
-    (INP, "[[mesh]]\npath = 'box.obj'\n[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 0]\nwidth = 1e400\n",
+    (INP, MESH + "materials = 5\n", r"mesh\[0\]\.materials"),
+    (INP, MESH + "albedo = '123'\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
+    (INP, MESH + "albedo = [true, 0, 0]\n", r"mesh\[0\]\.albedo: expected 3 numbers"),
+    (INP, MESH + "albedo = [2, 0, 0]\n", r"albedo must be 3 numbers in \[0, 1\]"),
+    (INP, MESH + "colour = [1, 0, 0]\n", r"unknown key\(s\) \['colour'\]"),
+    (INP, MESH + "[mesh.materials.nosuch]\nemission = [1, 1, 1]\n", r"\['nosuch'\] not in the mesh's materials"),
+    (INP, TRIANGLE.format("[1, 0, 0], [0, 1, 'a']", 2), r"mesh\[0\]\.vertices: expected numbers"),
+    (INP, TRIANGLE.format("[1, 0, 0], [0, 1]", 2), r"mesh\[0\]\.vertices"),
+    (INP, TRIANGLE.format("[1, 0, 0], [0, 1, 0]", 2.5), r"mesh\[0\]\.faces: indices must be integers"),
+    (INP, TRIANGLE.format("[1, 0, 0], [0, 1, 0]", 3), r"mesh\[0\]: face indices out of range"),
+    (INP, TRIANGLE.format("[1, 0, nan], [0, 1, 0]", 2), r"mesh\[0\]: 1 vertices have NaN or infinite"),
+    (INP, MESH + "transform = {scale = 1e30}\n", r"coordinates reach 1e\+30"),
+    (INP, MESH + "[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 1]\n", r"camera: look_at must differ"),
+    (INP, MESH + "[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 0]\nwidth = 1e400\n",
      r"camera\.width: expected a finite number"),
-    (INP, "[[mesh]]\npath = 'box.obj'\n[estimator]\nmethod = 'photonmap'\n", r"unknown method 'photonmap'"),
-    (INP, "[[mesh]]\npath = 'box.obj'\n[[point_light]]\nposition = [0, 1, 0]\n", r"point_light\[0\]\.intensity"),
+    (INP, MESH + "[estimator]\nmethod = 'photonmap'\n", r"unknown method 'photonmap'"),
+    (INP, MESH + "[[point_light]]\nposition = [0, 1, 0]\n", r"point_light\[0\]\.intensity"),
 ])
 def test_malformed_scene_structure(fails_cleanly, sub, tmp_path, toml, match):
     write_scene(tmp_path)
     (tmp_path / "s.toml").write_text(toml)
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
 # -- mesh files -----------------------------------------------------------------
 
-def test_mesh_file_missing(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mesh="nowhere.obj")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"mesh file not found: .*nowhere\.obj")
-
-
-def test_mesh_type_unsupported(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mesh="box.fbx")
-    (tmp_path / "box.fbx").write_text("whatever")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"unsupported mesh type '\.fbx'", sub=INP)
+@pytest.mark.parametrize("sub, mesh, match", [(SUB, "nowhere.obj", r"mesh file not found: .*nowhere\.obj"),
+                                             (INP, "box.fbx", r"unsupported mesh type '\.fbx'")])
+def test_mesh_file_missing_or_of_no_known_type(fails_cleanly, tmp_path, sub, mesh, match):
+    write_scene(tmp_path, mesh=mesh)
+    if mesh.endswith(".fbx"):
+        (tmp_path / mesh).write_text("whatever")
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("sub, old, new, match", [
@@ -199,17 +120,17 @@ def test_mesh_type_unsupported(fails_cleanly, tmp_path):
 def test_malformed_obj(fails_cleanly, sub, tmp_path, old, new, match):
     assert old in BOX_OBJ
     write_scene(tmp_path, obj=BOX_OBJ.replace(old, new, 1))
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
-def test_malformed_mtl(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 5 five 5"))
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"box\.mtl:5: malformed number", sub=INP)
-
-
-def test_negative_emission_in_mtl(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 5 -5 5"))
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"emission must be 3 numbers >= 0", sub=INP)
+@pytest.mark.parametrize("sub, ke, match", [
+    (INP, "Ke 5 five 5", r"box\.mtl:5: malformed number"),
+    (INP, "Ke 5 -5 5", r"emission must be 3 numbers >= 0"),
+    (SUB, "Ke 0 0 0", "the scene has no emitter"),
+])
+def test_bad_emission_in_mtl(fails_cleanly, sub, tmp_path, ke, match):
+    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", ke))
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
 PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
@@ -227,51 +148,38 @@ PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty
     (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 -1\n").encode(), r"m\.ply: face indices out of range"),
 ])
 def test_malformed_ply(fails_cleanly, sub, tmp_path, data, match):
-    write_scene(tmp_path, mesh="m.ply", extra="")
-    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
-        'path = "m.ply"', 'path = "m.ply"\nemission = [1, 1, 1]'))
+    write_scene(tmp_path, mesh="m.ply", mesh_keys="emission = [1, 1, 1]\n")
     (tmp_path / "m.ply").write_bytes(data)
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
-def test_malformed_zip(fails_cleanly, tmp_path):
+@pytest.mark.parametrize("members, match", [
+    (None, r"m\.zip: not a readable zip file"),
+    ({"a.obj": BOX_OBJ, "b.obj": BOX_OBJ}, "expected exactly one mesh file inside, found 2"),
+    ({"inner.obj": BOX_OBJ.replace("v 1 0 -1\n", "v 1 0 q\n")}, r"m\.zip.inner\.obj:3: malformed number"),
+])
+def test_malformed_zip(fails_cleanly, tmp_path, members, match):
     write_scene(tmp_path, mesh="m.zip")
-    (tmp_path / "m.zip").write_bytes(b"PK\x03\x04 not really a zip")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"m\.zip: not a readable zip file", sub=INP)
-
-
-def test_zip_with_two_meshes(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mesh="m.zip")
-    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
-        z.writestr("a.obj", BOX_OBJ)
-        z.writestr("b.obj", BOX_OBJ)
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr",
-                  match="expected exactly one mesh file inside, found 2", sub=INP)
-
-
-def test_zip_obj_error_names_member_line(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mesh="m.zip")
-    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
-        z.writestr("inner.obj", BOX_OBJ.replace("v 1 0 -1\n", "v 1 0 q\n"))
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"m\.zip.inner\.obj:3: malformed number", sub=INP)
+    if members is None:
+        (tmp_path / "m.zip").write_bytes(b"PK\x03\x04 not really a zip")
+    else:
+        with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
+            for name, text in members.items():
+                z.writestr(name, text)
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=INP)
 
 
 # -- emitters, degenerate triangles ---------------------------------------------------
 
-def test_no_emitter(fails_cleanly, tmp_path):
-    write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", "Ke 0 0 0"))
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="the scene has no emitter")
-
-
 def test_no_emitter_point_light_of_zero_intensity(fails_cleanly, tmp_path):
     write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", ""),
                 extra="\n[[point_light]]\nposition = [0, 1, 0]\nintensity = [0, 0, 0]\n")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="the scene has no emitter", sub=INP)
+    fails_cleanly(tmp_path, *RENDER, match="the scene has no emitter", sub=INP)
 
 
 def test_missing_mtl_warns_then_no_emitter(tmp_path):
     write_scene(tmp_path, mtl=None)
-    res = run(tmp_path, "render", "s.toml", "-o", "out/x.exr")
+    res = run(tmp_path, *RENDER)
     assert res.returncode == 2 and "Traceback" not in res.stderr
     lines = res.stderr.splitlines()
     assert len(lines) == 2, res.stderr
@@ -282,17 +190,14 @@ def test_missing_mtl_warns_then_no_emitter(tmp_path):
 
 def test_all_triangles_degenerate(fails_cleanly, tmp_path):
     obj = "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n"
-    write_scene(tmp_path, obj=obj, mtl=None)
-    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace(
-        'path = "box.obj"', 'path = "box.obj"\nemission = [1, 1, 1]'))
-    line = fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="every triangle is degenerate")
-    assert "dropped" not in line
+    write_scene(tmp_path, obj=obj, mtl=None, mesh_keys="emission = [1, 1, 1]\n")
+    assert "dropped" not in fails_cleanly(tmp_path, *RENDER, match="every triangle is degenerate")
 
 
 def test_degenerate_triangles_dropped_with_warning(tmp_path):
     extra = "v 0 0 0\nv 0 0 0\nf 9 10 1\nf 1 1 2\nf 1 2 3\nf 2 9 3\n"  # 2 degenerate, 2 fine
     write_scene(tmp_path, obj=BOX_OBJ + extra)
-    res = run(tmp_path, "render", "s.toml", "-o", "out/x.exr", "--quiet")
+    res = run(tmp_path, *RENDER, "--quiet")
     assert res.returncode == 0, res.stderr
     warn = [line for line in res.stderr.splitlines() if "degenerate" in line]
     assert len(warn) == 1 and warn[0].startswith("oclgi: warning: "), res.stderr
@@ -302,33 +207,23 @@ def test_degenerate_triangles_dropped_with_warning(tmp_path):
 
 # -- photon count, radius and other numbers --------------------------------------------
 
-@pytest.mark.parametrize("sub, count, match", [
-    (SUB, "0", r"photons\.count: expected a positive integer up to 2\^31, got 0$"),
-    (SUB, "-5", r"photons\.count: expected a positive integer up to 2\^31, got -5$"),
-    (INP, "2.5", r"photons\.count: expected a positive integer"),
-    (INP, "inf", r"photons\.count: expected a positive integer"),
-    (INP, "nan", r"photons\.count: expected a positive integer"),
-    (INP, "1e400", r"photons\.count: expected a positive integer"),
-    (INP, "'many'", r"photons\.count: expected a positive integer"),
-    (INP, "true", r"photons\.count: expected a positive integer"),
-    (INP, "3000000000", r"up to 2\^31"),
-])
-def test_bad_photon_count_in_toml(fails_cleanly, sub, tmp_path, count, match):
-    write_scene(tmp_path, count=count)
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+COUNT = r"photons\.count: expected a positive integer"
+RADIUS = r"estimator\.radius: expected a number from 1e-18 to 1e18"
 
 
-@pytest.mark.parametrize("sub, radius, match", [
-    (SUB, "0", r"estimator\.radius: expected a number from 1e-18 to 1e18"),
-    (SUB, "-1", r"estimator\.radius: expected a number from 1e-18 to 1e18"),
-    (INP, "-0.5", r"estimator\.radius: expected a number from 1e-18 to 1e18"),
-    (INP, "inf", r"estimator\.radius: expected a number from 1e-18 to 1e18"),
-    (INP, "nan", r"estimator\.radius: expected a number from 1e-18 to 1e18"),
-    (INP, "'big'", r"estimator\.radius: expected a number"),
+@pytest.mark.parametrize("sub, key, value, match", [
+    (SUB, "count", "0", COUNT + r" up to 2\^31, got 0$"),
+    (SUB, "count", "-5", COUNT + r" up to 2\^31, got -5$"),
+    *[(INP, "count", v, COUNT) for v in ("2.5", "inf", "nan", "1e400", "'many'", "true")],
+    (INP, "count", "3000000000", r"up to 2\^31"),
+    (SUB, "radius", "0", RADIUS),
+    (SUB, "radius", "-1", RADIUS),
+    *[(INP, "radius", v, RADIUS) for v in ("-0.5", "inf", "nan")],
+    (INP, "radius", "'big'", r"estimator\.radius: expected a number"),
 ])
-def test_bad_radius_in_toml(fails_cleanly, sub, tmp_path, radius, match):
-    write_scene(tmp_path, radius=radius)
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=match, sub=sub)
+def test_bad_count_or_radius_in_toml(fails_cleanly, sub, tmp_path, key, value, match):
+    write_scene(tmp_path, **{key: value})
+    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("sub, args, match", [
@@ -354,14 +249,10 @@ def test_bad_radius_in_toml(fails_cleanly, sub, tmp_path, radius, match):
     (INP, ["--method", "photonmap"], r"argument --method: unknown method 'photonmap'"),
     (INP, ["--device", "no-such-device-anywhere"], r"no OpenCL device matches"),
     (INP, ["--bogus"], r"unrecognized arguments: --bogus"),
+    (INP, ["--local-size", "1000000"], r"--local-size 1000000 is larger than"),
 ])
 def test_bad_cli_numbers(fails_cleanly, sub, scene, tmp_path, args, match):
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", *args, match=match, sub=sub)
-
-
-def test_local_size_too_large(fails_cleanly, scene, tmp_path):
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", "--local-size", "1000000",
-                  match=r"--local-size 1000000 is larger than", sub=INP)
+    fails_cleanly(tmp_path, *RENDER, *args, match=match, sub=sub)
 
 
 def test_no_command(fails_cleanly, tmp_path):
@@ -370,36 +261,36 @@ def test_no_command(fails_cleanly, tmp_path):
 
 # -- outputs --------------------------------------------------------------------------
 
-@pytest.mark.parametrize("sub, out, match", [
-    (INP, "out/x.jpg", r"must end in \.exr or \.png"),
-    (INP, "out/x", r"must end in \.exr or \.png"),
-])
-def test_bad_render_output_name(fails_cleanly, sub, scene, tmp_path, out, match):
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", out, match=match, sub=sub)
+@pytest.mark.parametrize("out, match", [("out/x.jpg", r"must end in \.exr or \.png"),
+                                        ("out/x", r"must end in \.exr or \.png")])
+def test_bad_render_output_name(fails_cleanly, scene, tmp_path, out, match):
+    fails_cleanly(tmp_path, "render", "s.toml", "-o", out, match=match, sub=INP)
 
 
 def test_render_output_is_a_folder(fails_cleanly, scene, tmp_path):
     (tmp_path / "out" / "x.png").mkdir(parents=True)  # the PNG cannot be written: no EXR either
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match=r"x\.png: it is a folder")
+    fails_cleanly(tmp_path, *RENDER, match=r"x\.png: it is a folder")
     assert os.listdir(tmp_path / "out") == ["x.png"]
 
 
 def test_render_output_parent_is_a_file(fails_cleanly, scene, tmp_path):
     (tmp_path / "out").write_text("")
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", "out/x.exr", match="is not a folder", sub=INP)
+    fails_cleanly(tmp_path, *RENDER, match="is not a folder", sub=INP)
 
 
-def test_irradiance_output_is_a_folder(fails_cleanly, scene, tmp_path):
-    (tmp_path / "e.npy").mkdir()
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", match="it is a folder", sub=INP)
+# -- points files and outputs of `oclgi irradiance` ------------------------------------------
 
+@pytest.mark.parametrize("make, points, out, match", [
+    (lambda d: (d / "e.npy").mkdir(), "p.csv", "e.npy", "it is a folder"),
+    (lambda d: None, "p.csv", "e.txt", r"must end in \.npy or \.csv"),
+    (lambda d: None, "nope.csv", "e.npy", r"points file not found: nope\.csv"),
+    (lambda d: (d / "p.txt").write_text(POINTS), "p.txt", "e.npy", r"points must be a \.npy or \.csv file"),
+    (lambda d: (d / "p.csv").write_bytes(b"\xff\xfe\x00\x01"), "p.csv", "e.npy", "not a text"),
+])
+def test_bad_irradiance_files(fails_cleanly, scene, tmp_path, make, points, out, match):
+    make(tmp_path)
+    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", points, "-o", out, match=match, sub=INP)
 
-def test_irradiance_output_suffix(fails_cleanly, scene, tmp_path):
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.txt",
-                  match=r"must end in \.npy or \.csv", sub=INP)
-
-
-# -- points files for `oclgi irradiance` ---------------------------------------------------
 
 @pytest.mark.parametrize("sub, text, match", [
     (SUB, "nan,0.01,0,0,1,0\n", r"query point 0 has a NaN or infinite coordinate"),
@@ -439,27 +330,9 @@ def test_bad_points_npy(fails_cleanly, sub, scene, tmp_path, make, match):
     fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", match=match, sub=sub)
 
 
-def test_points_file_missing(fails_cleanly, scene, tmp_path):
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "nope.csv", "-o", "e.npy",
-                  match=r"points file not found: nope\.csv", sub=INP)
-
-
-def test_points_file_suffix(fails_cleanly, scene, tmp_path):
-    (tmp_path / "p.txt").write_text(POINTS)
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.txt", "-o", "e.npy",
-                  match=r"points must be a \.npy or \.csv file", sub=INP)
-
-
-def test_points_binary_csv(fails_cleanly, scene, tmp_path):
-    (tmp_path / "p.csv").write_bytes(b"\xff\xfe\x00\x01")
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", match="not a text", sub=INP)
-
-
 # -- the writers themselves: all or nothing, no temporary files, normal permissions ----------
 
 def test_write_images_all_or_nothing(tmp_path, monkeypatch):
-    from oclgi import io
-
     real = io.write_image_file
 
     def fail_on_png(tmp, path, pixels, *args):
@@ -475,8 +348,6 @@ def test_write_images_all_or_nothing(tmp_path, monkeypatch):
 
 
 def test_write_array_interrupted_leaves_nothing(tmp_path, monkeypatch):
-    from oclgi import io
-
     def boom(*a, **k):
         raise KeyboardInterrupt
 
@@ -487,8 +358,6 @@ def test_write_array_interrupted_leaves_nothing(tmp_path, monkeypatch):
 
 
 def test_outputs_get_normal_permissions(tmp_path):
-    from oclgi import io
-
     mask = os.umask(0o022)
     try:
         p = io.write_array(tmp_path / "e.npy", np.zeros((2, 3)))
@@ -501,8 +370,6 @@ def test_outputs_get_normal_permissions(tmp_path):
 
 
 def test_write_error_is_an_oclgi_error(tmp_path):
-    from oclgi import io
-
     (tmp_path / "f").write_text("")
     with pytest.raises(OclgiError, match="is not a folder"):
         io.write_array(tmp_path / "f" / "e.npy", np.zeros((2, 3)))

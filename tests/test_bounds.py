@@ -48,8 +48,7 @@ def test_k1_closed_form(n):
 def test_symmetry(n, k):
     s, x = bounds.order_statistic_factor(n, k, return_argmax=True)
     s2, x2 = bounds.order_statistic_factor(n, n + 1 - k, return_argmax=True)
-    assert s2 == pytest.approx(s, rel=1e-9)
-    assert 1 - x2 == pytest.approx(x, rel=1e-4, abs=1e-12)
+    assert s2 == pytest.approx(s, rel=1e-9) and 1 - x2 == pytest.approx(x, rel=1e-4, abs=1e-12)
     xs = np.array([0.01, 0.2, 0.5, 0.77])
     np.testing.assert_allclose(bounds.order_statistic_integrand(xs, n, k),
                                bounds.order_statistic_integrand(1 - xs, n, n + 1 - k), rtol=1e-9)
@@ -64,14 +63,12 @@ def test_against_a_brute_force_sup(n, k):
     p = betainc(k, n + 1 - k, x)
     g = p * (1 - p) / (x * (1 - x))
     s = bounds.order_statistic_factor(n, k)
-    assert np.nanmax(g) <= s * (1 + 1e-9)
-    assert np.nanmax(g) >= s * (1 - 1e-5)
+    assert np.nanmax(g) <= s * (1 + 1e-9) and np.nanmax(g) >= s * (1 - 1e-5)
 
 
 def test_at_most_n_and_the_median():
     n = 30
-    s = np.array([bounds.order_statistic_factor(n, k) for k in range(1, n + 1)])
-    assert np.all(s <= n * (1 + 1e-12))
+    assert np.all(np.array([bounds.order_statistic_factor(n, k) for k in range(1, n + 1)]) <= n * (1 + 1e-12))
     # Bernoulli parent: sum_k g_k(x) <= n at every x (Cauchy-Schwarz)
     for x in (0.01, 0.3, 0.5, 0.9):
         assert sum(bounds.order_statistic_integrand(x, n, k) for k in range(1, n + 1)) <= n * (1 + 1e-12)
@@ -81,24 +78,17 @@ def test_at_most_n_and_the_median():
 
 def test_monotone_in_k_towards_the_middle():
     n = 41
-    prev = None
-    for k in range(1, (n + 1) // 2 + 1):
-        s, x = bounds.order_statistic_factor(n, k, return_argmax=True)
-        assert x <= 0.5 + 1e-9  # the lemma's condition
-        if prev is not None:
-            assert s <= prev * (1 + 1e-9)
-        prev = s
+    s, x = zip(*(bounds.order_statistic_factor(n, k, return_argmax=True) for k in range(1, (n + 1) // 2 + 1)))
+    assert all(xk <= 0.5 + 1e-9 for xk in x)  # the lemma's condition
+    assert all(b <= a * (1 + 1e-9) for a, b in zip(s, s[1:]))
 
 
 @pytest.mark.parametrize("k", [2, 5, 20])
 def test_monotone_in_n(k):
-    prev = None
-    for n in [2 * k, 2 * k + 1, 3 * k, 10 * k, 100 * k, 10**4 * k]:
-        s, x = bounds.order_statistic_factor(n, k, return_argmax=True)
-        assert x <= 0.5 + 1e-9
-        if prev is not None:
-            assert s >= prev * (1 - 1e-9)
-        prev = s
+    s, x = zip(*(bounds.order_statistic_factor(n, k, return_argmax=True)
+                 for n in [2 * k, 2 * k + 1, 3 * k, 10 * k, 100 * k, 10**4 * k]))
+    assert all(xn <= 0.5 + 1e-9 for xn in x)
+    assert all(b >= a * (1 - 1e-9) for a, b in zip(s, s[1:]))
 
 
 def test_bound_values():

@@ -83,18 +83,20 @@ def uniform(n: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).random((n, 4))
 
 
-@pytest.mark.parametrize("name,angle", CASES, ids=[f"{n}-{a:g}" for n, a in CASES])
-def test_sampled_directions_follow_the_pdf(probe, name, angle):
-    mat = GLOSSY[name]
-    wo = direction(angle)
+def chi2_test(probe, mat, wo, pdf_of):
+    """(p-value, dof) of ``mat``'s sampled directions at ``wo`` against the
+    pdf of material ``pdf_of``."""
     wi, _, weight = probe.sample(mat, np.tile(wo, (N_SAMPLES, 1)), uniform(N_SAMPLES, 7))
     valid = weight.max(axis=1) > 0
-    observed = np.bincount(cell_of(wi[valid], N_Z, N_PHI), minlength=N_Z * N_PHI)
-    expected = expected_counts(lambda d: probe.eval(mat, np.tile(wo, (len(d), 1)), d)[1], N_Z, N_PHI, N_SAMPLES)
+    expected = expected_counts(lambda d: probe.eval(pdf_of, np.tile(wo, (len(d), 1)), d)[1], N_Z, N_PHI, N_SAMPLES)
     # the absorbed samples are a cell of their own: the pdf's missing mass
-    observed = np.append(observed, (~valid).sum())
-    expected = np.append(expected, max(N_SAMPLES - expected.sum(), 0.0))
-    p, dof = chi2_pvalue(observed, expected)
+    observed = np.append(np.bincount(cell_of(wi[valid], N_Z, N_PHI), minlength=N_Z * N_PHI), (~valid).sum())
+    return chi2_pvalue(observed, np.append(expected, max(N_SAMPLES - expected.sum(), 0.0)))
+
+
+@pytest.mark.parametrize("name,angle", CASES, ids=[f"{n}-{a:g}" for n, a in CASES])
+def test_sampled_directions_follow_the_pdf(probe, name, angle):
+    p, dof = chi2_test(probe, GLOSSY[name], direction(angle), GLOSSY[name])
     assert p > sidak(0.01, len(CASES)), f"{name} at {angle} deg: chi-square p = {p:.3g} ({dof} dof)"
 
 
@@ -137,15 +139,13 @@ def test_white_furnace_and_the_photon_bound(probe, name):
     """With albedo 1, a lossless kind returns all the light it receives
     (mean weight 1), the others less; no photon's weight exceeds 1 (the
     fixed-point bound, kernels/oclgi_types.h)."""
-    white = {"diffuse": Material("w", albedo=(1.0, 1.0, 1.0)),
-             "mirror": Material("w", kind="mirror"),
+    white = {"diffuse": Material("w", albedo=(1.0, 1.0, 1.0)), "mirror": Material("w", kind="mirror"),
              "glass": Material("w", kind="dielectric", ior=1.5)}
     mat = white.get(name) or GLOSSY[name]
     lossless = name in white
     n = 200_000
     for angle in (5.0, 45.0, 80.0, 120.0, 175.0):
-        wo = np.tile(direction(angle), (n, 1))
-        _, _, weight = probe.sample(mat, wo, uniform(n, int(angle)), 1)
+        _, _, weight = probe.sample(mat, np.tile(direction(angle), (n, 1)), uniform(n, int(angle)), 1)
         assert weight.max() <= 1.0 + 1e-5, f"{name}: a photon gains power ({weight.max()})"
         mean = weight.mean(axis=0)
         if lossless:
@@ -207,13 +207,6 @@ def test_one_sided_surfaces_are_black_behind(probe):
 def test_the_chi_square_test_sees_a_wrong_pdf(probe):
     """The test above has power: samples of GGX alpha 0.1 fail against the
     pdf of alpha 0.11."""
-    wo = direction(40.0)
-    samples = GLOSSY["conductor_a0.1"]
     other = Material("other", kind="conductor", specular=(0.9, 0.8, 0.7), roughness=0.11)
-    wi, _, weight = probe.sample(samples, np.tile(wo, (N_SAMPLES, 1)), uniform(N_SAMPLES, 7))
-    valid = weight.max(axis=1) > 0
-    observed = np.append(np.bincount(cell_of(wi[valid], N_Z, N_PHI), minlength=N_Z * N_PHI), (~valid).sum())
-    expected = expected_counts(lambda d: probe.eval(other, np.tile(wo, (len(d), 1)), d)[1], N_Z, N_PHI, N_SAMPLES)
-    expected = np.append(expected, max(N_SAMPLES - expected.sum(), 0.0))
-    p, _ = chi2_pvalue(observed, expected)
+    p, _ = chi2_test(probe, GLOSSY["conductor_a0.1"], direction(40.0), other)
     assert p < 1e-6

@@ -7,10 +7,13 @@ The commands run as a user runs them (tests/cli_run.py); the uninterrupted
 runs in-process, which writes the same bytes.
 """
 
+import io
+import json
 import signal
 import subprocess
 import sys
 import time
+import zipfile
 
 import numpy as np
 import pytest
@@ -30,9 +33,8 @@ SIZE = 12
 
 
 def _args(out, method, photons=PHOTONS, *extra):
-    return ("render", BOX, "--method", method, "--photons", photons, "--width", SIZE, "--height", SIZE,
-            "--batch-paths", BATCH, "-O", *(("k=20",) if method == "photon_map" else ("extension=0",)),
-            "-o", out, "--quiet", *extra)
+    return ("render", BOX, "--method", method, "--photons", photons, "--width", SIZE, "--height", SIZE, "--batch-paths",
+            BATCH, "-O", *(("k=20",) if method == "photon_map" else ("extension=0",)), "-o", out, "--quiet", *extra)
 
 
 def _same_files(a, b):
@@ -42,8 +44,7 @@ def _same_files(a, b):
 
 def _same_sums(a, b):
     (_, sa), (_, sb) = load(a), load(b)
-    assert sa.next_path == sb.next_path and sa.segments == sb.segments
-    assert sa.sums.keys() == sb.sums.keys()
+    assert sa.next_path == sb.next_path and sa.segments == sb.segments and sa.sums.keys() == sb.sums.keys()
     for k in sa.sums:
         assert sa.sums[k].tobytes() == sb.sums[k].tobytes(), k
 
@@ -154,8 +155,7 @@ def test_resume_alone_takes_the_run_as_started(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "again.png").read_bytes() == (tmp_path / "whole.png").read_bytes()
     assert not (tmp_path / "again.exr").exists()
     # irradiance: the points file, the output and the units saved as well
-    pts = np.array([[0.0, 0.01, 0.0, 0.0, 1.0, 0.0], [0.2, 0.01, -0.1, 0.0, 1.0, 0.0]])
-    np.save(tmp_path / "p.npy", pts)
+    np.save(tmp_path / "p.npy", np.array([[0.0, 0.01, 0.0, 0.0, 1.0, 0.0], [0.2, 0.01, -0.1, 0.0, 1.0, 0.0]]))
     args = ("irradiance", BOX, "--points", "p.npy", "--units", "photometric", "--quiet")
     assert cmd(*args, "--photons", 30_000, "-o", "whole.csv").returncode == 0
     assert cmd(*args, "--photons", 20_000, "-o", "part.csv", "--checkpoint", "i.npz").returncode == 0
@@ -245,10 +245,6 @@ def test_crafted_checkpoints_are_one_line(tmp_path, monkeypatch, capsys):
     """A record nested 100,000 deep, a member whose header declares 10^20
     elements, a record that is not an object: each is refused in one line
     with status 2 before any work, never a traceback."""
-    import io
-    import json
-    import zipfile
-
     def npz(path, members):
         with zipfile.ZipFile(path, "w") as z:
             for name, data in members.items():
@@ -258,25 +254,20 @@ def test_crafted_checkpoints_are_one_line(tmp_path, monkeypatch, capsys):
         h = header.encode().ljust(118) + b"\n"
         return b"\x93NUMPY\x01\x00" + len(h).to_bytes(2, "little") + h + body
 
-    deep = "[" * 100_000 + "]" * 100_000
-    meta = np.frombuffer(deep.encode(), np.uint8)
-    buf = io.BytesIO()
-    np.save(buf, meta)
-    npz(tmp_path / "deep.npz", {"meta": buf.getvalue()})
+    def saved(text: bytes) -> bytes:  # np.save's .npy of the bytes
+        buf = io.BytesIO()
+        np.save(buf, np.frombuffer(text, np.uint8))
+        return buf.getvalue()
+
+    npz(tmp_path / "deep.npz", {"meta": saved(("[" * 100_000 + "]" * 100_000).encode())})
     huge = npy("{'descr': '<i8', 'fortran_order': False, 'shape': (100000000000000000000,), }")
-    buf = io.BytesIO()
-    np.save(buf, np.frombuffer(json.dumps({"format": 1, "first": 0, "count": 1, "next_path": 0,
-                                           "segments": 0}).encode(), np.uint8))
-    npz(tmp_path / "huge.npz", {"meta": buf.getvalue(), "sums.acc": huge})
-    buf = io.BytesIO()
-    np.save(buf, np.frombuffer(b"[1, 2]", np.uint8))
-    npz(tmp_path / "list.npz", {"meta": buf.getvalue()})
+    meta = json.dumps({"format": 1, "first": 0, "count": 1, "next_path": 0, "segments": 0}).encode()
+    npz(tmp_path / "huge.npz", {"meta": saved(meta), "sums.acc": huge})
+    npz(tmp_path / "list.npz", {"meta": saved(b"[1, 2]")})
     for name in ("deep.npz", "huge.npz", "list.npz"):
         res = in_process(monkeypatch, capsys, tmp_path, *_args("x.exr", "detp_disc_index", 1000), "--resume", name)
         _refused(res, "checkpoint")
-        assert "Traceback" not in res.stderr
-        assert not (tmp_path / "x.exr").exists()
-
+        assert "Traceback" not in res.stderr and not (tmp_path / "x.exr").exists()
 
 
 def test_two_runs_cannot_share_a_checkpoint(tmp_path, monkeypatch, capsys):
@@ -286,8 +277,7 @@ def test_two_runs_cannot_share_a_checkpoint(tmp_path, monkeypatch, capsys):
     p = _start(tmp_path, *_args("a.exr", "detp_disc_index"), "--checkpoint", "c.npz", "--checkpoint-every", "0")
     try:
         _wait_for(tmp_path / ".c.npz.oclgi-lock", p)
-        second = in_process(monkeypatch, capsys, tmp_path, *_args("b.exr", "detp_disc_index"), "--checkpoint",
-                            "c.npz")
+        second = in_process(monkeypatch, capsys, tmp_path, *_args("b.exr", "detp_disc_index"), "--checkpoint", "c.npz")
         _refused(second, "c.npz is the checkpoint of another oclgi run going on now")
         _wait_for(tmp_path / "c.npz", p)
         resumed = in_process(monkeypatch, capsys, tmp_path, *_args("b.exr", "detp_disc_index"), "--resume", "c.npz")
@@ -301,7 +291,8 @@ def test_two_runs_cannot_share_a_checkpoint(tmp_path, monkeypatch, capsys):
     assert not (tmp_path / ".c.npz.oclgi-lock").exists()
 
 
-def _flipped(tmp_path, monkeypatch, capsys, cases, seed):
+@pytest.mark.parametrize("cases, seed", [(12, 0), pytest.param(200, 1, marks=pytest.mark.full)])  # full: a campaign
+def test_damaged_checkpoints_resume_or_stop_in_one_line(tmp_path, monkeypatch, capsys, cases, seed):
     """A finished run's checkpoint with random bytes flipped or cut short:
     each resume goes on or stops with one line and status 2, never a
     traceback, and writes nothing when it stops."""
@@ -323,12 +314,3 @@ def _flipped(tmp_path, monkeypatch, capsys, cases, seed):
             assert res.returncode == 2 and res.stderr.count("\n") == 1 and res.stderr.startswith("oclgi: error: "), \
                 (case, res.stderr)
             assert not (tmp_path / f"f{case}.exr").exists()
-
-
-def test_damaged_checkpoints_resume_or_stop_in_one_line(tmp_path, monkeypatch, capsys):
-    _flipped(tmp_path, monkeypatch, capsys, cases=12, seed=0)
-
-
-@pytest.mark.full
-def test_damaged_checkpoints_campaign(tmp_path, monkeypatch, capsys):
-    _flipped(tmp_path, monkeypatch, capsys, cases=200, seed=1)

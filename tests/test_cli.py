@@ -6,6 +6,7 @@ into tmp_path (2,000 photons, an 8 x 8 camera), about a second each.
 
 import os
 import re
+from importlib.metadata import entry_points
 
 import numpy as np
 import pytest
@@ -42,7 +43,6 @@ radius = 0.1
 POINTS = [[0, 0.01, 0, 0, 1, 0], [0.5, 0.01, 0.5, 0, 1, 0], [-0.7, 0.01, 0.3, 0, 2, 0], [0, 0.5, 0, 1, 0, 0]]
 
 
-
 def ok(res):
     assert res.returncode == 0, res.stderr
     assert "Traceback" not in res.stderr
@@ -59,13 +59,10 @@ def scene(tmp_path):
 
 def _check_image_pair(exr, png, w, h):
     rad = read_image(exr)
-    assert rad.shape == (h, w, 3)
-    assert rad.dtype == np.float32
-    assert np.isfinite(rad).all() and (rad >= 0).all()
+    assert rad.shape == (h, w, 3) and rad.dtype == np.float32 and np.isfinite(rad).all() and (rad >= 0).all()
     assert rad.max() > 0  # the floor is lit and the light is in view
     pix = read_image(png)
-    assert pix.shape[:2] == (h, w) and pix.shape[2] in (3, 4)
-    assert np.isfinite(pix).all() and (pix >= 0).all()
+    assert pix.shape[:2] == (h, w) and pix.shape[2] in (3, 4) and np.isfinite(pix).all() and (pix >= 0).all()
 
 
 def test_render_writes_exr_and_png(scene, tmp_path):
@@ -91,8 +88,7 @@ def test_render_png_name_size_flags_and_default_output(scene, tmp_path):
     res = ok(run(tmp_path, "render", "s.toml", "-o", "y.png", "--width", "6", "--height", "4", "--quiet",
                  "--photons", "2e3", "--method", "impact"))
     _check_image_pair(tmp_path / "y.exr", tmp_path / "y.png", 6, 4)
-    assert res.stderr == ""
-    assert res.stdout.split() == ["wrote", "y.exr", "wrote", "y.png"]
+    assert res.stderr == "" and res.stdout.split() == ["wrote", "y.exr", "wrote", "y.png"]
     # without -o: out/SCENE.exr under the working folder
     ok(run(tmp_path, "render", "s.toml", "--quiet"))
     _check_image_pair(tmp_path / "out" / "s.exr", tmp_path / "out" / "s.png", 8, 8)
@@ -108,8 +104,7 @@ def test_irradiance_csv_and_npy(scene, tmp_path):
 
     res = ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv"))
     assert res.stdout.strip() == "wrote e.csv"
-    lines = (tmp_path / "e.csv").read_text().splitlines()
-    assert lines[0] == "x,y,z,nx,ny,nz,E_r,E_g,E_b"
+    assert (tmp_path / "e.csv").read_text().splitlines()[0] == "x,y,z,nx,ny,nz,E_r,E_g,E_b"
     table = np.loadtxt(tmp_path / "e.csv", delimiter=",", skiprows=1)
     assert table.shape == (len(POINTS), 9)
     np.testing.assert_allclose(table[:, :3], np.array(POINTS)[:, :3], atol=1e-6)
@@ -134,8 +129,7 @@ def test_irradiance_flags_change_the_estimate(scene, tmp_path):
     ok(run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "b.npy", "--quiet",
            "--seed", "8", "--radius", "0.2", "--max-depth", "3", "--local-size", "8"))
     a, b = np.load(tmp_path / "a.npy"), np.load(tmp_path / "b.npy")
-    assert a.shape == b.shape == (len(POINTS), 3)
-    assert np.isfinite(b).all() and (b >= 0).all()
+    assert a.shape == b.shape == (len(POINTS), 3) and np.isfinite(b).all() and (b >= 0).all()
     assert not np.array_equal(a, b)
 
 
@@ -157,7 +151,5 @@ def test_help(tmp_path):
 
 def test_console_script_installed():
     """The ``oclgi`` entry point of the installed package runs the same main()."""
-    from importlib.metadata import entry_points
-
     eps = [ep for ep in entry_points(group="console_scripts") if ep.name == "oclgi"]
     assert eps and eps[0].value == "oclgi.cli:main"

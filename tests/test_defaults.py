@@ -20,17 +20,15 @@ def test_default_method_is_the_disc_index():
     engine = oclgi.Engine(scene)
     pts = engine.camera_points()
     est = engine.irradiance(pts, photons=20_000)
-    assert est.stats.method == "detp_disc_index"
-    assert type(est.estimator).__name__ == "DetpDiscIndex"
+    assert est.stats.method == "detp_disc_index" and type(est.estimator).__name__ == "DetpDiscIndex"
     # the oracle's sums, bit for bit
     assert est.accumulators.tobytes() == engine.irradiance(pts, method="detp", photons=20_000).accumulators.tobytes()
 
 
-def test_a_radius_too_small_for_the_photons_warns(scenes_dir):
-    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
-    pts = engine.camera_points(width=8, height=8)
+def test_a_radius_too_small_for_the_photons_warns(cornell):
+    pts = cornell.camera_points(width=8, height=8)
     with pytest.warns(OclgiWarning, match=r"radius 0\.002: each disc catches about 0\.\d+ segments .* more photons"):
-        engine.irradiance(pts, photons=20_000, radius=0.002)
+        cornell.irradiance(pts, photons=20_000, radius=0.002)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the scene's own radius at its own photon count: no warning
-        engine.irradiance(pts)
+        cornell.irradiance(pts)

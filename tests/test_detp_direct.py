@@ -20,8 +20,7 @@ import numpy as np
 import pytest
 
 import oclgi
-from analytic_scenes import exact, plane_scene
-from exactness import cornell_engine
+from analytic_scenes import exact, plane_scene, quad
 from test_instances import _rigid
 
 VARIANTS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache"]
@@ -29,17 +28,13 @@ SUN = 2.0  # W/m^2 on a plane perpendicular to the sun
 RADIUS = 0.2
 
 
-def _quad(y, half, name, albedo, movable=False):
-    return {"name": name, "vertices": [[-half, y, -half], [half, y, -half], [half, y, half], [-half, y, half]],
-            "faces": [[0, 2, 1], [0, 3, 2]], "albedo": [albedo] * 3, "movable": movable}
-
-
 def _shadow_scene(movable=False):
     """A 6 m ground (albedo 0.5) under a sun shining straight down, and a
     black 1 m square 0.5 m above it: the ground reads SUN outside the
     square's shadow and 0 in it (its reflected light leaves or is absorbed
     by the square's underside), exactly."""
-    return oclgi.load_dict({"mesh": [_quad(0.0, 3.0, "ground", 0.5), _quad(0.5, 0.5, "roof", 0.0, movable)],
+    return oclgi.load_dict({"mesh": [quad(0.0, 3.0, name="ground", movable=False),
+                                     quad(0.5, 0.5, 0.0, name="roof", movable=movable)],
                             "sun": {"direction": [0.0, -1.0, 0.0], "irradiance": [SUN] * 3},
                             "photons": {"count": 200_000, "seed": 4, "max_depth": 4}})
 
@@ -78,8 +73,7 @@ def test_a_shadow_edge_inside_the_disc(shadow, options):
     # before: the point in the shadow reads the sunlit part of its disc
     assert photons[0] > 0.2 * SUN
     # after: the shadow reads 0, the lit ground the sun, exactly
-    assert exact_direct[0] == 0.0 and exact_direct[1] == 0.0
-    assert abs(exact_direct[2] / SUN - 1) < 1e-6
+    assert exact_direct[0] == 0.0 and exact_direct[1] == 0.0 and abs(exact_direct[2] / SUN - 1) < 1e-6
 
 
 def test_every_variant_the_same(shadow):
@@ -111,8 +105,7 @@ def test_session_recomputes_the_direct_light_at_its_pose(method):
     s = oclgi.Session(engine, pts, **kw)
     first = s.irradiance().copy()
     for _ in range(4):
-        m = _rigid(rng, shift=1.5)
-        s.move("roof", m)
+        s.move("roof", _rigid(rng, shift=1.5))
     fresh = oclgi.Session(s.engine, pts, **kw)
     assert np.array_equal(s.accumulators(), fresh.accumulators())
     assert np.array_equal(s.irradiance(), fresh.irradiance())
@@ -121,7 +114,7 @@ def test_session_recomputes_the_direct_light_at_its_pose(method):
     assert np.array_equal(s.irradiance(), first)
 
 
-def test_bad_input(shadow, scenes_dir):
+def test_bad_input(shadow, cornell):
     engine, pts = shadow
     with pytest.raises(oclgi.OclgiError, match="direct must be one of 'photons', 'exact'"):
         engine.irradiance(pts, photons=1000, direct="shadow rays")
@@ -130,4 +123,4 @@ def test_bad_input(shadow, scenes_dir):
     with pytest.raises(oclgi.OclgiError, match="takes no option"):
         engine.irradiance(pts, method="photon_map", photons=1000, direct="exact")
     with pytest.raises(oclgi.OclgiError, match="delta lights only"):
-        cornell_engine(scenes_dir).irradiance(pts, photons=1000, direct="exact")
+        cornell.irradiance(pts, photons=1000, direct="exact")

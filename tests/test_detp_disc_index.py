@@ -22,42 +22,31 @@ import numpy as np
 import pytest
 
 import oclgi
+from oclgi.errors import OclgiError
 from oclgi.estimators.detp_disc_index import DetpDiscIndex
-from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_camera_misses, check_replace_points,
-                       check_same, check_variant_same_as_plain, run_on_batch)
+from exactness import RADIUS_FRACTIONS, check_adversarial, check_camera_misses, check_replace_points
 
-METHOD = "detp_disc_index"
-PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
+METHOD = "detp_disc_index"  # the `same_as_plain` fixture's (conftest.py)
+FRAC = RADIUS_FRACTIONS[1]
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
 @pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_same_as_plain(engines, points, plain, scene, frac, count_emitted):
-    check_variant_same_as_plain(engines, points, plain, METHOD, scene, frac, count_emitted)
+def test_same_as_plain(same_as_plain, scene, frac, count_emitted):
+    same_as_plain(scene, frac, count_emitted)
 
 
 @pytest.mark.parametrize("leaf_size", [1, 3, 8, 32])
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_leaf_sizes(engines, points, plain, scene, leaf_size):
-    e = engines[scene]
-    frac = RADIUS_FRACTIONS[1]
-    est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                       leaf_size=leaf_size, count_work=True)
-    check_same(plain(scene, frac, True), est, f"{scene} leaf_size {leaf_size}")
+def test_leaf_sizes(same_as_plain, points, scene, leaf_size):
+    est = same_as_plain(scene, FRAC, leaf_size=leaf_size, count_work=True)
     assert est.work["u"] < est.stats.segments * len(points[scene]) / 10  # the index does cull
 
 
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_wide_and_binary_trees(engines, points, plain, scene):
-    e = engines[scene]
-    frac = RADIUS_FRACTIONS[1]
-    work = {}
-    for tree in ("binary", "wide"):
-        est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                           tree=tree, count_work=True)
-        check_same(plain(scene, frac, True), est, f"{scene} tree {tree}")
-        work[tree] = est.work
+def test_wide_and_binary_trees(same_as_plain, scene):
+    work = {tree: same_as_plain(scene, FRAC, tree=tree, count_work=True).work for tree in ("binary", "wide")}
     # every leaf the binary walk reaches, the wide one reaches (u counts the discs of the leaves reached)
     assert work["wide"]["u"] >= work["binary"]["u"]
     # one wide visit slabs 8 children, a binary one a single box
@@ -65,28 +54,20 @@ def test_wide_and_binary_trees(engines, points, plain, scene):
 
 
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_sah_tree(engines, points, plain, scene):
+def test_sah_tree(same_as_plain, scene):
     """The SAH-built tree (a session's static points) sums what plain DETP
     sums, and with its 64-disc leaves visits fewer nodes than the default."""
-    e = engines[scene]
-    frac = RADIUS_FRACTIONS[1]
-    work = {}
-    for name, opts in (("default", {}), ("session", DetpDiscIndex.session_tree)):
-        est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                           count_work=True, **opts)
-        check_same(plain(scene, frac, True), est, f"{scene} {name} tree")
-        work[name] = est.work
+    work = {name: same_as_plain(scene, FRAC, count_work=True, **opts).work
+            for name, opts in (("default", {}), ("session", DetpDiscIndex.session_tree))}
     assert DetpDiscIndex.session_tree["builder"] == "sah"
     assert work["session"]["nodes"] < work["default"]["nodes"], work
 
 
 # 1 and 7 against the launches' own size (64 where they name none: every other test runs it); 64 itself in the full suite
 @pytest.mark.parametrize("local_size", [1, 7, pytest.param(64, marks=pytest.mark.full)])
-def test_work_group_sizes(engines, points, plain, local_size):
-    e = oclgi.Engine(engines["cornell"].scene, local_size=local_size)
-    frac = RADIUS_FRACTIONS[2]  # large discs: many atomics on the same disc
-    est = e.irradiance(points["cornell"], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS)
-    check_same(plain("cornell", frac, True), est, f"local size {local_size}")
+def test_work_group_sizes(engines, same_as_plain, local_size):
+    # large discs: many atomics on the same disc
+    same_as_plain("cornell", RADIUS_FRACTIONS[2], engine=oclgi.Engine(engines["cornell"].scene, local_size=local_size))
 
 
 def test_camera_points_with_misses(engines):
@@ -95,16 +76,10 @@ def test_camera_points_with_misses(engines):
 
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_adversarial_segments(engines, count_emitted):
-    e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(7))
-    ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
-    assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
-    for leaf_size, tree, builder in ((1, "wide", "lbvh"), (8, "wide", "lbvh"), (1, "binary", "lbvh"),
-                                     (8, "binary", "lbvh"), (1, "wide", "sah"), (64, "wide", "sah")):
-        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, tree=tree,
-                           builder=builder)
-        assert np.array_equal(got, ref), \
-            f"leaf_size {leaf_size}, {tree}, {builder}: {(got != ref).any(axis=1).sum()} discs differ"
+    check_adversarial(engines["cornell"], METHOD, 7, count_emitted, [
+        dict(leaf_size=leaf_size, tree=tree, builder=builder)
+        for leaf_size, tree, builder in ((1, "wide", "lbvh"), (8, "wide", "lbvh"), (1, "binary", "lbvh"),
+                                         (8, "binary", "lbvh"), (1, "wide", "sah"), (64, "wide", "sah"))])
 
 
 def test_u_grows_like_cube_root_of_points(engines):
@@ -136,8 +111,6 @@ def test_u_grows_like_cube_root_of_points(engines):
 @pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 2.5}, {"leaf_size": True}, {"leaf_size": 257},
                                  {"tree": "quad"}, {"builder": "octree"}, {"piece": 0.1}])
 def test_bad_options(engines, points, bad):
-    from oclgi.errors import OclgiError
-
     with pytest.raises(OclgiError):
         engines["cornell"].irradiance(points["cornell"], method=METHOD, photons=100, **bad)
 

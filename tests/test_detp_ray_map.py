@@ -9,45 +9,36 @@ and that a segment cut into pieces is counted once.
 """
 
 
-import numpy as np
 import pytest
 
 import oclgi
-from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_camera_misses, check_replace_points,
-                       check_same, check_variant_same_as_plain, run_on_batch)
+from exactness import RADIUS_FRACTIONS, check_adversarial, check_camera_misses, check_replace_points
 from oclgi.errors import OclgiError
 
-METHOD = "detp_ray_map"
-PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
+METHOD = "detp_ray_map"  # the `same_as_plain` fixture's (conftest.py)
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
 @pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_same_as_plain(engines, points, plain, scene, frac, count_emitted):
-    check_variant_same_as_plain(engines, points, plain, METHOD, scene, frac, count_emitted)
+def test_same_as_plain(same_as_plain, scene, frac, count_emitted):
+    same_as_plain(scene, frac, count_emitted)
 
 
 @pytest.mark.parametrize("piece", [0.0, 0.05])
 @pytest.mark.parametrize("leaf_size", [1, 8, 32])
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_leaf_sizes_and_pieces(engines, points, plain, scene, leaf_size, piece):
-    e = engines[scene]
-    frac = RADIUS_FRACTIONS[1]
-    est = e.irradiance(points[scene], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                       leaf_size=leaf_size, piece=piece, count_work=True)
-    check_same(plain(scene, frac, True), est, f"{scene} leaf_size {leaf_size} piece {piece}")
+def test_leaf_sizes_and_pieces(same_as_plain, points, scene, leaf_size, piece):
+    est = same_as_plain(scene, RADIUS_FRACTIONS[1], leaf_size=leaf_size, piece=piece, count_work=True)
     assert est.work["u"] < est.stats.segments * len(points[scene]) / 2  # the map does cull
 
 
 # 1 and 7 against the launches' own size (64 where they name none: every other test runs it); 64 itself in the full suite
 @pytest.mark.parametrize("local_size", [1, 7, pytest.param(64, marks=pytest.mark.full)])
-def test_work_group_sizes_and_batches(engines, points, plain, local_size):
+def test_work_group_sizes_and_batches(engines, same_as_plain, local_size):
     """Also split into batches of 3,000 paths: one ray map per batch."""
     e = oclgi.Engine(engines["cornell"].scene, local_size=local_size, batch_bytes=3000 * 16 * 48)
-    frac = RADIUS_FRACTIONS[2]
-    est = e.irradiance(points["cornell"], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS)
-    check_same(plain("cornell", frac, True), est, f"local size {local_size}")
+    same_as_plain("cornell", RADIUS_FRACTIONS[2], engine=e)
 
 
 def test_camera_points_with_misses(engines):
@@ -56,16 +47,10 @@ def test_camera_points_with_misses(engines):
 
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_adversarial_segments(engines, count_emitted):
-    e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(8))
-    ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
-    assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
     # piece 0.004: many segments cut into many pieces (up to the cap), so
     # crossings land on piece edges and must be counted exactly once.
-    for leaf_size, piece in ((1, 0.0), (32, 0.0), (8, 0.004), (32, 0.05)):
-        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, leaf_size=leaf_size, piece=piece)
-        assert np.array_equal(got, ref), \
-            f"leaf_size {leaf_size} piece {piece}: {(got != ref).any(axis=1).sum()} discs differ"
+    check_adversarial(engines["cornell"], METHOD, 8, count_emitted,
+                      [dict(leaf_size=n, piece=piece) for n, piece in ((1, 0.0), (32, 0.0), (8, 0.004), (32, 0.05))])
 
 
 @pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 33}, {"leaf_size": 2.5}, {"piece": -1.0}])

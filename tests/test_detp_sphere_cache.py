@@ -23,15 +23,14 @@ import numpy as np
 import pytest
 
 import oclgi
-from exactness import DETP_PHOTONS, RADIUS_FRACTIONS, adversarial_batch, check_same, run_on_batch, surface_points
+from exactness import (DETP_PHOTONS, RADIUS_FRACTIONS, check_adversarial, check_camera_misses, check_same,
+                       surface_points)
 from oclgi.accel import ordering
 from oclgi.errors import OclgiError
 from oclgi.estimators import detp_sphere_cache as sc
 
-METHOD = "detp_sphere_cache"
+METHOD = "detp_sphere_cache"  # the `same_as_plain` fixture's (conftest.py)
 PHOTONS = DETP_PHOTONS  # the shared `plain` fixture's (conftest.py)
-
-
 
 
 def run(engine, pts, frac, **kw):
@@ -42,21 +41,18 @@ def run(engine, pts, frac, **kw):
 
 @pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_same_as_plain(engines, points, plain, scene, frac):
+def test_same_as_plain(same_as_plain, scene, frac):
     """Every order with every q."""
-    ref = plain(scene, frac)
     for order in ordering.METHODS:
         for q in (0.5, 2 / 3, 0.8):
-            est = run(engines[scene], points[scene], frac, order=order, q=q)
-            check_same(ref, est.accumulators, f"{scene} radius {frac} x diagonal, order {order}, q {q:.3f}")
+            same_as_plain(scene, frac, order=order, q=q)
 
 
 @pytest.mark.parametrize("frac", RADIUS_FRACTIONS)
 # the emitted segments left out is one flag of the same walk: the bunny in make test, the box as well in the full suite
 @pytest.mark.parametrize("scene", [pytest.param("cornell", marks=pytest.mark.full), "bunny"])
-def test_same_as_plain_without_emitted(engines, points, plain, scene, frac):
-    est = run(engines[scene], points[scene], frac, count_emitted=False)
-    check_same(plain(scene, frac, False), est.accumulators, f"{scene} {frac}, indirect only")
+def test_same_as_plain_without_emitted(same_as_plain, scene, frac):
+    same_as_plain(scene, frac, count_emitted=False)
 
 
 def test_run_lengths(engines, points, plain):
@@ -75,23 +71,14 @@ def test_run_lengths(engines, points, plain):
 
 # 1 and 7 against the launches' own size (64 where they name none: every other test runs it); 64 itself in the full suite
 @pytest.mark.parametrize("local_size", [1, 7, pytest.param(64, marks=pytest.mark.full)])
-def test_work_group_sizes(engines, points, plain, local_size):
-    e = oclgi.Engine(engines["cornell"].scene, local_size=local_size)
-    frac = RADIUS_FRACTIONS[2]
-    est = e.irradiance(points["cornell"], method=METHOD, radius=frac * e.scene.diagonal, photons=PHOTONS,
-                       run_length=50)
-    check_same(plain("cornell", frac), est.accumulators, f"local size {local_size}")
+def test_work_group_sizes(engines, same_as_plain, local_size):
+    same_as_plain("cornell", RADIUS_FRACTIONS[2], engine=oclgi.Engine(engines["cornell"].scene, local_size=local_size),
+                  run_length=50)
 
 
 def test_camera_points_with_misses(engines):
     """Camera points (a surface seen in scanline order, background pixels with zero normals)."""
-    e = engines["cornell"]
-    pts = e.camera_points(width=32, height=32)
-    assert (pts.tri < 0).any()
-    ref = e.irradiance(pts, method="detp", radius=0.05, photons=PHOTONS).accumulators
-    for order in ordering.METHODS:
-        est = e.irradiance(pts, method=METHOD, radius=0.05, photons=PHOTONS, order=order)
-        check_same(ref, est.accumulators, f"camera points, order {order}")
+    check_camera_misses(engines["cornell"], METHOD, 32, [{"order": order} for order in ordering.METHODS])
 
 
 def test_overflow_reruns_are_exact(engines, points, plain, monkeypatch):
@@ -111,8 +98,7 @@ def test_overflow_reruns_are_exact(engines, points, plain, monkeypatch):
     got = run(e, points["bunny"], frac, count_work=True, run_length=100)
     check_same(plain("bunny", frac), got.accumulators, "forced overflow")
     monkeypatch.undo()
-    again = run(e, points["bunny"], frac, count_work=True, run_length=100)
-    assert got.work == again.work
+    assert got.work == run(e, points["bunny"], frac, count_work=True, run_length=100).work
     assert caps and all(c > 40 for c in caps)  # the overflow path did run
     # several batches: 1,000 paths each
     small = oclgi.Engine(e.scene, batch_bytes=8 * 48 * 1000)
@@ -136,13 +122,9 @@ def test_pieces_when_lists_exceed_the_memory(engines, points, plain, monkeypatch
 @pytest.mark.parametrize("offset", [0.0, 1000.0])
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_adversarial_segments(engines, count_emitted, offset):
-    e = engines["cornell"]
-    pts, d, batch = adversarial_batch(e, np.random.default_rng(8), 300, 10_000, offset=offset)
-    ref = run_on_batch(e, "detp", pts, d, batch, count_emitted)
-    assert (ref != 0).any(axis=1).sum() > 0.5 * len(pts)
-    for opts in ({}, {"q": 0.5, "order": "none", "run_length": 7}, {"q": 0.9, "order": "morton"}):
-        got = run_on_batch(e, METHOD, pts, d, batch, count_emitted, **opts)
-        check_same(ref, got, f"adversarial {opts}, offset {offset}")
+    check_adversarial(engines["cornell"], METHOD, 8, count_emitted,
+                      [{}, {"q": 0.5, "order": "none", "run_length": 7}, {"q": 0.9, "order": "morton"}],
+                      n_discs=300, n_paths=10_000, offset=offset)
 
 
 # -- counts ------------------------------------------------------------------------
@@ -211,8 +193,7 @@ def test_counts_without_inner_spheres(engines):
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     pts = oclgi.query_points(corners, np.ones((8, 3)))
     est = e.irradiance(pts, method=METHOD, radius=0.1 * e.scene.diagonal, photons=5000, q=0.3, count_work=True)
-    assert est.estimator.levels == 0
-    assert est.work["t"] == est.stats.segments
+    assert est.estimator.levels == 0 and est.work["t"] == est.stats.segments
     assert est.work["u"] == 8 * est.stats.segments
 
 

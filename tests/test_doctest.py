@@ -14,5 +14,4 @@ import oclgi.scene_parameters
                                     oclgi.scene_parameters])
 def test_docstring_examples(module):
     result = doctest.testmod(module, verbose=False)
-    assert result.attempted >= 2
-    assert result.failed == 0
+    assert result.attempted >= 2 and result.failed == 0

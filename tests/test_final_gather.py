@@ -22,12 +22,15 @@ kernels/final_gather.cl).
 """
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 import oclgi
-from analytic_scenes import H, INTENSITY, plane_scene
-from exactness import cornell_engine
+from analytic_scenes import H, INTENSITY, plane_scene, quad
 from oclgi.errors import OclgiError
+from oclgi.estimators.detp_disc_index import DetpDiscIndex
+from oclgi.study import Config, run_study
+from oclgi.tracing.light_reuse import LightReuse
 
 VARIANTS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache"]
 RHO = 0.5
@@ -70,9 +73,6 @@ def test_point_light_over_a_plane(plane):
 def _shadow_engine():
     """A sun over a ground (albedo 0.5) and a grey 1 m roof 0.5 above it: under
     the roof the ground gets the light the roof's underside reflects back."""
-    quad = lambda y, half, albedo: {"vertices": [[-half, y, -half], [half, y, -half], [half, y, half],  # noqa: E731
-                                                 [-half, y, half]], "faces": [[0, 2, 1], [0, 3, 2]],
-                                    "albedo": [albedo] * 3}
     return oclgi.Engine(oclgi.load_dict({"mesh": [quad(0.0, 3.0, 0.5), quad(0.5, 0.5, 0.7)],
                                          "sun": {"direction": [0.3, -1.0, 0.1], "irradiance": [2.0, 1.5, 1.0]},
                                          "photons": {"count": 20_000, "seed": 4, "max_depth": 5}}))
@@ -81,8 +81,7 @@ def _shadow_engine():
 @pytest.fixture(scope="module")
 def shadow():
     engine = _shadow_engine()
-    rng = np.random.default_rng(5)
-    xz = rng.uniform(-1.5, 1.5, (24, 2))
+    xz = np.random.default_rng(5).uniform(-1.5, 1.5, (24, 2))
     up = np.column_stack([xz[:, 0], np.full(24, 1e-4), xz[:, 1], np.zeros(24), np.ones(24), np.zeros(24)])
     under = up.copy()
     under[:8, 1], under[:8, 4] = 0.5 - 1e-4, -1.0  # the roof's underside
@@ -97,8 +96,6 @@ def test_resolve_equals_a_float64_reference(shadow):
     g = est.estimator
     scale = est.scale
     hit_irr = np.empty((len(g.hits), 4), np.float32)
-    import pyopencl as cl
-
     cl.enqueue_copy(engine.queue, hit_irr, g.inner.resolve(scale))
     hit = g.hit_weights[:, 0] > 0  # the rays that met a surface (the rest left the scene)
     assert hit.mean() > 0.3 and (hit_irr[hit, 0] > 0).mean() > 0.5 and g.inner.accumulators().any()
@@ -109,8 +106,7 @@ def test_resolve_equals_a_float64_reference(shadow):
     cl.enqueue_copy(engine.queue, d, direct)
     w = g.hit_weights[:, :3].astype(np.float64).reshape(len(pts), n_rays, 3)
     e = hit_irr[:, :3].astype(np.float64).reshape(len(pts), n_rays, 3)
-    want = d[:, :3] + (w * e).mean(axis=1)
-    np.testing.assert_allclose(est.irradiance, want, rtol=2e-6, atol=1e-9)
+    np.testing.assert_allclose(est.irradiance, (d[:, :3] + (w * e).mean(axis=1)), rtol=2e-6, atol=1e-9)
     # the weights are the albedo seen (the roof 0.7, the ground 0.5) or 0 (a ray that left)
     assert set(np.unique(g.hit_weights[:, 0]).tolist()) <= set(np.float32([0.0, 0.5, 0.7]).tolist())
     assert np.all(np.abs(g.hits.xyz[hit, 1] - np.where(g.hit_weights[hit, 0] > 0.6, 0.5, 0.0)) < 1e-5)
@@ -139,12 +135,12 @@ def test_adaptive_radii_at_the_hits(shadow):
     assert np.isfinite(est.irradiance).all() and (est.irradiance > 0).any()
 
 
-def test_refused(shadow, scenes_dir):
+def test_refused(shadow, cornell):
     engine, pts = shadow
     with pytest.raises(OclgiError, match="needs direct = 'exact'"):
         engine.irradiance(pts, photons=1000, gather=8)
     with pytest.raises(OclgiError, match="delta lights only"):
-        cornell_engine(scenes_dir).irradiance(pts, photons=1000, direct="exact", gather=8)
+        cornell.irradiance(pts, photons=1000, direct="exact", gather=8)
     for bad in (-1, 1.5, True, 70_000, "8", float("nan")):
         with pytest.raises(OclgiError, match="gather must be an integer"):
             engine.irradiance(pts, photons=1000, direct="exact", gather=bad)
@@ -155,16 +151,12 @@ def test_refused(shadow, scenes_dir):
     points = oclgi.query_points(pts[:, :3], pts[:, 3:])
     with pytest.raises(OclgiError, match="sessions: gather"):
         oclgi.Session(engine, points, method="detp_disc_index", photons=1000, direct="exact", gather=8)
-    from oclgi.estimators.detp_disc_index import DetpDiscIndex
-
     with pytest.raises(OclgiError, match="Engine.estimator"):
         DetpDiscIndex(engine.queue, engine.compiled, points, 0.1, gather=8)
 
 
 def test_light_animations_refuse_it():
     from test_light_reuse import POSITIONS, box, points
-
-    from oclgi.tracing.light_reuse import LightReuse
 
     reuse = LightReuse(oclgi.Engine(box(POSITIONS[0])), "lamp", POSITIONS, photons=500, seed=1, max_depth=2)
     with pytest.raises(OclgiError, match="light animations: gather"):
@@ -174,8 +166,6 @@ def test_light_animations_refuse_it():
 def test_the_study_compares_it(shadow):
     """`oclgi study` (run_study) takes the option like any other: its rows
     are labelled with it, and the seeds give the rays their noise."""
-    from oclgi.study import Config, run_study
-
     engine, pts = shadow
     plain = Config("detp_disc_index", [4_000, 12_000], radius=0.15, direct="exact")
     gathered = Config("detp_disc_index", [4_000, 12_000], radius=0.15, direct="exact", gather=64)
@@ -197,7 +187,6 @@ def test_a_render_gathers(scenes_dir):
     assert np.isfinite(gathered.radiance).all()
     np.testing.assert_allclose(gathered.radiance.mean(), plain.radiance.mean(), rtol=0.1)
     assert not np.array_equal(gathered.radiance, plain.radiance)
-
 
 
 def test_memory_is_checked_before_gathering(shadow):

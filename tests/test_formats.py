@@ -7,18 +7,24 @@ nested TOML and numbers beyond float32 are read or refused with one
 OclgiError naming the file and the problem.
 """
 
+import configparser
+import struct
 import warnings
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
+import oclgi
 from oclgi.errors import OclgiError
+from oclgi.scene import zip_reader
 from oclgi.scene.degenerate import degenerate_triangles
 from oclgi.scene.description import load_dict, load_file
 from oclgi.scene.mesh import load_mesh
 from oclgi.scene.scene import OclgiWarning
+from oclgi.scene.trimesh_errors import PACKAGES
 
 FLOOR = {"vertices": [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], "faces": [[0, 2, 1], [0, 3, 2]]}
 # 0.4 m x 0.4 m: 0.16 m^2 in two triangles
@@ -34,8 +40,7 @@ def test_huge_ground_plane_keeps_the_light():
     with warnings.catch_warnings():
         warnings.simplefilter("error", OclgiWarning)  # nothing is dropped
         scene = load_dict({"mesh": [FLOOR, LIGHT, GROUND]})
-    assert scene.n_triangles == 6
-    assert scene.has_emitter()
+    assert scene.n_triangles == 6 and scene.has_emitter()
     assert np.isclose(scene.triangle_areas()[scene.tri_material == 1].sum(), 0.16)
 
 
@@ -75,32 +80,38 @@ def _gltf_files():
     return files
 
 
+def _zip(path, files, compression=zipfile.ZIP_STORED):
+    """A zip file of ``files`` (member name -> data)."""
+    with zipfile.ZipFile(path, "w", compression) as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+    return path
+
+
+def _write(folder, files):
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+
+
 def test_gltf_with_external_buffers(tmp_path):
-    for name, data in _gltf_files().items():
-        (tmp_path / name).write_bytes(data)
+    _write(tmp_path, _gltf_files())
     mesh = load_mesh(tmp_path / "model.gltf")
     assert mesh.faces.shape == (2, 3)
     assert np.allclose(np.sort(mesh.vertices, axis=0), np.sort(np.array(LIGHT["vertices"], float), axis=0))
 
 
 def test_gltf_with_external_buffers_in_a_zip(tmp_path):
-    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
-        for name, data in _gltf_files().items():
-            z.writestr(f"scene/{name}", data)
-    assert load_mesh(tmp_path / "m.zip").faces.shape == (2, 3)
+    files = {f"scene/{name}": data for name, data in _gltf_files().items()}
+    assert load_mesh(_zip(tmp_path / "m.zip", files)).faces.shape == (2, 3)
 
 
 @pytest.mark.parametrize("in_zip", [False, True])
 def test_gltf_missing_buffer_is_named(tmp_path, in_zip):
     files = {k: v for k, v in _gltf_files().items() if k != "gltf_buffer_0.bin"}
     if in_zip:
-        with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
-            for name, data in files.items():
-                z.writestr(name, data)
-        path = tmp_path / "m.zip"
+        path = _zip(tmp_path / "m.zip", files)
     else:
-        for name, data in files.items():
-            (tmp_path / name).write_bytes(data)
+        _write(tmp_path, files)
         path = tmp_path / "model.gltf"
     with pytest.raises(OclgiError, match=r"model\.gltf: cannot read GLTF file: the file it names "
                                          r"'gltf_buffer_0\.bin' is missing beside it$"):
@@ -217,11 +228,6 @@ def test_missing_optional_package_is_named(tmp_path, monkeypatch):
 
 
 def test_optional_packages_the_formats_need_are_installed_with_oclgi():
-    import configparser
-    from pathlib import Path
-
-    from oclgi.scene.trimesh_errors import PACKAGES
-
     cfg = configparser.ConfigParser()
     cfg.read(Path(__file__).resolve().parent.parent / "setup.cfg")
     requires = [r.split(">")[0].split("=")[0].strip() for r in cfg["options"]["install_requires"].split("\n")]
@@ -232,16 +238,13 @@ def test_optional_packages_the_formats_need_are_installed_with_oclgi():
 
 @pytest.fixture
 def small_bound(monkeypatch):
-    from oclgi.scene import zip_reader
-
     monkeypatch.setattr(zip_reader, "MAX_INFLATED", 4000)
     return 4000
 
 
 def test_zip_member_over_the_bound_is_refused_by_its_header(tmp_path, small_bound):
     obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "f 1 2 3\n" * 1000  # 8 kB
-    with zipfile.ZipFile(tmp_path / "m.zip", "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("big.obj", obj)
+    _zip(tmp_path / "m.zip", {"big.obj": obj}, zipfile.ZIP_DEFLATED)
     with pytest.raises(OclgiError, match=r"m\.zip: member 'big\.obj' inflates to 8024 bytes, more than the "
                                          r"4000 bytes oclgi reads from one zip"):
         load_mesh(tmp_path / "m.zip")
@@ -250,20 +253,15 @@ def test_zip_member_over_the_bound_is_refused_by_its_header(tmp_path, small_boun
 def test_zip_bound_covers_all_members_together(tmp_path, small_bound):
     obj = "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n" + "# padding\n" * 300
     mtl = "newmtl a\nKd 0.5 0.5 0.5\n" + "# padding\n" * 200
-    with zipfile.ZipFile(tmp_path / "m.zip", "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("m.obj", obj)
-        z.writestr("m.mtl", mtl)
+    _zip(tmp_path / "m.zip", {"m.obj": obj, "m.mtl": mtl}, zipfile.ZIP_DEFLATED)
     with pytest.raises(OclgiError, match=r"member 'm\.mtl' inflates to 2024 bytes, more than the 946 bytes left of the 4000 bytes "
                                          r"oclgi reads from one zip"):
         load_mesh(tmp_path / "m.zip")
 
 
 def test_zip_header_that_lies_cannot_inflate_more(tmp_path, small_bound):
-    import struct
-
     big = "v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "f 1 2 3\n" * 100_000  # 800 kB, deflates to a few kB
-    with zipfile.ZipFile(tmp_path / "m.zip", "w", zipfile.ZIP_DEFLATED) as z:
-        z.writestr("m.obj", big)
+    _zip(tmp_path / "m.zip", {"m.obj": big}, zipfile.ZIP_DEFLATED)
     raw = bytearray((tmp_path / "m.zip").read_bytes())
     # declare 100 bytes inflated, in the local header (offset 22) and the central directory (offset 24)
     raw[22:26] = struct.pack("<I", 100)
@@ -285,6 +283,9 @@ QUADS = ("[[mesh]]\nvertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1]]\nfaces = [[0
          "[[mesh]]\nvertices = [[0, 1, 0], [0.2, 1, 0], [0, 1, 0.2]]\nfaces = [[0, 1, 2]]\nemission = [1, 1, 1]\n")
 
 
+LIT = "[[point_light]]\nposition = [0, 1, 0]\nintensity = "
+
+
 @pytest.mark.parametrize("extra, match", [
     # each of these was accepted (inf on the device) or a traceback (an integer past float's range)
     ("[camera]\nposition = [1e39, 0, 0]\nlook_at = [0, 0, 0]\n",
@@ -294,12 +295,10 @@ QUADS = ("[[mesh]]\nvertices = [[-1, 0, -1], [1, 0, -1], [1, 0, 1]]\nfaces = [[0
      r"point_light\[0\]\.position: expected 3 numbers, each from -1e18 to 1e18"),
     ("[camera]\nposition = [0, 0, 3]\nlook_at = [0, 0, 0]\nfov = 1" + "0" * 400 + "\n",
      r"camera\.fov: expected a number from -3\.4e38 to 3\.4e38 \(float32 on the device\)"),
-    ("[[point_light]]\nposition = [0, 1, 0]\nintensity = [1" + "0" * 400 + ", 0, 0]\n",
-     r"point_light\[0\]\.intensity: expected 3 numbers"),
-    ("[[point_light]]\nposition = [0, 1, 0]\nintensity = [1e39, 0, 0]\n",
+    (LIT + "[1" + "0" * 400 + ", 0, 0]\n", r"point_light\[0\]\.intensity: expected 3 numbers"),
+    (LIT + "[1e39, 0, 0]\n",
      r"point_light\[0\]\.intensity: expected 3 numbers, each 0 or from 1\.2e-38 to 3\.4e38 \(float32"),
-    ("[[point_light]]\nposition = [0, 1, 0]\nintensity = [1e-46, 0, 0]\n",
-     r"point_light\[0\]\.intensity: expected 3 numbers, each 0 or from 1\.2e-38"),
+    (LIT + "[1e-46, 0, 0]\n", r"point_light\[0\]\.intensity: expected 3 numbers, each 0 or from 1\.2e-38"),
 ])
 def test_scene_values_beyond_float32_refused(tmp_path, extra, match):
     with pytest.raises(OclgiError, match=r"^" + match):
@@ -324,16 +323,11 @@ def test_seed_past_2_64_refused(tmp_path):
 
 
 def test_gltf_buffer_over_the_zip_bound_is_named(tmp_path, monkeypatch):
-    from oclgi.scene import zip_reader
-
     files = _gltf_files()
     monkeypatch.setattr(zip_reader, "MAX_INFLATED", len(files["model.gltf"]) + 10)
-    with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
-        for name, data in files.items():
-            z.writestr(name, data)
     with pytest.raises(OclgiError, match=r"m\.zip: member 'gltf_buffer_\d\.bin' inflates to \d+ bytes, more than "
                                          r"the 10 bytes left"):
-        load_mesh(tmp_path / "m.zip")
+        load_mesh(_zip(tmp_path / "m.zip", files))
 
 
 def test_real_meshes_still_load(scenes_dir):
@@ -376,9 +370,6 @@ def test_each_format_loads_a_box(tmp_path, name, export):
 def test_dict_keys_that_are_not_names_are_refused():
     """A dict made in Python may have keys TOML cannot: one line, not a
     TypeError from sorting them with the names."""
-    import oclgi
-    from oclgi.errors import OclgiError
-
     for desc, message in (({"mesh": {0: 1, "x": 2}}, "got 0"), ({1: 2}, "got 1")):
         with pytest.raises(OclgiError, match=f"keys must be names \\(strings\\), {message}"):
             oclgi.load_dict(desc)

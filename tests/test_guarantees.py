@@ -10,10 +10,14 @@ constant that enforces it.
 
 import re
 
+import numpy as np
+import pytest
 from conftest import ROOT
 
 from oclgi import budget, params, progress
 from oclgi.cl import programs
+from oclgi.errors import OclgiError
+from oclgi.io import read_npy
 from oclgi.scene import zip_reader
 
 SECTION = "### Input errors, outputs and signals"
@@ -134,16 +138,9 @@ def test_the_numbers_are_the_codes():
 def test_npy_header_is_checked_against_the_file(tmp_path):
     """A header claiming terabytes is refused before numpy allocates them;
     a truncated file is refused; a Fortran-ordered float32 file reads."""
-    import numpy as np
-    import pytest
-
-    from oclgi.errors import OclgiError
-    from oclgi.io import read_npy
-
     huge = tmp_path / "huge.npy"
     with open(huge, "wb") as f:
-        np.lib.format.write_array_header_1_0(f, {"descr": "<f8", "fortran_order": False,
-                                                 "shape": (300_000_000_000, 6)})
+        np.lib.format.write_array_header_1_0(f, {"descr": "<f8", "fortran_order": False, "shape": (300_000_000_000, 6)})
         f.write(bytes(48))
     with pytest.raises(OclgiError, match=r"declares shape \(300000000000, 6\) .* holds 48 bytes"):
         read_npy(huge, "points")

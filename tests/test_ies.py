@@ -21,9 +21,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from reference import ies_candela
-from test_lights import PDF_PROBE, _both, _disc_mean, _points, _quad, _scene_file, refused_in_one_line
+from analytic_scenes import disc_mean
+from test_lights import PDF_PROBE, _both, _points, _quad, _scene_file, refused_in_one_line
 
 import oclgi
+from oclgi.cl.layout import Emitter
 from oclgi.cl.programs import ProgramCache
 from oclgi.errors import OclgiError, OclgiWarning
 from oclgi.photometry import LUMENS_PER_WATT
@@ -77,7 +79,7 @@ def _expected(profile_lookup, nadir, c0, xz, d):
         c = np.degrees(np.arctan2(w @ c90, w @ c0))
         return profile_lookup(gamma, c) * (H / r) / r**2 / LUMENS_PER_WATT
 
-    return np.array([_disc_mean(exact, x, z, d) for x, z in xz])
+    return np.array([disc_mean(x, z, d, 160, exact) for x, z in xz])
 
 
 # (gamma, C) of the points: tabulated angles, discs well inside their bins
@@ -214,14 +216,11 @@ def test_light_pdf_dir_of_an_ies_light_is_its_sampling_density(cl_env):
     profile = ies.parse(ies_text(VERT, HORIZ, TABLE + 1.0).encode())  # no dark bin
     light = lights.IesLight((0.0, 0.0, 0.0), profile, direction=(0.0, -1.0, 0.0), c0=(0.0, 0.0, 1.0))
     rec = light.record(None)
-    from oclgi.cl.layout import Emitter
-
     em = np.zeros(1, Emitter)
     em["kind"], em["p"], em["e1"], em["e2"], em["a"], em["b"], em["power"] = (
         rec["kind"], rec["p"], rec["e1"], rec["e2"], rec["a"], rec["b"], 1.0)
     n = 200_000
-    rng = np.random.default_rng(7)
-    u = (np.floor(rng.random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
+    u = (np.floor(np.random.default_rng(7).random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
     mf = cl.mem_flags
     bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
             for a in (em, rec["table"].astype(np.float32), u)]
@@ -245,8 +244,7 @@ def test_light_pdf_dir_of_an_ies_light_is_its_sampling_density(cl_env):
 
 
 def test_mitsuba_export_leaves_ies_lights_out_with_a_warning(tmp_path):
-    path = _file(tmp_path, ies_text(VERT, HORIZ, TABLE))
-    sc = _scene(tmp_path, {"ies": path.name}, photons=1000)
+    sc = _scene(tmp_path, {"ies": _file(tmp_path, ies_text(VERT, HORIZ, TABLE)).name}, photons=1000)
     with pytest.warns(OclgiWarning, match=r"point_light\[0\]: Mitsuba 3 has no IES profiles; lamp\.ies is left out"):
         assert lights.mitsuba_emitters(None, sc) == {}
 
@@ -263,8 +261,7 @@ def test_the_shipped_downlight_and_its_scene(scenes_dir):
         warnings.simplefilter("error")
         engine = oclgi.Engine(sc)
     assert LUMENS_PER_WATT * float(engine.compiled.total_power @ [0.2126, 0.7152, 0.0722]) == pytest.approx(3000.0)
-    image = engine.render(photons=20_000, width=16, height=16)
-    assert image.radiance.mean() > 0
+    assert engine.render(photons=20_000, width=16, height=16).radiance.mean() > 0
 
 
 # -- refused, in one line -----------------------------------------------------------------------------------------
@@ -319,34 +316,28 @@ def test_too_large_and_missing_files(tmp_path, monkeypatch):
         ies.read(tmp_path)
 
 
+PL = '[[point_light]]\nposition = [0, 1, 0]\n'
+LAMP = PL + 'ies = "lamp.ies"\n'
 
 
 @pytest.mark.parametrize("table, match", [
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "none.ies"\n', r"point_light\[0\]\.ies: IES file not found"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nintensity = [1, 1, 1]\n',
-     r"point_light\[0\]\.intensity: an IES light's intensity is its file's candela"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\ncandela = 5\nlumens = 5\n',
-     r"give candela \(the peak\) or lumens \(the flux\), not both"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nlumens = -5\n',
-     r"point_light\[0\]\.lumens: expected a luminous flux \(lm\) > 0"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nintensity = [1, 1, 1]\nlumens = 5\n',
-     r"point_light\[0\]\.lumens goes with ies"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nintensity = [1, 1, 1]\ndirection = [0, -1, 0]\n',
-     r"point_light\[0\]\.direction goes with ies"),
+    (PL + 'ies = "none.ies"\n', r"point_light\[0\]\.ies: IES file not found"),
+    (LAMP + 'intensity = [1, 1, 1]\n', r"point_light\[0\]\.intensity: an IES light's intensity is its file's candela"),
+    (LAMP + 'candela = 5\nlumens = 5\n', r"give candela \(the peak\) or lumens \(the flux\), not both"),
+    (LAMP + 'lumens = -5\n', r"point_light\[0\]\.lumens: expected a luminous flux \(lm\) > 0"),
+    (PL + 'intensity = [1, 1, 1]\nlumens = 5\n', r"point_light\[0\]\.lumens goes with ies"),
+    (PL + 'intensity = [1, 1, 1]\ndirection = [0, -1, 0]\n', r"point_light\[0\]\.direction goes with ies"),
     ('[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\nc0 = [1, 0, 0]\n',
      r"spot_light\[0\]\.c0 goes with ies"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nc0 = [0, 2, 0]\n',
-     r"point_light\[0\]\.c0: must not be parallel to the direction"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nmatrix = [[1, 0, 0], [0, 1, 0], [0, 0, -1]]\n',
-     r"point_light\[0\]\.matrix: expected a rotation"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nmatrix = [[1, 0, 0], [0, 1, 0]]\n',
-     r"point_light\[0\]\.matrix: expected 3 rows of 3 numbers"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\nmatrix = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n'
-     'direction = [0, -1, 0]\n', r"give matrix or direction, not both"),
+    (LAMP + 'c0 = [0, 2, 0]\n', r"point_light\[0\]\.c0: must not be parallel to the direction"),
+    (LAMP + 'matrix = [[1, 0, 0], [0, 1, 0], [0, 0, -1]]\n', r"point_light\[0\]\.matrix: expected a rotation"),
+    (LAMP + 'matrix = [[1, 0, 0], [0, 1, 0]]\n', r"point_light\[0\]\.matrix: expected 3 rows of 3 numbers"),
+    (LAMP + 'matrix = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\ndirection = [0, -1, 0]\n',
+     r"give matrix or direction, not both"),
     ('[[spot_light]]\nposition = [0, 1, 0]\nies = "lamp.ies"\n', r"spot_light\[0\]\.direction: required"),
     ('[[spot_light]]\nposition = [0, 1, 0]\nies = "up.ies"\ndirection = [0, -1, 0]\ncone_angle = 10\n',
      r"no light of the IES profile falls within the spot's cone"),
-    ('[[point_light]]\nposition = [0, 1, 0]\nies = 5\n', r"point_light\[0\]\.ies: expected an IES file name"),
+    (PL + 'ies = 5\n', r"point_light\[0\]\.ies: expected an IES file name"),
 ])
 def test_bad_ies_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, table, match):
     _file(tmp_path, GOOD)

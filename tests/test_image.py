@@ -1,11 +1,14 @@
 """The image pipeline: samples per pixel (each a query point, the photons
 shared), their box filter, and alpha as coverage."""
 
+import math
+
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 import oclgi
-from oclgi.engine import sample_offsets
+from oclgi.engine import KEY, auto_exposure, sample_offsets
 
 
 @pytest.fixture(scope="module")
@@ -24,8 +27,7 @@ def test_samples_per_pixel_are_the_mean_of_one_sample_images(engine):
     singles = []
     for off in offsets:
         pts = engine.view_points(cam, (0, 0, 24, 24), offset=off)
-        est = engine.irradiance(pts, photons=30_000)
-        singles.append(engine.shade(pts, est.estimator.irr)[0])
+        singles.append(engine.shade(pts, engine.irradiance(pts, photons=30_000).estimator.irr)[0])
     mean = np.mean(np.stack(singles).astype(np.float64), axis=0).astype(np.float32)
     assert four.radiance.tobytes() == mean.tobytes()  # the same sums per point, the same filter
     # one sample is the pixel's centre: the plain render, bit for bit
@@ -46,8 +48,6 @@ def test_spp_is_checked(engine):
 
 
 def test_images_say_how_they_were_made(engine, tmp_path):
-    import OpenImageIO as oiio
-
     result = engine.render(photons=20_000, width=16, height=16, spp=2, seed=7, method="impact")
     exr, png = oclgi.save_render(result, tmp_path / "r.exr")
     for path in (exr, png):
@@ -61,10 +61,6 @@ def test_images_say_how_they_were_made(engine, tmp_path):
 
 
 def test_layers_irradiance_albedo_normal_depth(engine, tmp_path):
-    import math
-
-    import OpenImageIO as oiio
-
     result = engine.render(photons=20_000, width=16, height=16, layers=True)
     lay = result.layers
     assert list(lay) == ["irradiance", "albedo", "normal", "depth"]
@@ -91,8 +87,6 @@ def test_layers_irradiance_albedo_normal_depth(engine, tmp_path):
 
 
 def test_auto_exposure_puts_the_log_average_at_middle_grey(engine):
-    from oclgi.engine import KEY, auto_exposure
-
     auto = engine.render(photons=20_000, width=16, height=16, exposure="auto")
     cover = (auto.pixels[..., 3] > 0).astype(np.float32)[..., None]
     x = auto_exposure(np.concatenate([auto.radiance, cover], axis=2).reshape(-1, 4))

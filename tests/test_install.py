@@ -103,8 +103,7 @@ def test_installed_command_line(installed, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stdout.lstrip().startswith(("* ", "  "))
     res = _run_installed(installed, tmp_path, args=[sys.executable, "-m", "oclgi", "render", "missing.toml"])
-    assert res.returncode == 2
-    assert res.stderr.strip() == "oclgi: error: scene file not found: missing.toml"
+    assert res.returncode == 2 and res.stderr.strip() == "oclgi: error: scene file not found: missing.toml"
 
 
 def test_installed_package_ships_the_viewer_page(installed):

@@ -18,10 +18,11 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 from cli_run import run
-from oclgi.cl.programs import KernelBuildError, ProgramCache, kernel_dir, programs
+from oclgi.cl.programs import PREFETCH_AHEAD, KernelBuildError, ProgramCache, kernel_dir, programs
 
 TARGETS = ("haswell", "skylake-avx512")
 VARIANTS = ({}, {"count_work": 1})
@@ -42,15 +43,13 @@ def _clang():
 
 def _clang_options(cache: ProgramCache, defines: dict) -> list[str]:
     """The program cache's options in clang's spelling (as PoCL passes them)."""
-    import pyopencl
-
     out = []
     for opt in cache.options(tuple(sorted(defines.items()))):
         if opt == "-cl-denorms-are-zero":
             out.append("-fdenormal-fp-math=positive-zero")  # what PoCL turns it into for LLVM >= 11
         elif opt != "-cl-kernel-arg-info":
             out.append(opt)
-    return out + ["-I", str(Path(pyopencl.__file__).parent / "cl")]
+    return out + ["-I", str(Path(cl.__file__).parent / "cl")]
 
 
 def test_every_kernel_builds_without_warnings_on_this_device(cl_env):
@@ -96,8 +95,7 @@ def test_the_target_check_sees_a_wide_vector_passed_by_value(cl_env, tmp_path):
                               "-target", "x86_64-pc-linux-gnu", f"-march={target}", "-emit-llvm", "-c",
                               "-o", os.devnull, str(src)], capture_output=True, text=True, timeout=60)
         said[target] = res.stderr
-    assert "changes the ABI" in said["haswell"]
-    assert "warning" not in said["skylake-avx512"]
+    assert "changes the ABI" in said["haswell"] and "warning" not in said["skylake-avx512"]
 
 
 def _kernels_with(tmp_path, stem, extra):
@@ -122,8 +120,7 @@ def test_compiler_output_is_kept_off_the_terminal_unless_asked(tmp_path, scenes_
     assert loud.returncode == 0, loud.stderr
     assert "oclgi-test-warning" in loud.stderr and "compiler output for image.cl" in loud.stderr
     monkeypatch.setenv("OCLGI_COMPILER_OUTPUT", "1")
-    env = run(tmp_path, "render", scene, *SMALL, "-o", tmp_path / "c.exr")
-    assert "oclgi-test-warning" in env.stderr
+    assert "oclgi-test-warning" in run(tmp_path, "render", scene, *SMALL, "-o", tmp_path / "c.exr").stderr
 
 
 def test_a_kernel_that_does_not_build_gives_one_line(tmp_path, scenes_dir, monkeypatch):
@@ -147,8 +144,6 @@ def test_build_error_from_the_api_keeps_the_log(cl_env, tmp_path, monkeypatch):
 def test_scalar_arguments_are_declared_once(cl_env):
     """Plain Python numbers are packed as the kernel's own types; a wrong
     argument count fails at the call, before anything runs."""
-    import pyopencl as cl
-
     ctx, queue = cl_env
     k = programs(ctx).get("detp").detp_resolve  # (long *acc, int n, float inv_norm, float4 *out)
     acc = np.arange(6, dtype=np.int64) * 3
@@ -168,15 +163,10 @@ def test_prefetch_is_on_for_cpu_devices_and_builds_off(cl_env):
     a CPU device only; off, as on a GPU, the kernels that use it build
     without a warning too (on a CPU they run on, prefetching, in every
     exactness test)."""
-    import pyopencl as cl
-
-    from oclgi.cl.programs import PREFETCH_AHEAD
-
     ctx, _queue = cl_env
     cache = ProgramCache(ctx)
     cpu = bool(ctx.devices[0].type & cl.device_type.CPU)
-    assert PREFETCH_AHEAD > 0
-    assert (f"-DOCLGI_PREFETCH_AHEAD={PREFETCH_AHEAD}" in cache.options(())) == cpu
+    assert PREFETCH_AHEAD > 0 and (f"-DOCLGI_PREFETCH_AHEAD={PREFETCH_AHEAD}" in cache.options(())) == cpu
     assert "-DOCLGI_PREFETCH_AHEAD=0" in cache.options((("prefetch_ahead", 0),))
     users = [p for p in _kernel_files() if '#include "prefetch.h"' in p.read_text()]
     assert {p.stem for p in users} >= {"update", "detp_disc_index", "photon_trace"}

@@ -12,14 +12,17 @@ frames (the int64 sums) whatever the batch split or the work-group size.
 from statistics import NormalDist
 
 import numpy as np
+import pyopencl as cl
 import pytest
 from cli_run import in_process
 from conftest import SCENES
 from reference import ray_triangle_brute
 
 import oclgi
+from oclgi.cl.layout import Segment
 from oclgi.errors import OclgiError
 from oclgi.tracing.light_reuse import LightReuse, light_path
+from oclgi.tracing.light_reweight import Reweighting
 
 BOX = str(SCENES / "cornell-box" / "CornellBox-Original.obj")
 ALPHA = 1e-3  # family-wise false-alarm rate of each unbiasedness test
@@ -67,23 +70,29 @@ def test_each_frame_is_unbiased(kind, method):
         ref.append([eng.irradiance(points(), method=method, photons=len(POSITIONS) * N, radius=RADIUS, seed=1 + s,
                                    max_depth=6).irradiance.sum(axis=1) for s in range(SEEDS)])
     ref = np.array(ref).transpose(1, 0, 2)  # (seeds, F, P): equal path counts per frame
+    _z_tests(f"{kind}, {method}", reuse, ref)
+
+
+def _z_tests(label, reuse, ref):
+    """Two-sample z-tests of the frames (seeds, F, P) against their
+    recomputations, per point and frame, Bonferroni-corrected; and the
+    tests' power to see a wrong frame."""
+    seeds = len(reuse)
     m1, m2 = reuse.mean(0), ref.mean(0)
     v1, v2 = reuse.var(0, ddof=1), ref.var(0, ddof=1)
-    se = np.sqrt(v1 / SEEDS + v2 / SEEDS)
+    se = np.sqrt(v1 / seeds + v2 / seeds)
     lit = se > 0  # points that no position lights are 0 in both
     z = np.abs(m1 - m2)[lit] / se[lit]
-    tests = z.size
-    z_crit = NormalDist().inv_cdf(1 - ALPHA / (2 * tests))
-    ratio = (v1[lit] / np.maximum(v2[lit], 1e-30))
-    print(f"\n{kind}, {method}: {tests} tests, max |z| {z.max():.2f} (Bonferroni critical {z_crit:.2f}); "
+    z_crit = NormalDist().inv_cdf(1 - ALPHA / (2 * z.size))
+    ratio = v1 / np.maximum(v2, 1e-30)
+    print(f"\n{label}: {z.size} tests, max |z| {z.max():.2f} (Bonferroni critical {z_crit:.2f}); "
           f"variance reuse / recompute per frame (median over points, equal paths): "
-          f"{[float(np.median((v1 / np.maximum(v2, 1e-30))[j][lit[j]])) for j in range(len(POSITIONS))]}")
+          f"{[float(np.median(ratio[j][lit[j]])) for j in range(len(m1))]}")
     assert lit.sum() >= 0.8 * lit.size
     assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
-    assert np.isfinite(ratio).all()
+    assert np.isfinite(ratio[lit]).all()
     # the test has the power to see a wrong frame: each against its neighbour's recomputation
-    shifted = np.roll(m2, 1, axis=0), np.roll(v2, 1, axis=0)
-    z_wrong = np.abs(m1 - shifted[0]) / np.sqrt(v1 / SEEDS + shifted[1] / SEEDS + 1e-30)
+    z_wrong = np.abs(m1 - np.roll(m2, 1, axis=0)) / np.sqrt(v1 / seeds + np.roll(v2, 1, axis=0) / seeds + 1e-30)
     assert z_wrong.max() > 3 * z_crit
 
 
@@ -101,16 +110,14 @@ def test_frames_are_bit_exact_whatever_the_split_or_local_size(method):
     for x, y in zip(a, b):
         assert x.dtype == np.int64 and np.array_equal(x, y)
     assert not np.array_equal(a[0], a[1]), "the frames should differ"
-    c = _sums(oclgi.Engine(sc), seed=6, method=method, axes=AXES)
-    assert not np.array_equal(a[0], c[0])
+    assert not np.array_equal(a[0], _sums(oclgi.Engine(sc), seed=6, method=method, axes=AXES)[0])
 
 
 def test_one_position_is_the_ordinary_run():
     """F = 1: every weight is p / p = 1 and a point light's profile is 1, so
     the tails are the ordinary run's bit for bit, and the first hits carry
     the ordinary photon's power: Impact Count's sums are the same."""
-    sc = box(POSITIONS[1])
-    eng = oclgi.Engine(sc)
+    eng = oclgi.Engine(box(POSITIONS[1]))
     pts = points()
     reuse = LightReuse(eng, "lamp", POSITIONS[1:2], photons=3000, seed=9, max_depth=6)
     est = reuse.frames_irradiance(pts, method="impact")[0]
@@ -127,10 +134,6 @@ def test_weights_and_powers_match_a_float64_reference():
     """The kernels' densities (light_pdf_dir to area, visibility, side),
     their sums D and a frame's powers against numpy in float64, with the
     shadow rays by brute force over every triangle."""
-    import pyopencl as cl
-
-    from oclgi.cl.layout import Segment
-
     sc = box(POSITIONS[0], AXES[0])
     eng = oclgi.Engine(sc)
     reuse = LightReuse(eng, "lamp", POSITIONS, AXES, photons=400, seed=4, max_depth=6)
@@ -179,8 +182,7 @@ def test_weights_and_powers_match_a_float64_reference():
     assert np.allclose(out["power"][::md][ok], c0[ok, None] * e, rtol=2e-4, atol=1e-7)
     assert np.allclose(out["org"][::md][ok], rec["p"][j], atol=0)
     tails = out.reshape(n_paths, md)[ok, 1:]["power"]
-    assert np.allclose(tails, store.reshape(n_paths, md)[ok, 1:]["power"] * scale[ok, None, None], rtol=2e-4,
-                       atol=1e-7)
+    assert np.allclose(tails, store.reshape(n_paths, md)[ok, 1:]["power"] * scale[ok, None, None], rtol=2e-4, atol=1e-7)
     assert (out.reshape(n_paths, md)[~(p[:, j] > 0) & agree]["dir"] == 0).all()  # unseen: empty paths
 
 
@@ -190,8 +192,7 @@ def test_powers_stay_under_phi_max():
     for j in range(reuse.frames):
         for batch in reuse.batches(j):
             seg = batch.read_segments(eng.queue)
-            assert seg["power"].max() <= 1.0 + 1e-6
-            assert np.isfinite(seg["power"]).all()
+            assert seg["power"].max() <= 1.0 + 1e-6 and np.isfinite(seg["power"]).all()
 
 
 def test_light_path_specs(tmp_path):
@@ -264,8 +265,7 @@ def test_cli_animates_a_light(monkeypatch, capsys, tmp_path):
     r = in_process(monkeypatch, capsys, tmp_path, "animate", str(scene), "--light", "lamp", "--light-path=-0.5,1.5,0;0.5,1.5,0", "--frames", "3",
                 "--photons", "1000", "-o", str(out))
     assert r.returncode == 0, r.stderr
-    assert sorted(p.name for p in out.iterdir()) == ["frame_0000.png", "frame_0001.png", "frame_0002.png",
-                                                    "timing.csv"]
+    assert sorted(p.name for p in out.iterdir()) == ["frame_0000.png", "frame_0001.png", "frame_0002.png", "timing.csv"]
     rows = (out / "timing.csv").read_text().splitlines()
     assert rows[0].startswith("frame,paths,trace_s") and len(rows) == 4
 
@@ -324,19 +324,7 @@ def test_each_frame_is_unbiased_in_sponza(scenes_dir):
         eng = oclgi.Engine(scene)
         ref.append([eng.irradiance(pts, photons=len(SPONZA_POSITIONS) * n, radius=radius, seed=1 + s,
                                    max_depth=5).irradiance.sum(axis=1) for s in range(seeds)])
-    ref = np.array(ref).transpose(1, 0, 2)
-    m1, m2 = reuse.mean(0), ref.mean(0)
-    v1, v2 = reuse.var(0, ddof=1), ref.var(0, ddof=1)
-    se = np.sqrt(v1 / seeds + v2 / seeds)
-    lit = se > 0
-    z = np.abs(m1 - m2)[lit] / se[lit]
-    z_crit = NormalDist().inv_cdf(1 - ALPHA / (2 * z.size))
-    print(f"\nSponza: {z.size} tests, max |z| {z.max():.2f} (critical {z_crit:.2f}); variance reuse / recompute "
-          f"per frame (median over points): {[float(np.median((v1 / np.maximum(v2, 1e-30))[j][lit[j]])) for j in range(4)]}")
-    assert lit.sum() >= 0.8 * lit.size
-    assert z.max() < z_crit, f"|z| = {z.max():.2f} at {np.argwhere(lit)[np.argmax(z)]}"
-    z_wrong = np.abs(m1 - np.roll(m2, 1, axis=0)) / np.sqrt(v1 / seeds + np.roll(v2, 1, axis=0) / seeds + 1e-30)
-    assert z_wrong.max() > 3 * z_crit  # the test can see a wrong frame
+    _z_tests("Sponza", reuse, np.array(ref).transpose(1, 0, 2))
 
 
 @pytest.mark.parametrize("spot", [False, True], ids=["point", "spot"])
@@ -344,8 +332,6 @@ def test_each_frame_is_unbiased_in_sponza(scenes_dir):
 def test_reweighted_frames_equal_the_frames(spot, consistent):
     """A frame as segment 0 plus the stored tail pairs re-weighted
     (oclgi/tracing/light_reweight.py) has the frame's sums bit for bit."""
-    from oclgi.tracing.light_reweight import Reweighting
-
     axes = AXES if spot else None
     engine = oclgi.Engine(box(POSITIONS[0], AXES[0] if spot else None))
     reuse = LightReuse(engine, "lamp", POSITIONS, axes, photons=1200, seed=9, max_depth=6)

@@ -11,7 +11,6 @@ from oclgi.incremental.light_session import LightSession
 from oclgi.tracing.light_reuse import LightReuse
 from test_light_reuse import AXES, BOX, POSITIONS, RADIUS, box, points
 
-BOX_PATH = BOX
 N = 1000
 
 
@@ -43,8 +42,7 @@ def test_precomputed_positions_by_reuse_others_recomputed(spot):
 def test_light_session_protocol():
     engine = oclgi.Engine(box(POSITIONS[0]))
     cam = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=16, height=16)
-    s = LightSession(engine, None, light="lamp", positions=POSITIONS, photons=N, max_depth=6, radius=RADIUS,
-                     camera=cam)
+    s = LightSession(engine, None, light="lamp", positions=POSITIONS, photons=N, max_depth=6, radius=RADIUS, camera=cam)
     assert isinstance(s, oclgi.IncrementalSession)
     first, _ = s.render()
     assert first.shape == (16, 16, 3) and first.max() > 0
@@ -71,7 +69,7 @@ def test_light_session_protocol():
 def test_a_light_path_in_the_scene_file(tmp_path, monkeypatch, capsys):
     """``path`` in a [[point_light]] table: the session's default positions
     and animate's default --light-path, the same frames byte for byte."""
-    text = (f'name = "lit"\n[[mesh]]\npath = "{BOX_PATH}"\n[mesh.materials.light]\nemission = [0, 0, 0]\n'
+    text = (f'name = "lit"\n[[mesh]]\npath = "{BOX}"\n[mesh.materials.light]\nemission = [0, 0, 0]\n'
             '[[point_light]]\nname = "lamp"\nposition = [0, 1.5, 0]\nintensity = [1, 0.8, 0.6]\n'
             'path = [[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4]]\n'
             '[photons]\ncount = 3000\nmax_depth = 6\n[camera]\nposition = [0, 1, 3.94]\nlook_at = [0, 1, 0]\n'

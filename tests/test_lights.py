@@ -19,19 +19,27 @@ Tolerances: 10^6 photons; a disc of radius d on the plane catches about
 are about four standard errors of that count (stated per test).
 """
 
+import base64
+import json
 import math
+import shutil
+import struct
 import warnings
 
 import numpy as np
+import OpenImageIO as oiio
 import pyopencl as cl
 import pytest
-from cli_run import in_process
+from analytic_scenes import disc_mean
+from cli_run import fails_cleanly, in_process
 
 import oclgi
+from oclgi.cl.layout import Emitter
 from oclgi.cl.programs import ProgramCache
 from oclgi.errors import OclgiError
 from oclgi.scene import lights
-from oclgi.scene.scene import OclgiWarning
+from oclgi.scene.scene import OclgiWarning, PointLight
+from oclgi.study import mitsuba as mitsuba_reference
 
 H = 1.0
 UP = (0.0, 1.0, 0.0)
@@ -60,17 +68,8 @@ def _both(engine, pts, radius):
     """DETP's and the default estimator's irradiance (channel 0); they are the same sums."""
     plain = engine.irradiance(pts, method="detp", radius=radius)
     default = engine.irradiance(pts, radius=radius)
-    assert default.stats.method != "detp"
-    assert np.array_equal(plain.accumulators, default.accumulators)
+    assert default.stats.method != "detp" and np.array_equal(plain.accumulators, default.accumulators)
     return plain.irradiance[:, 0].astype(np.float64)
-
-
-def _disc_mean(f, x0, z0, d, n=160):
-    """Mean of f(x, z) over the disc of radius d about (x0, z0) (midpoint rule, polar)."""
-    r = (np.arange(n) + 0.5) / n * d
-    phi = (np.arange(n) + 0.5) / n * 2 * np.pi
-    rr, pp = np.meshgrid(r, phi, indexing="ij")
-    return float((f(x0 + rr * np.cos(pp), z0 + rr * np.sin(pp)) * rr).sum() / rr.sum())
 
 
 # -- spot -------------------------------------------------------------------------------------------------------
@@ -111,10 +110,9 @@ def test_spot_light_plane(spot):
     xs = np.array([0.0, 0.1, 0.2, 0.28, 0.42, 0.48])
     pts = [(x, 0.0) for x in xs] + [(0.0, x) for x in xs[1:]] + [(0.75, 0.0), (0.0, -0.8)]
     e = _both(spot, _points(pts), 0.06)
-    ref = np.array([_disc_mean(exact, x, z, 0.06) for x, z in pts])
+    ref = np.array([disc_mean(x, z, 0.06, 160, exact) for x, z in pts])
     inside = ref > 0
-    assert inside.sum() == len(pts) - 2
-    assert np.abs(e[inside] / ref[inside] - 1).max() < 0.04
+    assert inside.sum() == len(pts) - 2 and np.abs(e[inside] / ref[inside] - 1).max() < 0.04
     assert abs(np.mean(e[inside] / ref[inside]) - 1) < 0.015
     assert np.all(e[~inside] == 0)  # outside the cone: no photon at all
 
@@ -124,8 +122,7 @@ def test_spot_light_photons_stay_under_phi_max(spot):
     record's power is the cone's largest, so none exceeds 1 (phi_max)."""
     s, _ = spot.trace(photons=50_000)
     units = s["power"] / spot.photon_watts(50_000)
-    assert units.max() <= 1.0 + 1e-6
-    assert units.min() >= 0.0
+    assert units.max() <= 1.0 + 1e-6 and units.min() >= 0.0
     assert (units[:, 0] < 0.5).mean() > 0.05  # the falloff band's photons carry less
 
 
@@ -170,14 +167,11 @@ def test_uniform_sky_plane(hemisphere):
     hemisphere or the whole sphere (the plane's lower side takes the rest).
     Radius 0.2: about 10^4 segments a disc, 1% noise: within 4%, mean within 1.5%."""
     eng = oclgi.Engine(_scene({"sky": {"radiance": [1.0, 0.5, 0.25], "hemisphere": hemisphere}}))
-    pts = [(0.0, 0.0), (0.5, 0.0), (-0.5, 0.3), (0.3, -0.6), (-0.6, -0.6), (0.6, 0.6)]
-    e = _both(eng, _points(pts), 0.2)
-    assert np.abs(e / math.pi - 1).max() < 0.04
-    assert abs(np.mean(e) / math.pi - 1) < 0.015
+    e = _both(eng, _points([(0.0, 0.0), (0.5, 0.0), (-0.5, 0.3), (0.3, -0.6), (-0.6, -0.6), (0.6, 0.6)]), 0.2)
+    assert np.abs(e / math.pi - 1).max() < 0.04 and abs(np.mean(e) / math.pi - 1) < 0.015
     _, r = lights.bounding_sphere(eng.scene)
     omega = 2 * math.pi if hemisphere else 4 * math.pi
-    np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * omega * np.array([1, 0.5, 0.25]),
-                               rtol=1e-12)
+    np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * omega * np.array([1, 0.5, 0.25]), rtol=1e-12)
     s, _ = eng.trace(photons=20_000)
     down = s["dir"][:, 1] <= 0
     assert down.all() if hemisphere else 0.45 < down.mean() < 0.55
@@ -206,13 +200,11 @@ def test_point_light_plane():
     eng = oclgi.Engine(_scene({"point_light": [{"position": [0, H, 0], "intensity": [1, 1, 1]}]}, half=2.0))
     pts = [(0.0, 0.0), (0.3, 0.2), (-0.5, 0.4), (0.8, -0.6)]
     e = _both(eng, _points(pts), 0.15)
-    ref = np.array([_disc_mean(lambda x, z: H / (x * x + z * z + H * H) ** 1.5, x, z, 0.15) for x, z in pts])
+    ref = np.array([disc_mean(x, z, 0.15, 160, lambda x, z: H / (x * x + z * z + H * H) ** 1.5) for x, z in pts])
     assert np.abs(e / ref - 1).max() < 0.04
 
 
 def test_point_light_class_is_where_it_was():
-    from oclgi.scene.scene import PointLight
-
     assert PointLight is lights.PointLight is oclgi.PointLight
     assert oclgi.SpotLight is lights.SpotLight and oclgi.SunLight is lights.SunLight
     assert oclgi.SkyLight is lights.SkyLight
@@ -234,8 +226,7 @@ def test_all_kinds_share_one_run_under_phi_max():
     assert list(rows.kind) == [0, 0, 1, 2, 3, 4]
     n = 200_000
     s, _ = eng.trace(photons=n)
-    units = s["power"] / eng.photon_watts(n)
-    assert units.max() <= 1 + 1e-6
+    assert (s["power"] / eng.photon_watts(n)).max() <= 1 + 1e-6
     # each kind's photons carry its emitted power in total (the spot: its exact power, the profile included)
     o = s["org"].astype(np.float64)
     c, r = lights.bounding_sphere(sc)
@@ -279,8 +270,7 @@ def test_light_pdf_dir_is_the_sampling_density(cl_env):
     ctx, queue = cl_env
     probe = cl.Program(ctx, PDF_PROBE).build(options=ProgramCache(ctx).options(())).pdf_probe
     n = 200_000
-    rng = np.random.default_rng(5)
-    u = (np.floor(rng.random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
+    u = (np.floor(np.random.default_rng(5).random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
     e1, e2 = np.array([1.0, 0, 0]), np.array([0, 0, 2.0])
     R = 1.5
     cases = [
@@ -293,10 +283,7 @@ def test_light_pdf_dir_is_the_sampling_density(cl_env):
         ((lights.EMITTER_SKY, (0, 0, 0), (0, 1, 0), (0, 0, 0), R, 1), math.pi * R * R * 2 * math.pi),
         ((lights.EMITTER_ENVMAP, (0, 0, 0), (0, 0, 0), (16.0, 8.0, 0), R, 0), math.pi * R * R * 4 * math.pi),
     ]
-    env = lights.EnvMapLight(_two_tone_map(8, 16))
-    table = env.record(((0, 0, 0), R))["table"].astype(np.float32)
-    from oclgi.cl.layout import Emitter
-
+    table = lights.EnvMapLight(_two_tone_map(8, 16)).record(((0, 0, 0), R))["table"].astype(np.float32)
     mf = cl.mem_flags
     r_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=u)
     out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 8 * 4 * n)
@@ -312,8 +299,7 @@ def test_light_pdf_dir_is_the_sampling_density(cl_env):
         pdf = out[:, 7].astype(np.float64)
         assert (pdf > 0).all(), kind  # every sampled direction is one the light emits
         assert abs(np.mean(1 / pdf) / measure - 1) < 0.01, kind
-        d = out[:, 3:6].astype(np.float64)
-        np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1, atol=1e-5)
+        np.testing.assert_allclose(np.linalg.norm(out[:, 3:6].astype(np.float64), axis=1), 1, atol=1e-5)
 
 
 # -- environment map ---------------------------------------------------------------------------------------------
@@ -333,8 +319,6 @@ def _two_tone_map(h, w, split="rows"):
 
 
 def _write_exr(path, img):
-    import OpenImageIO as oiio
-
     out = oiio.ImageOutput.create(str(path))
     out.open(str(path), oiio.ImageSpec(img.shape[1], img.shape[0], 3, "float"))
     out.write_image(np.ascontiguousarray(img, np.float32))
@@ -366,8 +350,7 @@ def test_environment_map_plane(envmap_file):
     assert np.abs(up_e / (2 * math.pi * UPPER) - 1).max() < 0.04
     assert np.abs(down_e / (2 * math.pi * LOWER) - 1).max() < 0.04
     _, r = lights.bounding_sphere(eng.scene)
-    np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * 2 * 2 * math.pi * (UPPER + LOWER),
-                               rtol=1e-6)
+    np.testing.assert_allclose(eng.compiled.total_power, math.pi * r * r * 2 * 2 * math.pi * (UPPER + LOWER), rtol=1e-6)
     s, _ = eng.trace(photons=20_000)
     units = s["power"] / eng.photon_watts(20_000)
     assert units.max() <= 1 + 1e-6 and units[:, 0].max() > 0.99  # the map's reddest texels carry phi_max
@@ -391,8 +374,6 @@ def test_environment_map_orientation_is_mitsubas(tmp_path):
     minus = eng.irradiance(np.hstack([p, np.tile([-1.0, 0, 0], (2, 1))]), radius=0.2).irradiance.astype(np.float64)
     assert np.abs(plus / (math.pi * UPPER) - 1).max() < 0.04
     assert np.abs(minus / (math.pi * LOWER) - 1).max() < 0.04
-    from oclgi.study import mitsuba as mitsuba_reference
-
     try:
         mitsuba_reference.load_mitsuba()
     except OclgiError:
@@ -409,15 +390,9 @@ def test_environment_map_orientation_is_mitsubas(tmp_path):
     ("[sky]\nradiance = [1, 1, 1]\nscale = 2\n", r"sky\.scale goes with map"),
 ])
 def test_bad_environment_maps_fail_in_one_line(monkeypatch, capsys, tmp_path, envmap_file, table, match):
-    import re
-    import shutil
-
     _scene_file(tmp_path, table)
     shutil.copy(envmap_file, tmp_path / "two_tone.exr")
-    res = in_process(monkeypatch, capsys, tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv")
-    lines = res.stderr.splitlines()
-    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
-    assert lines and lines[-1].startswith("oclgi: error: ") and re.search(match, lines[-1]), res.stderr
+    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
 
 
 def test_environment_map_with_nan_is_refused():
@@ -453,18 +428,17 @@ def _scene_file(tmp_path, tables: str):
     (tmp_path / "p.csv").write_text("x,y,z,nx,ny,nz\n0,0,0,0,1,0\n")
 
 
+SPOT_TABLE = "[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\n"
+
+
 @pytest.mark.parametrize("tables, match", [
     ("[[spot_light]]\nposition = [0, 1, 0]\nintensity = [1, 1, 1]\n", r"spot_light\[0\]\.direction: required"),
     ("[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, 0, 0]\nintensity = [1, 1, 1]\n",
      r"spot_light\[0\]\.direction: expected a non-zero direction"),
-    ("[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\ncone_angle = 200\n",
-     r"spot_light\[0\]\.cone_angle: expected a half-angle in \(0, 180\]"),
-    ("[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\ncone_delta = 40\n",
-     r"spot_light\[0\]\.cone_delta: expected degrees from 0 to cone_angle"),
-    ("[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\nangle = 3\n",
-     r"spot_light\[0\]: unknown key\(s\) \['angle'\]"),
-    ("[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nintensity = [1, 1, 1]\ncandela = 3\n",
-     r"spot_light\[0\]: give intensity \(W/sr\) or candela, not both"),
+    (SPOT_TABLE + "cone_angle = 200\n", r"spot_light\[0\]\.cone_angle: expected a half-angle in \(0, 180\]"),
+    (SPOT_TABLE + "cone_delta = 40\n", r"spot_light\[0\]\.cone_delta: expected degrees from 0 to cone_angle"),
+    (SPOT_TABLE + "angle = 3\n", r"spot_light\[0\]: unknown key\(s\) \['angle'\]"),
+    (SPOT_TABLE + "candela = 3\n", r"spot_light\[0\]: give intensity \(W/sr\) or candela, not both"),
     ("[[sun]]\ndirection = [0, -1, 0]\nirradiance = [1, -1, 1]\n", r"sun\[0\]\.irradiance"),
     ("[[sun]]\nirradiance = [1, 1, 1]\n", r"sun\[0\]\.direction: required"),
     ("[[sun]]\ndirection = [0, -1, 0]\nlux = -5\n", r"sun\[0\]\.lux: expected an illuminance > 0"),
@@ -482,14 +456,10 @@ def test_bad_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, tables
 
 
 def refused_in_one_line(monkeypatch, capsys, tmp_path, match):
-    """``oclgi irradiance`` of _scene_file's scene ends with status 2 and one error line matching ``match``."""
-    import re
-
-    res = in_process(monkeypatch, capsys, tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv")
-    lines = res.stderr.splitlines()
-    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
-    assert lines and lines[-1].startswith("oclgi: error: ") and re.search(match, lines[-1]), res.stderr
-    assert not (tmp_path / "e.csv").exists()
+    """``oclgi irradiance`` of _scene_file's scene fails cleanly
+    (cli_run.fails_cleanly), its error line matching ``match``."""
+    fails_cleanly(lambda d, *a: in_process(monkeypatch, capsys, d, *a), tmp_path, "irradiance", "s.toml", "--points",
+                  "p.csv", "-o", "e.csv", match=match)
 
 
 def test_bad_lights_made_in_python():
@@ -507,8 +477,7 @@ def test_bad_lights_made_in_python():
 @pytest.mark.parametrize("facing_down", [True, False])
 def test_area_light_emitting_away_from_every_surface_warns(facing_down):
     lv, lf = _quad(0.2, y=1.0)
-    light = {"vertices": lv, "faces": lf[:, ::-1] if facing_down else lf, "albedo": [0, 0, 0],
-             "emission": [1, 1, 1]}
+    light = {"vertices": lv, "faces": lf[:, ::-1] if facing_down else lf, "albedo": [0, 0, 0], "emission": [1, 1, 1]}
     sc = _scene({}, extra_meshes=[light], photons=1000)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -528,15 +497,12 @@ def test_mitsuba_conversion_of_every_kind():
     """Mitsuba's irradiance under each converted light matches the closed
     form: the spot inside its full cone and outside it, the sun with cos
     alpha, the sky (constant, and the hemisphere envmap) with pi L."""
-    from oclgi.study import mitsuba as mitsuba_reference
-
     try:
         mi = mitsuba_reference.load_mitsuba()
     except OclgiError:
         pytest.skip("mitsuba is not installed")
     sc = _scene({"spot_light": [SPOT]}, photons=1000)
-    d = mitsuba_reference.scene_dict(mi, sc)
-    assert d["spot_light_0"]["type"] == "spot"
+    assert mitsuba_reference.scene_dict(mi, sc)["spot_light_0"]["type"] == "spot"
     p = np.array([[0.0, 0, 0], [0.2, 0, 0.1], [0.0, 0, 0.8]])
     n = np.tile(UP, (len(p), 1))
     e = mitsuba_reference.irradiance(sc, p, n, spp=16, max_depth=1)[:, 0]
@@ -561,12 +527,8 @@ def test_mitsuba_conversion_of_every_kind():
 
 def _gltf(tmp_path, lights_ext, nodes):
     """A .gltf: a 2 x 2 floor quad (y = 0, facing up), embedded buffer, plus ``nodes`` and the lights."""
-    import base64
-    import json
-
     pos = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], np.float32)
-    idx = np.array([0, 2, 1, 0, 3, 2], np.uint16)
-    blob = pos.tobytes() + idx.tobytes()
+    blob = pos.tobytes() + np.array([0, 2, 1, 0, 3, 2], np.uint16).tobytes()
     children = {c for n in nodes for c in n.get("children", [])}
     doc = {
         "asset": {"version": "2.0"}, "extensionsUsed": ["KHR_lights_punctual"],
@@ -635,8 +597,6 @@ def test_gltf_bad_lights(tmp_path, light, match):
 
 def test_gltf_binary_lights(tmp_path):
     """A .glb's JSON chunk is read for its lights as a .gltf's text is."""
-    import struct
-
     path = _gltf(tmp_path, [{"type": "directional", "intensity": 683.0, "color": [1, 1, 1]}],
                  [{"rotation": DOWN, "extensions": {"KHR_lights_punctual": {"light": 0}}}])
     text = path.read_bytes()
@@ -644,6 +604,5 @@ def test_gltf_binary_lights(tmp_path):
     glb = tmp_path / "lit.glb"
     glb.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text)) + struct.pack("<I4s", len(text), b"JSON")
                     + text)
-    sc = oclgi.load_dict({"mesh": [{"path": str(glb)}], "photons": {"count": 1000}})
-    (sun,) = sc.lights
+    (sun,) = oclgi.load_dict({"mesh": [{"path": str(glb)}], "photons": {"count": 1000}}).lights
     np.testing.assert_allclose(sun.direction, [0, -1, 0], atol=1e-12)

@@ -4,14 +4,18 @@ with a glass object moving."""
 
 from __future__ import annotations
 
+import json
+import struct
 import warnings
 
 import numpy as np
 import pytest
+import trimesh
+from trimesh.visual import TextureVisuals
+from trimesh.visual.material import PBRMaterial
 
 import oclgi
 from oclgi.errors import OclgiError
-from oclgi.scene.materials import Material
 from test_instances import _rigid
 
 
@@ -59,8 +63,7 @@ def test_mtl_phong_is_scaled_to_conserve_energy(tmp_path):
     shiny = next(m for m in scene.materials if m.name.endswith("shiny"))
     assert shiny.kind == "phong" and shiny.exponent == 20
     bound = max(shiny.albedo) + max(shiny.specular) * 22 / 21
-    assert 0.999 < bound <= 1.0
-    assert shiny.albedo[0] / shiny.specular[0] == pytest.approx(1.0)
+    assert 0.999 < bound <= 1.0 and shiny.albedo[0] / shiny.specular[0] == pytest.approx(1.0)
     text = " ".join(str(w.message) for w in caught)
     assert "scaled" in text and "map_Kd 'wood.png'" in text and "d 0.5" in text
 
@@ -103,8 +106,7 @@ def test_a_mirror_shows_the_points_it_reflects(cl_env):
             "albedo": [0.5, 0.5, 0.5]}
     scene = oclgi.load_dict({"mesh": [mirror, wall], "point_light": {"position": [0, 3, 0], "intensity": [5, 5, 5]},
                              "camera": {"position": [0, 1, 2], "look_at": [0, 0, -1], "width": 16, "height": 16}})
-    engine = oclgi.Engine(scene)
-    pts = engine.camera_points()
+    pts = oclgi.Engine(scene).camera_points()
     on_wall = pts.tri >= 2
     reflected = on_wall & (pts.weights[:, 0] < 1)
     direct = on_wall & ~reflected
@@ -120,15 +122,13 @@ def test_a_mirror_shows_the_points_it_reflects(cl_env):
     np.testing.assert_allclose(pts.positions[on_wall, 2], -3.0, atol=1e-5)
 
 
-def test_camera_paths_are_the_same_for_diffuse_scenes(scenes_dir):
+def test_camera_paths_are_the_same_for_diffuse_scenes(cornell):
     """All-diffuse scenes: every visible point has weight 1; a pixel that
     sees nothing holds its ray's direction, weight 1 and no coverage."""
-    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
-    cam = engine.view_camera(width=32, height=32)
-    pts = engine.camera_points(width=32, height=32)
+    cam = cornell.view_camera(width=32, height=32)
+    pts = cornell.camera_points(width=32, height=32)
     hit = pts.tri >= 0
-    assert hit.sum() > 500 and (~hit).sum() > 50
-    assert (pts.weights[hit] == 1).all()
+    assert hit.sum() > 500 and (~hit).sum() > 50 and (pts.weights[hit] == 1).all()
     np.testing.assert_array_equal(pts.weights[~hit], np.tile([1, 1, 1, 0], ((~hit).sum(), 1)))
     d = pts.positions[~hit, :3].astype(np.float64)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-6)
@@ -168,8 +168,7 @@ def test_retrace_through_glass_equals_a_fresh_trace(scenes_dir, rng):
     """Photon paths through a moved glass object: the session's store equals
     a fresh trace at the new pose, bit for bit."""
     engine = oclgi.Engine(_room(scenes_dir, {"kind": "dielectric", "ior": 1.5}))
-    pts = engine.camera_points()
-    session = oclgi.Session(engine, points=pts, method="detp", radius=0.05, photons=10_000)
+    session = oclgi.Session(engine, points=engine.camera_points(), method="detp", radius=0.05, photons=10_000)
     for _ in range(4):
         session.move("bunny", _rigid(rng, shift=0.4))
     seg, plen = session.segments()
@@ -213,24 +212,22 @@ def test_photon_maps_store_no_impacts_on_mirrors(cl_env):
     assert ((seg["tri"] >= 0) & (seg["tri"] < 2)).sum() > 1000  # photons did hit the mirror
 
 
+def _quad(y, material):
+    """A trimesh square at height y, facing up, of the given material."""
+    q = trimesh.Trimesh([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1]], [[0, 2, 1], [0, 3, 2]], process=False)
+    q.visual = TextureVisuals(material=material)
+    return q
+
+
 def test_gltf_materials_are_named_by_material_and_read_as_kinds(tmp_path):
     """glTF metallic-roughness: a metal becomes a GGX conductor (alpha =
     roughness^2), a dielectric a diffuse surface; overrides are keyed by
     the material's name, which geometries sharing it share."""
-    import trimesh
-    from trimesh.visual import TextureVisuals
-    from trimesh.visual.material import PBRMaterial
-
-    def quad(y, material):
-        q = trimesh.Trimesh([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1]], [[0, 2, 1], [0, 3, 2]], process=False)
-        q.visual = TextureVisuals(material=material)
-        return q
-
     gold = PBRMaterial(name="gold", baseColorFactor=[255, 200, 80, 255], metallicFactor=1.0, roughnessFactor=0.5)
     paint = PBRMaterial(name="paint", baseColorFactor=[128, 128, 255, 255], metallicFactor=0.0, roughnessFactor=0.9)
     lamp = PBRMaterial(name="lamp", baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 1, 1])
-    trimesh.Scene({"a": quad(0.0, gold), "b": quad(0.5, gold), "c": quad(1.0, paint),
-                   "light": quad(2.0, lamp)}).export(tmp_path / "s.glb")
+    trimesh.Scene({"a": _quad(0.0, gold), "b": _quad(0.5, gold), "c": _quad(1.0, paint),
+                   "light": _quad(2.0, lamp)}).export(tmp_path / "s.glb")
     scene = oclgi.load_dict({"mesh": [{"path": str(tmp_path / "s.glb"),
                                        "materials": {"paint": {"albedo": [0.2, 0.3, 0.4]}}}]})
     by_name = {m.name.split(":")[-1]: m for m in scene.materials}
@@ -243,8 +240,6 @@ def test_gltf_materials_are_named_by_material_and_read_as_kinds(tmp_path):
 
 
 def test_a_gltf_camera_is_used_when_the_scene_names_none(tmp_path):
-    import trimesh
-
     s = trimesh.Scene(trimesh.creation.box())
     s.set_camera(angles=(0, 0, 0), distance=5, fov=(60, 45))
     s.export(tmp_path / "s.glb")
@@ -262,9 +257,6 @@ def test_a_gltf_camera_is_used_when_the_scene_names_none(tmp_path):
 
 def _patch_glb(path, edit):
     """Rewrite a .glb's JSON chunk through ``edit(doc)`` (its binary chunk kept)."""
-    import json
-    import struct
-
     data = path.read_bytes()
     n = struct.unpack_from("<I", data, 12)[0]
     doc = json.loads(data[20:20 + n])
@@ -277,18 +269,9 @@ def _patch_glb(path, edit):
 
 
 def test_gltf_material_extensions_make_glass_and_bright_lamps(tmp_path):
-    import trimesh
-    from trimesh.visual import TextureVisuals
-    from trimesh.visual.material import PBRMaterial
-
-    def quad(y, material):
-        q = trimesh.Trimesh([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1]], [[0, 2, 1], [0, 3, 2]], process=False)
-        q.visual = TextureVisuals(material=material)
-        return q
-
     glass = PBRMaterial(name="glass", baseColorFactor=[255, 255, 255, 255], metallicFactor=0.0, roughnessFactor=0.0)
     lamp = PBRMaterial(name="lamp", baseColorFactor=[0, 0, 0, 255], emissiveFactor=[1, 0.5, 0.25])
-    trimesh.Scene({"g": quad(0.0, glass), "l": quad(2.0, lamp)}).export(tmp_path / "s.glb")
+    trimesh.Scene({"g": _quad(0.0, glass), "l": _quad(2.0, lamp)}).export(tmp_path / "s.glb")
 
     def edit(doc):
         for m in doc["materials"]:

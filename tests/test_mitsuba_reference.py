@@ -13,14 +13,18 @@ several oclgi seeds and two Mitsuba seeds, with the margins stated.
 
 import json
 import math
+import sys
 
 import numpy as np
 import pytest
+from analytic_scenes import box_mesh
 
 import oclgi
-from oclgi.study import image_compare, mitsuba as mitsuba_reference
+from oclgi.study import image as study_image, image_compare, mitsuba as mitsuba_reference
 from oclgi.errors import OclgiError
+from oclgi.io import read_image
 from oclgi.queries import QueryPoints
+from oclgi.study.image import FILES, compare_with_mitsuba
 
 LUM = image_compare.LUMINANCE
 
@@ -91,21 +95,14 @@ def test_point_light_image_matches_oclgi_camera(plane_scene):
     far_background = ~image_compare.dilate(hit, 1)
     assert far_background.sum() > 50 and np.all(img[far_background] == 0)
     # and oclgi's own image of the same scene, direct light only, agrees on average
-    ocl = engine.render(photons=400_000, radius=0.1).radiance
-    cmp = image_compare.compare(ocl, img, ~keep)
+    cmp = image_compare.compare(engine.render(photons=400_000, radius=0.1).radiance, img, ~keep)
     assert abs(cmp.signed_mean) < 0.02 and cmp.rel_median < 0.05, cmp
 
 
 def _furnace(rho, le, inward=True):
     """A closed unit cube of albedo rho whose walls emit Le on the side of
     their normals: inward (a furnace) or outward (dark inside)."""
-    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
-    tri = v[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    wrong = (np.einsum("ij,ij->i", n, 0.5 - tri.mean(axis=1)) < 0) == inward
-    faces[wrong] = faces[wrong][:, ::-1]
+    v, faces = box_mesh((0, 0, 0), (1, 1, 1), inward)
     return oclgi.load_dict({
         "mesh": [{"vertices": v, "faces": faces, "albedo": [rho] * 3, "emission": [le, le / 2, le / 4]}],
         "camera": {"position": [0.5, 0.5, 0.5], "look_at": [0.5, 0.5, 0], "fov": 80, "width": 16, "height": 16},
@@ -136,8 +133,7 @@ def test_furnace_emitting_outwards_is_dark_inside():
     outwards leave the inside dark, in Mitsuba as in oclgi."""
     scene = _furnace(0.5, 1.0, inward=False)
     e = mitsuba_reference.irradiance(scene, FURNACE_POINTS, FURNACE_NORMALS, spp=64)
-    assert np.all(e == 0)
-    assert np.all(mitsuba_reference.render(scene, spp=4) == 0)
+    assert np.all(e == 0) and np.all(mitsuba_reference.render(scene, spp=4) == 0)
     est = oclgi.Engine(scene).irradiance(np.hstack([FURNACE_POINTS, FURNACE_NORMALS]), photons=10_000, radius=0.1)
     assert np.all(est.irradiance == 0)
 
@@ -159,12 +155,6 @@ def test_path_length_mapping():
 
 
 # -- oclgi against Mitsuba on the Cornell box --------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def cornell(scenes_dir):
-    return oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
-
 
 # Image test: 64 x 64 pixels (a pixel is 2.2-5.5 cm on the surfaces facing
 # the camera), DETP with 2e6 photons and a 5 cm disc, Mitsuba 1024 spp, the
@@ -258,7 +248,6 @@ def test_moved_object_is_where_the_engine_put_it(scenes_dir):
 
 # -- image_compare on synthetic arrays ---------------------------------------------------------------
 
-
 def _synthetic_points(h=12, w=16):
     """Camera points of a floor (left half, normal +y) meeting a wall (right
     half, normal -x) in a corner, with background in the top two rows and a
@@ -314,15 +303,13 @@ def test_edge_mask_material_seams_with_scene():
         "camera": {"position": [1, 3, 0.01], "look_at": [1, 0, 0], "fov": 30, "width": 20, "height": 20},
     })
     pts = oclgi.Engine(scene).camera_points()
-    assert (pts.tri >= 0).all()
-    assert not image_compare.edge_mask(pts, 0).any()
+    assert (pts.tri >= 0).all() and not image_compare.edge_mask(pts, 0).any()
     seam = image_compare.edge_mask(pts, 0, scene=scene)
     assert seam.sum() == 2 * 20 and np.all(seam.sum(axis=1) == 2)  # one seam, across every row
 
 
 def test_compare_statistics():
-    rng = np.random.default_rng(7)
-    ref = rng.uniform(0.5, 2.0, (20, 30, 3))
+    ref = np.random.default_rng(7).uniform(0.5, 2.0, (20, 30, 3))
     test = ref.copy()
     test[:10] *= 1.1  # top half 10% high
     test[10:] *= 0.95  # bottom half 5% low
@@ -330,11 +317,9 @@ def test_compare_statistics():
     mask[:, :2] = True
     test[:, :2] = 1e6  # wildly off, but masked
     c = image_compare.compare(test, ref, mask, scale=0.1)
-    assert c.compared == 20 * 28 and c.masked == 40 and c.dark == 0
-    assert c.rel_mean == pytest.approx(0.075)
+    assert c.compared == 20 * 28 and c.masked == 40 and c.dark == 0 and c.rel_mean == pytest.approx(0.075)
     assert c.rel_median == pytest.approx(0.075)  # halfway between 0.05 and 0.1
-    assert c.rel_p95 == pytest.approx(0.1)
-    assert c.signed_mean == pytest.approx(0.025)
+    assert c.rel_p95 == pytest.approx(0.1) and c.signed_mean == pytest.approx(0.025)
     top, bottom = ref[:10, 2:].mean(axis=(0, 1)), ref[10:, 2:].mean(axis=(0, 1))
     np.testing.assert_allclose(c.channel_ratio, (1.1 * top + 0.95 * bottom) / (top + bottom))
     assert c.error.shape == (20, 30) and c.error.dtype == np.float32
@@ -352,40 +337,27 @@ def test_compare_dark_reference_and_bad_input():
     ref[0, 0] = 0
     c = image_compare.compare(ref, ref)
     assert c.dark == 1 and c.compared == 15 and c.rel_mean == 0 and c.channel_ratio == (1.0, 1.0, 1.0)
-    with pytest.raises(OclgiError, match="differ in shape"):
-        image_compare.compare(ref, np.ones((4, 5, 3)))
-    with pytest.raises(OclgiError, match=r"\(H, W, 3\)"):
-        image_compare.compare(ref[:, :, 0], ref)
     bad = ref.copy()
     bad[1, 1, 1] = np.nan
-    with pytest.raises(OclgiError, match="NaN"):
-        image_compare.compare(bad, ref)
-    with pytest.raises(OclgiError, match="mask"):
-        image_compare.compare(ref, ref, np.zeros((4, 4)))
-    with pytest.raises(OclgiError, match="no pixel left"):
-        image_compare.compare(ref, ref, np.ones((4, 4), bool))
+    for args, match in (((ref, np.ones((4, 5, 3))), "differ in shape"), ((ref[:, :, 0], ref), r"\(H, W, 3\)"),
+                        ((bad, ref), "NaN"), ((ref, ref, np.zeros((4, 4))), "mask"),
+                        ((ref, ref, np.ones((4, 4), bool)), "no pixel left")):
+        with pytest.raises(OclgiError, match=match):
+            image_compare.compare(*args)
 
 
 # -- compare_with_mitsuba: its files, all or nothing ------------------------------------------------
 
-
 def _small_run(engine, out, **kw):
-    from oclgi.study.image import compare_with_mitsuba
-
-    return compare_with_mitsuba(engine, out, spp=16, edge_px=1, width=24, height=16, photons=50_000,
-                                radius=0.1, **kw)
+    return compare_with_mitsuba(engine, out, spp=16, edge_px=1, width=24, height=16, photons=50_000, radius=0.1, **kw)
 
 
 def test_compare_with_mitsuba_writes_its_files(cornell, tmp_path):
-    from oclgi.io import read_image
-    from oclgi.study.image import FILES
-
     out = tmp_path / "cmp"
     summary = _small_run(cornell, out)
     assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
     data = json.loads((out / "comparison.json").read_text())
-    assert data == summary
-    assert data["width"] == 24 and data["height"] == 16
+    assert data == summary and data["width"] == 24 and data["height"] == 16
     assert data["oclgi"]["photons"] == 50_000 and data["oclgi"]["max_depth"] == 16
     assert data["mitsuba"]["max_depth"] == 17 and data["mitsuba"]["spp"] == 16
     assert 0 < data["compared_pixels"] < 24 * 16
@@ -398,8 +370,6 @@ def test_compare_with_mitsuba_writes_its_files(cornell, tmp_path):
 
 
 def test_compare_with_mitsuba_leaves_nothing_on_error(cornell, tmp_path, monkeypatch):
-    from oclgi.study import image as study_image
-
     out = tmp_path / "cmp"
     with pytest.raises(OclgiError, match="count_emitted"):
         _small_run(cornell, out, count_emitted=False)
@@ -427,13 +397,10 @@ def test_compare_with_mitsuba_leaves_nothing_on_error(cornell, tmp_path, monkeyp
         m.setattr(study_image, "write_image_file", failing_write)
         with pytest.raises(OclgiError, match="disk full"):
             _small_run(cornell, out)
-    assert len(calls) == 4
-    assert list(out.iterdir()) == []
+    assert len(calls) == 4 and list(out.iterdir()) == []
 
 
 def test_missing_mitsuba_is_one_clear_error(monkeypatch, plane_scene):
-    import sys
-
     monkeypatch.setitem(sys.modules, "mitsuba", None)  # makes `import mitsuba` fail
     with pytest.raises(OclgiError, match=r"pip install 'oclgi\[mitsuba\]'"):
         mitsuba_reference.render(plane_scene, spp=1)
@@ -441,15 +408,11 @@ def test_missing_mitsuba_is_one_clear_error(monkeypatch, plane_scene):
 
 def test_bad_arguments(plane_scene):
     p, n = np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]])
-    with pytest.raises(OclgiError, match="samples per pixel"):
-        mitsuba_reference.render(plane_scene, spp=0)
-    with pytest.raises(OclgiError, match="seed"):
-        mitsuba_reference.irradiance(plane_scene, p, n, seed=-1)
-    with pytest.raises(OclgiError, match="normal"):
-        mitsuba_reference.irradiance(plane_scene, p, np.zeros((1, 3)))
-    with pytest.raises(OclgiError, match="max_depth"):
-        mitsuba_reference.irradiance(plane_scene, p, n, max_depth=0)
-    with pytest.raises(OclgiError, match="Scene or Engine"):
-        mitsuba_reference.render("scene.toml")
-    with pytest.raises(OclgiError, match="variant"):
-        mitsuba_reference.load_mitsuba("no_such_variant")
+    for call, match in ((lambda: mitsuba_reference.render(plane_scene, spp=0), "samples per pixel"),
+                        (lambda: mitsuba_reference.irradiance(plane_scene, p, n, seed=-1), "seed"),
+                        (lambda: mitsuba_reference.irradiance(plane_scene, p, np.zeros((1, 3))), "normal"),
+                        (lambda: mitsuba_reference.irradiance(plane_scene, p, n, max_depth=0), "max_depth"),
+                        (lambda: mitsuba_reference.render("scene.toml"), "Scene or Engine"),
+                        (lambda: mitsuba_reference.load_mitsuba("no_such_variant"), "variant")):
+        with pytest.raises(OclgiError, match=match):
+            call()

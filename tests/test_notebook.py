@@ -15,10 +15,8 @@ KERNEL = "oclgi-test-python"
 
 
 def test_the_notebook_is_committed_without_outputs():
-    nb = json.loads(NOTEBOOK.read_text())
-    code = [c for c in nb["cells"] if c["cell_type"] == "code"]
-    assert len(code) >= 4
-    assert all(c["outputs"] == [] and c["execution_count"] is None for c in code)
+    code = [c for c in json.loads(NOTEBOOK.read_text())["cells"] if c["cell_type"] == "code"]
+    assert len(code) >= 4 and all(c["outputs"] == [] and c["execution_count"] is None for c in code)
 
 
 @pytest.fixture
@@ -57,8 +55,7 @@ def test_the_quickstart_notebook_runs(kernel_of_this_python):
     sensors = next(c for c in code if "engine.irradiance(" in c.source)
     assert text(sensors).startswith("array([[") and text(sensors).count("[") == 4  # (3, 3)
     session = next(c for c in code if "session.move(" in c.source)
-    assert "paths traced again" in text(session)
-    assert text(code[-1]).strip() == sys.executable
+    assert "paths traced again" in text(session) and text(code[-1]).strip() == sys.executable
     # progress went to stderr (or a widget), never into stdout
     assert not any("%|" in o.get("text", "") for c in code for o in c.outputs
                    if o.output_type == "stream" and o.name == "stdout")

@@ -7,12 +7,15 @@ the original wrong, which is why oclgi reads OBJ itself.
 """
 
 import warnings
+import zipfile
 
 import numpy as np
 import pytest
 import trimesh
 
 from oclgi.errors import OclgiError
+from oclgi.scene.description import load_file
+from oclgi.scene.mesh import load_mesh
 from oclgi.scene.obj import read_obj
 from oclgi.scene.scene import OclgiWarning
 
@@ -53,8 +56,7 @@ def test_original_file_is_the_tricky_one(box_dir):
 
 
 def test_reader_matches_trimesh_on_safe_file(original, trimesh_safe):
-    assert original.faces.shape == (36, 3)
-    assert len(trimesh_safe.faces) == 36
+    assert original.faces.shape == (36, 3) and len(trimesh_safe.faces) == 36
     assert _triangles(original.vertices, original.faces) == _triangles(trimesh_safe.vertices, trimesh_safe.faces)
 
 
@@ -79,8 +81,7 @@ def test_trimesh_gets_the_original_wrong(box_dir, original):
 def test_materials_come_through(original):
     assert original.material_names == [
         "floor", "ceiling", "backWall", "rightWall", "leftWall", "shortBox", "tallBox", "light"]
-    light = original.materials["light"]
-    assert light.emission == pytest.approx((17.0, 12.0, 4.0))
+    assert original.materials["light"].emission == pytest.approx((17.0, 12.0, 4.0))
     # every material named by usemtl is defined in the .mtl, and only the light emits
     for name in original.material_names:
         mat = original.materials[name]
@@ -88,39 +89,32 @@ def test_materials_come_through(original):
         if name != "light":
             assert mat.emission is None or max(mat.emission) == 0, name
     # the light is two triangles facing down
-    light_id = original.material_names.index("light")
-    light_faces = original.faces[original.face_material == light_id]
+    light_faces = original.faces[original.face_material == original.material_names.index("light")]
     assert len(light_faces) == 2
     v = original.vertices[light_faces]
-    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    assert (n[:, 1] < 0).all()
+    assert (np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])[:, 1] < 0).all()
     np.testing.assert_allclose(v[..., 1], 1.98)
 
 
 def test_scene_material_of_light(scenes_dir):
     """Through the scene description the light keeps its Ke and is the emitter."""
-    from oclgi.scene.description import load_file
-
     scene = load_file(scenes_dir / "cornell_box.toml")
     emissive = [m for m in scene.materials if max(m.emission) > 0]
     assert [m.emission for m in emissive] == [pytest.approx((17.0, 12.0, 4.0))]
-    assert emissive[0].name.endswith(":light")
-    assert scene.n_triangles == 36
+    assert emissive[0].name.endswith(":light") and scene.n_triangles == 36
 
 
 # -- the reader on small hand-written files --------------------------------------
 
 def _write(tmp_path, text, name="m.obj"):
-    p = tmp_path / name
-    p.write_text(text)
-    return p
+    (tmp_path / name).write_text(text)
+    return tmp_path / name
 
 
 def test_relative_indices_tabs_and_polygons(tmp_path):
     p = _write(tmp_path, "v\t0 0 0\nv 1\t0 0\nv  1 1 0\nv 0 1 0\nf -4 -3 -2 -1\nv 5 5 5\nf 1/1/1 2//2 -1\n")
     m = read_obj(p)
-    assert m.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 1, 4]]
-    assert m.face_material.tolist() == [-1, -1, -1]
+    assert m.faces.tolist() == [[0, 1, 2], [0, 2, 3], [0, 1, 4]] and m.face_material.tolist() == [-1, -1, -1]
 
 
 @pytest.mark.parametrize("text, match", [
@@ -166,10 +160,6 @@ def test_malformed_mtl_is_an_error(tmp_path):
 
 
 def test_obj_in_zip_reads_its_mtllib(tmp_path):
-    import zipfile
-
-    from oclgi.scene.mesh import load_mesh
-
     z = tmp_path / "mesh.zip"
     with zipfile.ZipFile(z, "w") as f:
         f.writestr("m.obj", "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl glow\nf 1 2 3\n")
@@ -177,5 +167,4 @@ def test_obj_in_zip_reads_its_mtllib(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         mesh = load_mesh(z)
-    assert mesh.names == ["", "glow"]
-    assert mesh.materials["glow"].emission == pytest.approx((4, 5, 6))
+    assert mesh.names == ["", "glow"] and mesh.materials["glow"].emission == pytest.approx((4, 5, 6))

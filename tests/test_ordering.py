@@ -9,6 +9,7 @@ argsort exactly.
 """
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 from oclgi.accel import ordering
@@ -71,20 +72,16 @@ def test_hilbert_is_a_hilbert_curve_over_a_whole_grid(queue, bits):
     step = np.abs(np.diff(walk, axis=0)).sum(axis=1)
     assert (step == 1).all(), f"{int((step != 1).sum())} jumps"
     # and it is Skilling's curve: the reference decoder inverts the keys
-    assert np.array_equal(hilbert_decode(keys, bits), cells)
-    assert walk[0].tolist() == [0, 0, 0]
+    assert np.array_equal(hilbert_decode(keys, bits), cells) and walk[0].tolist() == [0, 0, 0]
 
 
 def test_hilbert_at_ten_bits(queue, rng):
     """The production resolution: random runs of consecutive 30-bit keys decode to a
     face-adjacent walk, and the device encodes those cells back to the same keys."""
-    starts = rng.integers(0, 2**30 - 2000, size=8)
-    keys = np.concatenate([np.arange(s, s + 2000) for s in starts])
+    keys = np.concatenate([np.arange(s, s + 2000) for s in rng.integers(0, 2**30 - 2000, size=8)])
     cells = hilbert_decode(keys, 10)
-    steps = np.abs(np.diff(cells.reshape(8, 2000, 3), axis=1)).sum(axis=2)
-    assert (steps == 1).all()
-    back = ordering.point_keys(queue, (cells + 0.5).astype(np.float32), "hilbert", bits=10,
-                               box=(np.zeros(3), 1024.0))
+    assert (np.abs(np.diff(cells.reshape(8, 2000, 3), axis=1)).sum(axis=2) == 1).all()
+    back = ordering.point_keys(queue, (cells + 0.5).astype(np.float32), "hilbert", bits=10, box=(np.zeros(3), 1024.0))
     assert np.array_equal(back.astype(np.int64), keys)
 
 
@@ -93,8 +90,7 @@ def test_morton_equals_bit_interleave(queue, rng):
     keys = ordering.point_keys(queue, pts, "morton", bits=4, box=box)
     assert np.array_equal(keys.astype(np.int64), morton_reference(cells, 4))
     cells = rng.integers(0, 1024, size=(50_000, 3))
-    keys = ordering.point_keys(queue, (cells + 0.5).astype(np.float32), "morton", bits=10,
-                               box=(np.zeros(3), 1024.0))
+    keys = ordering.point_keys(queue, (cells + 0.5).astype(np.float32), "morton", bits=10, box=(np.zeros(3), 1024.0))
     assert np.array_equal(keys.astype(np.int64), morton_reference(cells, 10))
 
 
@@ -108,8 +104,7 @@ def test_quantisation_uses_the_bounding_cube(queue, rng):
     side = float((pts.max(axis=0) - lo).max())
     cells = np.clip(np.floor((pts - lo) * (1024 / (side * (1 + 1e-6)))), 0, 1023).astype(np.int64)
     # float32 rounding in the kernel may move a point sitting on a cell border
-    ref = morton_reference(cells, 10)
-    assert (keys.astype(np.int64) == ref).mean() > 0.999
+    assert (keys.astype(np.int64) == morton_reference(cells, 10)).mean() > 0.999
     assert keys[1] == 0  # the low corner: cell (0, 0, 0)
     far = hilbert_decode(ordering.point_keys(queue, pts[:1], "hilbert", bits=10, box=(lo, side)), 10)[0]
     assert far[0] == 1023  # the longest axis spans all cells, the far corner is the last one
@@ -122,8 +117,7 @@ def test_device_sort_equals_numpy_stable_argsort(queue, rng, n, high):
     """Exactly argsort(kind="stable"): many ties (high = 7, 1000) check stability."""
     keys = rng.integers(0, high, size=n).astype(np.uint32)
     perm = ordering.sort_keys(queue, keys, key_bits=30)
-    assert perm.dtype == np.int32
-    assert np.array_equal(perm, np.argsort(keys, kind="stable"))
+    assert perm.dtype == np.int32 and np.array_equal(perm, np.argsort(keys, kind="stable"))
 
 
 def test_order_points(queue, rng):
@@ -138,8 +132,6 @@ def test_order_points(queue, rng):
     assert np.array_equal(ordering.order_points(queue, pts, "none"), np.arange(20_000))
     buf = ordering.order_points(queue, pts, "hilbert", device=True)
     out = np.empty(20_000, np.int32)
-    import pyopencl as cl
-
     cl.enqueue_copy(queue, out, buf)
     assert np.array_equal(out, ordering.order_points(queue, pts, "hilbert"))
 

@@ -19,40 +19,14 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 from cli_run import in_process, run
-from small_scene import BOX_OBJ, MOVING_BLOCK as MOVING
+from small_scene import MOVING_BLOCK as MOVING, write_scene
 
 from oclgi import io, tempfiles
 from oclgi.errors import OclgiError
 from oclgi.incremental.animate import animate, poses
-
-BOX_MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 5 5 5\n"
-SCENE = """[[mesh]]
-path = "box.obj"
-
-[camera]
-position = [0, 0.5, 3]
-look_at = [0, 0.3, 0]
-width = 8
-height = 8
-
-[photons]
-count = 2000
-
-[estimator]
-radius = 0.1
-"""
-POINTS = "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0.5,0.01,0.5,0,1,0\n"
-
-
-def write_scene(d: Path, name="s.toml") -> Path:
-    (d / "box.obj").write_text(BOX_OBJ)
-    (d / "box.mtl").write_text(BOX_MTL)
-    (d / "p.csv").write_text(POINTS)
-    (d / name).write_text(SCENE)
-    return d / name
-
 
 @pytest.fixture
 def scene(tmp_path):
@@ -86,19 +60,24 @@ def snapshot(d: Path) -> dict:
     return {p.relative_to(d): p.read_bytes() for p in sorted(d.rglob("*")) if p.is_file()}
 
 
-def refused(res, match):
-    rc, out, err = res
-    lines = err.splitlines()
-    assert rc == 2, err
-    assert "Traceback" not in err
-    assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), err
-    assert match in lines[0], lines[0]
-    assert out == ""
+@pytest.fixture
+def refuses(oclgi):
+    """``oclgi ARGS`` in ``cwd`` refused: exit status 2, one error line holding
+    ``match``, nothing on stdout, every file under ``cwd`` as it was."""
+    def check(cwd, *args, match):
+        before = snapshot(cwd)
+        rc, out, err = oclgi(cwd, *args)
+        lines = err.splitlines()
+        assert rc == 2, err
+        assert "Traceback" not in err
+        assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), err
+        assert match in lines[0], lines[0]
+        assert out == "" and snapshot(cwd) == before
+
+    return check
 
 
 def software(path) -> str:
-    import OpenImageIO as oiio
-
     inp = oiio.ImageInput.open(str(path))
     try:
         return inp.spec().get_string_attribute("Software")
@@ -220,35 +199,38 @@ SLOW_WRITE = textwrap.dedent("""
 """)
 
 
-def test_sigterm_while_writing_leaves_no_temporary_file(scene, tmp_path):
-    before = snapshot(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, "render", "s.toml", "-o", "x.exr", "--quiet"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def _signalled(script, args, cwd, ready, sig, temporary_first=True):
+    """``python -c script args`` in ``cwd``, sent ``sig`` once it printed the
+    line ``ready`` (a temporary file under ``cwd`` by then, unless not
+    ``temporary_first``); returns the ended process."""
+    proc = subprocess.Popen([sys.executable, "-c", script, *args], cwd=cwd, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     try:
-        assert proc.stdout.readline() == "writing\n", proc.stderr.read()
-        assert any(tempfiles.is_temporary(p.name) for p in tmp_path.iterdir())
-        proc.send_signal(signal.SIGTERM)
+        assert proc.stdout.readline() == ready, proc.stderr.read()
+        assert not temporary_first or any(tempfiles.is_temporary(p.name) for p in cwd.iterdir())
+        proc.send_signal(sig)
         proc.wait(timeout=30)
     finally:
         proc.kill()
         proc.wait()
+    return proc
+
+
+RENDER_X = ["render", "s.toml", "-o", "x.exr", "--quiet"]
+
+
+def test_sigterm_while_writing_leaves_no_temporary_file(scene, tmp_path):
+    before = snapshot(tmp_path)
+    proc = _signalled(SLOW_WRITE, RENDER_X, tmp_path, "writing\n", signal.SIGTERM)
     # Ended by the signal (or, where a handler turns it into an exit, with 128 + 15).
     assert proc.returncode in (-signal.SIGTERM, 128 + signal.SIGTERM), proc.returncode
-    assert "Traceback" not in proc.stderr.read()
-    assert snapshot(tmp_path) == before
+    assert "Traceback" not in proc.stderr.read() and snapshot(tmp_path) == before
 
 
 def test_sigkill_leftover_is_removed_by_the_next_run(oclgi, scene, tmp_path):
     before = snapshot(tmp_path)
-    proc = subprocess.Popen([sys.executable, "-c", SLOW_WRITE, "render", "s.toml", "-o", "x.exr", "--quiet"],
-                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline() == "writing\n", proc.stderr.read()
-        proc.kill()  # SIGKILL: no handler runs
-        proc.wait(timeout=30)
-    finally:
-        proc.kill()
-        proc.wait()
+    # SIGKILL: no handler runs
+    proc = _signalled(SLOW_WRITE, RENDER_X, tmp_path, "writing\n", signal.SIGKILL, temporary_first=False)
     left = [p.name for p in tmp_path.iterdir() if tempfiles.is_temporary(p.name)]
     assert left and all(f"-{proc.pid}-" in name for name in left)
     rc, out, err = oclgi(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.npy", "--quiet")
@@ -287,73 +269,60 @@ def test_temporary_names_carry_the_pid(tmp_path):
 
 # -- no output replaces an input ------------------------------------------------------------------
 
-def test_irradiance_output_is_not_the_points_file(no_work, oclgi, scene, tmp_path):
-    before = snapshot(tmp_path)
+def test_irradiance_output_is_not_the_points_file(no_work, refuses, scene, tmp_path):
     for out in ("p.csv", "./p.csv", tmp_path / "p.csv"):
-        refused(oclgi(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", out),
-                "it is the points file (--points)")
+        refuses(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", out,
+                match="it is the points file (--points)")
     os.symlink("p.csv", tmp_path / "link.csv")
-    before[Path("link.csv")] = before[Path("p.csv")]
-    refused(oclgi(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "link.csv"),
-            "it is the points file")
-    assert snapshot(tmp_path) == before
+    refuses(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "link.csv", match="it is the points file")
 
 
 @pytest.mark.parametrize("out", ["scene.exr", "scene.png"])  # the file -o names, or its sibling
-def test_render_output_is_not_the_scene_file(no_work, oclgi, tmp_path, out):
-    write_scene(tmp_path, "scene.exr")
-    before = snapshot(tmp_path)
-    refused(oclgi(tmp_path, "render", "scene.exr", "-o", out, "--quiet"), "it is the scene file")
-    assert snapshot(tmp_path) == before
+def test_render_output_is_not_the_scene_file(no_work, refuses, tmp_path, out):
+    write_scene(tmp_path, name="scene.exr")
+    refuses(tmp_path, "render", "scene.exr", "-o", out, "--quiet", match="it is the scene file")
 
 
-def test_animate_output_is_not_the_keyframes_file(no_work, oclgi, tmp_path):
+def test_animate_output_is_not_the_keyframes_file(no_work, refuses, tmp_path):
     (tmp_path / "m.toml").write_text(MOVING)
     (tmp_path / "anim").mkdir()
     (tmp_path / "anim" / "timing.csv").write_text("0,0,0\n0.5,0,0\n")
-    before = snapshot(tmp_path)
-    refused(oclgi(tmp_path, "animate", "m.toml", "--path", "anim/timing.csv", "--frames", 2, "-o", "anim"),
-            "it is the keyframes file (--path)")
-    assert snapshot(tmp_path) == before
+    refuses(tmp_path, "animate", "m.toml", "--path", "anim/timing.csv", "--frames", 2, "-o", "anim",
+            match="it is the keyframes file (--path)")
 
 
 # -- the sibling image -------------------------------------------------------------------------------
 
-def test_sibling_never_replaces_a_users_file(oclgi, scene, tmp_path):
+def test_sibling_never_replaces_a_users_file(oclgi, refuses, scene, tmp_path):
     (tmp_path / "photo.png").write_bytes(b"my photo")
-    before = snapshot(tmp_path)
-    refused(oclgi(tmp_path, "render", "s.toml", "-o", "photo.exr", "--quiet"),
-            "photo.png exists and oclgi did not write it")
-    assert snapshot(tmp_path) == before
+    refuses(tmp_path, "render", "s.toml", "-o", "photo.exr", "--quiet",
+            match="photo.png exists and oclgi did not write it")
 
     rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", "photo.exr", "--no-png", "--quiet")
     assert rc == 0, err
-    assert out == "wrote photo.exr\n"
-    assert (tmp_path / "photo.png").read_bytes() == b"my photo"
+    assert out == "wrote photo.exr\n" and (tmp_path / "photo.png").read_bytes() == b"my photo"
 
     rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", "photo.exr", "--force", "--quiet")
     assert rc == 0, err
     assert software(tmp_path / "photo.png") == "oclgi"
 
 
-def test_sibling_of_a_png_and_reruns(oclgi, scene, tmp_path):
+def test_sibling_of_a_png_and_reruns(oclgi, refuses, scene, tmp_path):
     for named in ("x.exr", "x.png", "x.exr"):  # each run replaces oclgi's own files (make render does this)
         rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", named, "--quiet")
         assert rc == 0, err
         assert out == "wrote x.exr\nwrote x.png\n"
     (tmp_path / "y.exr").write_bytes(b"not an image")
-    refused(oclgi(tmp_path, "render", "s.toml", "-o", "y.png", "--quiet"), "y.exr exists and oclgi did not")
+    refuses(tmp_path, "render", "s.toml", "-o", "y.png", "--quiet", match="y.exr exists and oclgi did not")
     rc, out, err = oclgi(tmp_path, "render", "s.toml", "-o", "y.png", "--no-exr", "--quiet")
     assert rc == 0, err
-    assert out == "wrote y.png\n"
-    assert (tmp_path / "y.exr").read_bytes() == b"not an image"
+    assert out == "wrote y.png\n" and (tmp_path / "y.exr").read_bytes() == b"not an image"
 
 
-def test_default_outputs_are_both_protected(no_work, oclgi, scene, tmp_path):
+def test_default_outputs_are_both_protected(no_work, refuses, scene, tmp_path):
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "s.exr").write_bytes(b"mine")
-    refused(oclgi(tmp_path, "render", "s.toml", "--quiet"), "s.exr exists and oclgi did not write it")
-    assert (tmp_path / "out" / "s.exr").read_bytes() == b"mine"
+    refuses(tmp_path, "render", "s.toml", "--quiet", match="s.exr exists and oclgi did not write it")
 
 
 @pytest.mark.parametrize("args,match", [
@@ -361,36 +330,31 @@ def test_default_outputs_are_both_protected(no_work, oclgi, scene, tmp_path):
     (["-o", "x.exr", "--no-exr"], "--no-exr contradicts -o x.exr"),
     (["--no-png", "--no-exr"], "leave nothing to write"),
 ])
-def test_sibling_flags_that_contradict(no_work, oclgi, scene, tmp_path, args, match):
-    before = snapshot(tmp_path)
-    refused(oclgi(tmp_path, "render", "s.toml", *args, "--quiet"), match)
-    assert snapshot(tmp_path) == before
+def test_sibling_flags_that_contradict(no_work, refuses, scene, tmp_path, args, match):
+    refuses(tmp_path, "render", "s.toml", *args, "--quiet", match=match)
 
 
 @pytest.mark.parametrize("command", [["render", "s.toml"], ["animate", "s.toml", "--path", "line:1,0,0", "-o", "a"]])
 @pytest.mark.parametrize("exposure", ["-1", "nan", "0", "inf"])
-def test_bad_exposure_is_refused(no_work, oclgi, scene, tmp_path, command, exposure):
-    before = snapshot(tmp_path)
+def test_bad_exposure_is_refused(no_work, refuses, scene, tmp_path, command, exposure):
     wanted = "expected 'auto' or a positive number" if command[0] == "render" else "expected a positive number"
-    refused(oclgi(tmp_path, *command, "--exposure", exposure), f"argument --exposure: {wanted}")
-    assert snapshot(tmp_path) == before
+    refuses(tmp_path, *command, "--exposure", exposure, match=f"argument --exposure: {wanted}")
 
 
 def test_help_names_the_sibling(tmp_path):
-    res = run(tmp_path, "render", "--help")
-    text = " ".join(res.stdout.split())
+    text = " ".join(run(tmp_path, "render", "--help").stdout.split())
     assert "-o x.exr writes x.exr and x.png" in text
     assert "--no-png" in text and "--no-exr" in text and "--force" in text
 
 
 # -- writability is checked first ----------------------------------------------------------------------
 
-def test_virtual_file_system_fails_before_any_work(no_work, oclgi, scene, tmp_path):
+def test_virtual_file_system_fails_before_any_work(no_work, refuses, scene, tmp_path):
     # /proc takes no new files, for root too (who passes every permission check).
-    refused(oclgi(tmp_path, "render", "s.toml", "-o", "/proc/oclgi-test.exr", "--quiet"),
-            "cannot write /proc/oclgi-test.exr")
-    refused(oclgi(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "/proc/oclgi/e.npy", "--quiet"),
-            "cannot write /proc/oclgi/e.npy")
+    refuses(tmp_path, "render", "s.toml", "-o", "/proc/oclgi-test.exr", "--quiet",
+            match="cannot write /proc/oclgi-test.exr")
+    refuses(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "/proc/oclgi/e.npy", "--quiet",
+            match="cannot write /proc/oclgi/e.npy")
 
 
 def _as_unprivileged(cwd: Path, args) -> tuple[int, str]:
@@ -504,8 +468,7 @@ def test_failed_animation_adds_no_frame(tmp_path):
     session = FakeSession(look=tmp_path)
     rows = animate(session, "block", "line:1,0,0", 2, old)
     # An existing folder is staged inside it: its parent needs no write right.
-    assert session.seen == [["old"], ["old"]]
-    assert len(rows) == 2
+    assert session.seen == [["old"], ["old"]] and len(rows) == 2
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old"]
     assert sorted(p.name for p in old.iterdir()) == ["frame_0000.png", "frame_0001.png", "timing.csv"]
     assert software(old / "frame_0000.png") == "oclgi"
@@ -521,16 +484,7 @@ def test_sigterm_during_animation_leaves_nothing(tmp_path):
         from pathlib import Path
         animate(FakeSession(hang_at=2), "block", "line:1,0,0", 4, Path(sys.argv[1]))
     """)
-    proc = subprocess.Popen([sys.executable, "-c", script, str(tmp_path / "anim")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline() == "frames written\n", proc.stderr.read()
-        assert any(tempfiles.is_temporary(p.name) for p in tmp_path.iterdir())
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=30)
-    finally:
-        proc.kill()
-        proc.wait()
+    proc = _signalled(script, [str(tmp_path / "anim")], tmp_path, "frames written\n", signal.SIGTERM)
     assert proc.returncode in (-signal.SIGTERM, 128 + signal.SIGTERM), proc.returncode
     assert list(tmp_path.iterdir()) == []
 
@@ -555,14 +509,11 @@ def test_keyframe_matrices_are_checked(tmp_path, bad, match):
 def test_good_keyframe_matrices(tmp_path):
     small = [0.01, 0, 0, 1, 0, 0.01, 0, 2, 0, 0, -0.01, 3, 0, 0, 0, 1]  # a small scale and a mirror are poses
     np.save(tmp_path / "k.npy", np.array([IDENTITY, small], float))
-    p = poses(str(tmp_path / "k.npy"), 2)
-    np.testing.assert_allclose(p[1][:3, 3], [1, 2, 3])
+    np.testing.assert_allclose(poses(str(tmp_path / "k.npy"), 2)[1][:3, 3], [1, 2, 3])
 
 
-def test_bad_matrix_fails_before_any_work(no_work, oclgi, tmp_path):
+def test_bad_matrix_fails_before_any_work(no_work, refuses, tmp_path):
     (tmp_path / "m.toml").write_text(MOVING)
     (tmp_path / "k.csv").write_text(",".join(map(str, IDENTITY[:15] + [0])) + "\n")
-    before = snapshot(tmp_path)
-    refused(oclgi(tmp_path, "animate", "m.toml", "--path", "k.csv", "--frames", 1, "-o", "anim"),
-            "k.csv: the matrix of row 1 has the last row")
-    assert snapshot(tmp_path) == before
+    refuses(tmp_path, "animate", "m.toml", "--path", "k.csv", "--frames", 1, "-o", "anim",
+            match="k.csv: the matrix of row 1 has the last row")

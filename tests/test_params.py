@@ -12,6 +12,7 @@ Each bad value is given three ways, and the message's text after the name
   sessions call) or the estimator options of ``Engine.irradiance``.
 """
 
+import dataclasses
 import doctest
 import math
 import re
@@ -19,17 +20,17 @@ import subprocess
 
 import numpy as np
 import pytest
-from cli_run import in_process
-from small_scene import BOX_OBJ
+from cli_run import fails_cleanly, in_process, run
+from small_scene import BOX_MTL as MTL, BOX_OBJ
 
 import oclgi
 import oclgi.params
-from oclgi import params
+from oclgi import budget, params
+from oclgi.cli import build_parser
 from oclgi.errors import OclgiError
 from oclgi.scene.description import load_dict, load_file
 from oclgi.study import Config
 
-MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 5 5 5\n"
 SCENE = '[[mesh]]\npath = "box.obj"\n{mesh}\n[camera]\nposition = [0, 0.5, 3]\nlook_at = [0, 0.3, 0]\n' \
         'width = 4\nheight = 4\n{extra}'
 POINTS = np.array([[0, 0.01, 0, 0, 1, 0]], float)
@@ -48,28 +49,10 @@ def engine(tmp_path_factory):
     return oclgi.Engine(load_file(write_scene(tmp_path_factory.mktemp("params"))), progress=False)
 
 
-def files_under(d):
-    return {p.relative_to(d) for p in d.rglob("*") if p.is_file()}
-
-
 @pytest.fixture
 def cli(monkeypatch, capsys):
-    """``oclgi.cli.main(args)`` in ``cwd``: checks a clean failure (exit 2, one
-    error line, after warnings if any, nothing on stdout, no file written)
-    and returns the error line."""
-    def fail(cwd, *args):
-        before = files_under(cwd)
-        done = in_process(monkeypatch, capsys, cwd, *args)
-        rc, out, err = done.returncode, done.stdout, done.stderr
-        assert rc == 2, err
-        lines = err.splitlines()
-        assert lines and lines[-1].startswith("oclgi: error: "), err
-        assert all(line.startswith("oclgi: warning: ") for line in lines[:-1]), err
-        assert "Traceback" not in err and out == ""
-        assert files_under(cwd) == before
-        return lines[-1]
-
-    return fail
+    """``oclgi.cli.main(args)`` in ``cwd``: checks a clean failure (cli_run.fails_cleanly), returns the error line."""
+    return lambda cwd, *args: fails_cleanly(lambda d, *a: in_process(monkeypatch, capsys, d, *a), cwd, *args)
 
 
 ARGPARSE = re.compile(r"^oclgi: error: argument (\S+): (.*) \(see `oclgi \w+ --help`\)$")
@@ -104,7 +87,7 @@ def cli_text(value):
     return value if isinstance(value, str) else repr(value)
 
 
-# -- the scalar parameters that have a flag: --photons, --seed, --max-depth, --radius, --method --------
+# -- the run's scalar parameters: with a flag (--photons, --seed, --max-depth, --radius, --method) or -O --
 
 FLAGGED = {  # parameter: (flag, scene file table.key, bad values, good values and what they read as)
     "photons": ("--photons", "photons.count",
@@ -125,15 +108,33 @@ FLAGGED = {  # parameter: (flag, scene file table.key, bad values, good values a
                ["photonmap", "DETP", "", 5],
                [(m, m) for m in params.METHODS]),
 }
-FLAGGED_BAD = [(p, v) for p, spec in FLAGGED.items() for v in spec[2]]
-FLAGGED_GOOD = [(p, v, want) for p, spec in FLAGGED.items() for v, want in spec[3]]
+# the parameters without a flag: -O extension=E, -O count_emitted=false
+OPTION_PARAMS = {
+    "extension": ("estimator.extension", [-1, -0.5, math.inf, math.nan, "x", 1e19],
+                  [(0, 0.0), (0.5, 0.5), (1e18, 1e18)]),
+    "count_emitted": ("estimator.count_emitted", [1, 0, 1.0, "yes"], [(True, True), (False, False)]),
+}
+BAD = [(p, v) for p, spec in FLAGGED.items() for v in spec[2]] + \
+    [(p, v) for p, spec in OPTION_PARAMS.items() for v in spec[1]]
+GOOD = [(p, v, want) for p, spec in FLAGGED.items() for v, want in spec[3]] + \
+    [(p, v, want) for p, spec in OPTION_PARAMS.items() for v, want in spec[2]]
 
 
-@pytest.mark.parametrize("param, value", FLAGGED_BAD, ids=[f"{p}={v!r}" for p, v in FLAGGED_BAD])
-def test_flagged_parameter_refused_alike(param, value, engine, cli, tmp_path):
-    flag, key, _, _ = FLAGGED[param]
+def _key_and_args(param, value, text):
+    """The scene file's table.key of ``param`` and its command-line arguments
+    (a flag's, or -O param=VALUE), ``value`` written by ``text``."""
+    if param in FLAGGED:
+        return FLAGGED[param][1], [FLAGGED[param][0], cli_text(value)]
+    return OPTION_PARAMS[param][0], ["-O", f"{param}={text(value)}"]
+
+
+@pytest.mark.parametrize("param, value", BAD, ids=[f"{p}={v!r}" for p, v in BAD])
+def test_parameter_refused_alike(param, value, engine, cli, tmp_path):
+    key, args = _key_and_args(param, value, cli_text)
     write_scene(tmp_path)
-    by_cli = flag_problem(cli(tmp_path, "render", "s.toml", "-o", "x.exr", flag, cli_text(value)), flag)
+    line = cli(tmp_path, "render", "s.toml", "-o", "x.exr", *args)
+    by_cli = (flag_problem(line, args[0]) if param in FLAGGED
+              else named_problem(flag_problem(line, "-O/--option"), param))
 
     table, name = key.split(".")
     scene = write_scene(tmp_path / "bad", extra=f"[{table}]\n{name} = {toml_literal(value)}\n")
@@ -147,69 +148,23 @@ def test_flagged_parameter_refused_alike(param, value, engine, cli, tmp_path):
     by_api = named_problem(str(info.value), param)
 
     assert by_cli == by_file == by_api
-    assert f"{value!r}" in by_api
+    assert f"{value!r}" in by_api and (param in FLAGGED or by_api.endswith(f"got {value!r}"))
 
 
-@pytest.mark.parametrize("param, value, want", FLAGGED_GOOD, ids=[f"{p}={v!r}" for p, v, _ in FLAGGED_GOOD])
-def test_flagged_parameter_accepted_alike(param, value, want, engine, tmp_path):
-    from oclgi.cli import build_parser
-
-    flag, key, _, _ = FLAGGED[param]
-    args = build_parser().parse_args(["render", "s.toml", flag, cli_text(value)])
+@pytest.mark.parametrize("param, value, want", GOOD, ids=[f"{p}={v!r}" for p, v, _ in GOOD])
+def test_parameter_accepted_alike(param, value, want, engine, tmp_path):
+    key, args = _key_and_args(param, value, toml_literal)
+    parsed = build_parser().parse_args(["render", "s.toml", *args])
     table, name = key.split(".")
     scene = load_file(write_scene(tmp_path, extra=f"[{table}]\n{name} = {toml_literal(value)}\n"))
     api = engine.run_params(**{param: value})
-    for got in (getattr(args, param), getattr(scene.settings, param), getattr(api, param)):
-        assert got == want and type(got) is type(want)
-
-
-# -- the parameters without a flag: -O extension=E, -O count_emitted=false ----------------------------
-
-OPTION_PARAMS = {
-    "extension": ("estimator.extension", [-1, -0.5, math.inf, math.nan, "x", 1e19],
-                  [(0, 0.0), (0.5, 0.5), (1e18, 1e18)]),
-    "count_emitted": ("estimator.count_emitted", [1, 0, 1.0, "yes"], [(True, True), (False, False)]),
-}
-OPTION_BAD = [(p, v) for p, spec in OPTION_PARAMS.items() for v in spec[1]]
-OPTION_GOOD = [(p, v, want) for p, spec in OPTION_PARAMS.items() for v, want in spec[2]]
-
-
-@pytest.mark.parametrize("param, value", OPTION_BAD, ids=[f"{p}={v!r}" for p, v in OPTION_BAD])
-def test_option_parameter_refused_alike(param, value, engine, cli, tmp_path):
-    key = OPTION_PARAMS[param][0]
-    write_scene(tmp_path)
-    line = cli(tmp_path, "render", "s.toml", "-o", "x.exr", "-O", f"{param}={cli_text(value)}")
-    by_cli = named_problem(flag_problem(line, "-O/--option"), param)
-
-    scene = write_scene(tmp_path / "bad", extra=f"[estimator]\n{key.split('.')[1]} = {toml_literal(value)}\n")
-    with pytest.raises(params.ParamError) as info:
-        load_file(scene)
-    by_file = named_problem(str(info.value), key)
-
-    with pytest.raises(params.ParamError) as info:
-        engine.run_params(**{param: value})
-    by_api = named_problem(str(info.value), param)
-
-    assert by_cli == by_file == by_api
-    assert by_api.endswith(f"got {value!r}")
-
-
-@pytest.mark.parametrize("param, value, want", OPTION_GOOD, ids=[f"{p}={v!r}" for p, v, _ in OPTION_GOOD])
-def test_option_parameter_accepted_alike(param, value, want, engine, tmp_path):
-    from oclgi.cli import build_parser
-
-    key = OPTION_PARAMS[param][0]
-    args = build_parser().parse_args(["render", "s.toml", "-O", f"{param}={toml_literal(value)}"])
-    scene = load_file(write_scene(tmp_path, extra=f"[estimator]\n{key.split('.')[1]} = {toml_literal(value)}\n"))
-    api = engine.run_params(**{param: value})
-    for got in (dict(args.option)[param], getattr(scene.settings, param), getattr(api, param)):
+    by_cli = getattr(parsed, param) if param in FLAGGED else dict(parsed.option)[param]
+    for got in (by_cli, getattr(scene.settings, param), getattr(api, param)):
         assert got == want and type(got) is type(want)
 
 
 def test_option_parameters_reach_the_run(tmp_path):
     """-O extension and -O count_emitted change the estimate as the API's arguments do."""
-    from cli_run import run
-
     write_scene(tmp_path)
     np.save(tmp_path / "p.npy", POINTS)
     res = run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", "--photons", "2e3",
@@ -254,8 +209,7 @@ def test_run_parameter_is_no_option(key, engine, cli, tmp_path):
 
 
 def test_option_text():
-    assert params.option_text("k=50") == ("k", 50)
-    assert params.option_text(" q = 0.6") == ("q", 0.6)
+    assert params.option_text("k=50") == ("k", 50) and params.option_text(" q = 0.6") == ("q", 0.6)
     assert params.option_text("front_only=false") == ("front_only", False)  # was the string 'false'
     assert params.option_text("front_only=True") == ("front_only", True)
     assert params.option_text("order=morton") == ("order", "morton")
@@ -267,8 +221,6 @@ def test_option_text():
 
 def test_boolean_option_from_the_command_line(tmp_path):
     """-O front_only=false reaches the photon map as False (it was refused as 'false')."""
-    from cli_run import run
-
     write_scene(tmp_path)
     np.save(tmp_path / "p.npy", POINTS)
     res = run(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", "--photons", "2000",
@@ -291,8 +243,7 @@ def test_boolean_option_from_the_command_line(tmp_path):
 def test_study_refuses_alike(args, api, problem, cli, tmp_path):
     write_scene(tmp_path)
     line = cli(tmp_path, "study", "s.toml", "--seeds", "2", *args, "-o", "out")
-    flag = args[0]
-    assert flag_problem(line, flag) == problem
+    assert flag_problem(line, args[0]) == problem
     api.setdefault("method", "detp")
     with pytest.raises(params.ParamError) as info:
         Config(api.pop("method"), **api)
@@ -373,8 +324,6 @@ def test_run_params_dataclass(engine):
         params.RunParams(photons=0)
     with pytest.raises(Exception):
         p.photons = 5  # frozen: change one with dataclasses.replace, which checks again
-    import dataclasses
-
     with pytest.raises(params.ParamError, match="^max_depth: "):
         dataclasses.replace(p, max_depth=0)
     with pytest.raises(OclgiError, match="settings must be an oclgi.params.RunParams"):
@@ -410,8 +359,6 @@ def test_doctests():
 
 def test_cli_subprocess_float32_radius(tmp_path):
     """The command as users run it: one line, exit 2, no traceback (was ZeroDivisionError)."""
-    from cli_run import run
-
     write_scene(tmp_path)
     res = run(tmp_path, "render", "s.toml", "-o", "x.exr", "--radius", "1e-300")
     assert isinstance(res, subprocess.CompletedProcess)
@@ -455,8 +402,6 @@ def test_api_readers(reader, bad, good):
 
 
 def test_huge_frame_count_gives_its_memory():
-    from oclgi import budget
-
     for value in (10**8, 1e8):
         with pytest.raises(params.ParamError, match=r"^--frames: expected an integer in 1..1,000,000, got 100000000 "
                                                     r"\(its poses and timings alone would take about 119.2 GiB"):

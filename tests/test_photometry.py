@@ -61,7 +61,6 @@ def test_irradiance_command_writes_lux(tmp_path, monkeypatch, capsys):
     assert lines[0] == "x,y,z,nx,ny,nz,E_v_lux" and len(lines) == 2
     watts = np.load(tmp_path / "w.npy")
     assert float(lines[1].split(",")[-1]) == pytest.approx(float(illuminance_lux(watts)[0]), rel=1e-8)
-    bad = scene.read_text().replace("candela = 1000", "candela = 1000\nintensity = [1, 1, 1]")
-    scene.write_text(bad)
+    scene.write_text(scene.read_text().replace("candela = 1000", "candela = 1000\nintensity = [1, 1, 1]"))
     res = in_process(monkeypatch, capsys, tmp_path, *args, "-o", "x.npy")
     assert res.returncode == 2 and "give intensity (W/sr) or candela, not both" in res.stderr

@@ -19,11 +19,11 @@
 """
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from analytic_scenes import box, exact, face_points, ring_points
+from exactness import surface_points
 from scipy.spatial import cKDTree
 
 import oclgi
@@ -31,10 +31,6 @@ from oclgi.cl.constants import FIXED_ONE, FRONT_COS_EPS
 from oclgi.errors import OclgiError
 from oclgi.estimators import photon_map as pm
 from oclgi.accel.point_index import KnnIndex
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from exactness import surface_points  # noqa: E402
-from analytic_scenes import box, exact, plane_scene  # noqa: E402
 
 EPS = np.float32(FRONT_COS_EPS)  # the kernels' front-side rule
 
@@ -72,10 +68,8 @@ def assert_same_as_kdtree(ids, d2, pos, qp, k):
 
 
 @pytest.fixture(scope="module")
-def queue():
-    from oclgi.cl.device import create_context
-
-    return create_context()[1]
+def queue(cl_env):
+    return cl_env[1]
 
 
 @pytest.mark.parametrize("index", ["bvh", "grid"])
@@ -130,14 +124,8 @@ def test_neighbours_far_queries_duplicates_and_back_sides(queue, index):
         assert (ids[::3] == -1).all() and np.isinf(d2[::3]).all()
 
 
-@pytest.fixture(scope="module")
-def cornell(scenes_dir):
-    return oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
-
-
 def test_neighbours_cornell_impacts(cornell):
-    rng = np.random.default_rng(3)
-    pts = surface_points(cornell, 300, rng)
+    pts = surface_points(cornell, 300, np.random.default_rng(3))
     k = 40
     est = cornell.irradiance(pts, method="photon_map", photons=40_000, k=k)
     pmap = est.estimator
@@ -155,8 +143,7 @@ def test_neighbours_cornell_impacts(cornell):
     # the estimate is built from exactly these neighbours
     # impacts carry power in units of the largest photon power: 2^24 fixed-point units
     q = np.rint(power.astype(np.float32) * np.float32(FIXED_ONE)).astype(np.int64)
-    kth = ref_ids[:, -1]
-    expect = q[ref_ids].sum(axis=1) - q[kth]
+    expect = q[ref_ids].sum(axis=1) - q[ref_ids[:, -1]]
     assert np.array_equal(est.accumulators, expect)
     r2 = ref_d2[:, -1].astype(np.float64)
     np.testing.assert_allclose(est.irradiance, expect / est.scale / (math.pi * r2[:, None]), rtol=1e-5)
@@ -176,8 +163,7 @@ def test_impacts_are_segment_ends(cornell):
             keep &= np.arange(len(seg)) % depth != 0
         s = seg[keep]
         end = s["org"] + s["t_end"][:, None] * s["dir"]
-        assert np.array_equal(pos, end.astype(np.float32))
-        assert np.array_equal(dirs, s["dir"])
+        assert np.array_equal(pos, end.astype(np.float32)) and np.array_equal(dirs, s["dir"])
         assert np.array_equal(power * cornell.photon_watts(photons), s["power"])  # impacts in device units
 
 
@@ -191,17 +177,10 @@ def test_bits_do_not_depend_on_batches_groups_or_index(scenes_dir):
     pts = e.camera_points(width=24, height=24)
     ref = _run_bits(e, pts)
     assert ref.any()
-    assert np.array_equal(_run_bits(e, pts), ref)
-    assert np.array_equal(_run_bits(e, pts, index="grid"), ref)
     small = oclgi.Engine(scene, batch_bytes=16 * 48 * 1000)  # 1,000 paths per batch
-    assert np.array_equal(_run_bits(small, pts), ref)
-    for ls in (1, 7, 128):
-        assert np.array_equal(_run_bits(oclgi.Engine(scene, local_size=ls), pts), ref)
-
-
-@pytest.fixture(scope="module")
-def plane():
-    return oclgi.Engine(plane_scene(n_cells=16, half=4.0))
+    for engine, kw in [(e, {}), (e, {"index": "grid"}), (small, {}),
+                       *[(oclgi.Engine(scene, local_size=ls), {}) for ls in (1, 7, 128)]]:
+        assert np.array_equal(_run_bits(engine, pts, **kw), ref), kw
 
 
 def test_k_over_k_minus_1_on_the_plane(plane):
@@ -228,22 +207,16 @@ def test_k_over_k_minus_1_on_the_plane(plane):
 def test_point_light_plane_accuracy(plane):
     """k-1, k = 2048, 10^6 photons: every interior point within 8% (3.6
     sigma of the 1 / sqrt(k-2) = 2.2% noise) and the mean within 1%."""
-    rho = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-    ang = np.array([0.0, 1.3, 2.6, 3.9, 5.2])
-    p = np.array([(r * math.cos(a), 0.0, r * math.sin(a)) for r in rho for a in ang])
-    pts = np.hstack([p, np.tile([0.0, 1.0, 0.0], (len(p), 1))])
+    p, pts = ring_points()
     est = plane.irradiance(pts, method="photon_map", photons=1_000_000, k=2048)
     rel = est.irradiance[:, 0] / exact(p[:, 0], p[:, 2]) - 1
-    assert np.abs(rel).max() < 0.08
-    assert abs(rel.mean()) < 0.01
+    assert np.abs(rel).max() < 0.08 and abs(rel.mean()) < 0.01
     assert np.array_equal(est.accumulators[:, 0], est.accumulators[:, 2])
 
 
 def test_furnace_box(rng):
     """All bounces: within 5% of pi Le / (1 - rho) at points 0.15 from the
     edges (k = 4096: r_k ~ 0.06, noise 1.6%)."""
-    from analytic_scenes import face_points
-
     engine = oclgi.Engine(box(rho=0.5, le=1.0))
     p, n = face_points(rng)
     est = engine.irradiance(np.hstack([p, n]), method="photon_map", k=4096)
@@ -265,5 +238,4 @@ def test_options_and_errors(cornell, monkeypatch):
         cornell.irradiance(pt, method="photon_map", photons=20_000)
     # k = 1 is fine for the k estimator; work counts come from the search
     e = cornell.irradiance(pt, method="photon_map", photons=1000, k=1, estimator="k", count_work=True)
-    assert e.irradiance.shape == (1, 3)
-    assert e.work["u"] >= 1 and e.work["nodes"] >= 1
+    assert e.irradiance.shape == (1, 3) and e.work["u"] >= 1 and e.work["nodes"] >= 1

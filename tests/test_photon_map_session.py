@@ -120,8 +120,7 @@ def test_practical_update(engine, points):
     acc = session.accumulators()
     assert np.array_equal(session.radii()[:n_room], first[1][:n_room])
     pos, dirs, pw = est.impacts()
-    brute = _fixed_radius_sums(pos, dirs, pw, pts.positions[:n_room, :3],
-                               pts.normals[:n_room, :3], r2_first[:n_room])
+    brute = _fixed_radius_sums(pos, dirs, pw, pts.positions[:n_room, :3], pts.normals[:n_room, :3], r2_first[:n_room])
     assert np.array_equal(acc[:n_room], brute)
     changed = (acc[:n_room] != first[0][:n_room]).any(axis=1)
     assert changed.sum() > 10, "the moves must change some room points' sums"
@@ -130,8 +129,7 @@ def test_practical_update(engine, points):
 
     # back at the first pose: the first frame, bit for bit (and so the recomputation there)
     session.move("bunny", np.eye(4))
-    assert np.array_equal(session.accumulators(), first[0])
-    assert np.array_equal(session.radii(), first[1])
+    assert np.array_equal(session.accumulators(), first[0]) and np.array_equal(session.radii(), first[1])
     assert np.array_equal(session.irradiance(), first[2])
     assert session.points.positions.tobytes() == pts.positions.tobytes()  # w: tri bits, NaN for -1
 
@@ -141,8 +139,7 @@ def test_exact_equals_recomputation(engine, points):
     session = _session(engine, pts, mode="exact")
     searched = 0
     for m in _moves(np.random.default_rng(3), 6) + _slide(3):
-        stats = session.move("bunny", m)
-        searched += stats.points - (len(pts) - n_room)
+        searched += session.move("bunny", m).points - (len(pts) - n_room)
         fresh = session.recompute()
         assert np.array_equal(session.accumulators(), fresh.accumulators)
         assert np.array_equal(session.radii(), fresh.estimator.radii())

@@ -18,21 +18,18 @@
 """
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from analytic_scenes import exact, ring_points
+from exactness import surface_points
 
 import oclgi
 from oclgi.cl.constants import FIXED_ONE, FRONT_COS_EPS
 from oclgi.errors import OclgiError
 from oclgi.estimators import ray_map_knn as rmk
 from oclgi.estimators.ray_map_knn import METRICS, SegmentKnnIndex
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from analytic_scenes import exact, plane_scene  # noqa: E402
-from exactness import surface_points  # noqa: E402
+from oclgi.tracing.run import PathRange
 
 EPS = float(FRONT_COS_EPS)
 
@@ -100,13 +97,6 @@ def check_against_brute(got, org, dirs, tmax, power, qp, qn, k, metric, min_clea
     assert np.isinf(r2[few]).all() and not acc[few].any()
 
 
-@pytest.fixture(scope="module")
-def queue():
-    from oclgi.cl.device import create_context
-
-    return create_context()[1]
-
-
 def random_segments(rng, n):
     """Segments in the unit cube: unit directions, lengths from tiny to 2,
     a tenth escaping (t_end = inf), powers of a few scales."""
@@ -120,7 +110,8 @@ def random_segments(rng, n):
 
 
 @pytest.mark.parametrize("metric", METRICS)
-def test_neighbours_random_segments(queue, metric):
+def test_neighbours_random_segments(cl_env, metric):
+    queue = cl_env[1]
     rng = np.random.default_rng(11)
     org, dirs, t_end, power = random_segments(rng, 4000)
     m, k = 150, 12
@@ -141,17 +132,11 @@ def test_neighbours_random_segments(queue, metric):
             assert all(np.array_equal(a.view(np.uint8), b.view(np.uint8)) for a, b in zip(got, again))
 
 
-@pytest.fixture(scope="module")
-def cornell(scenes_dir):
-    return oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"), progress=False)
-
-
 @pytest.mark.parametrize("metric", METRICS)
 def test_neighbours_cornell_segments(cornell, metric):
     """The stored segments of a run: the estimate is built from exactly the
     brute force's neighbours."""
-    rng = np.random.default_rng(4)
-    pts = surface_points(cornell, 200, rng)
+    pts = surface_points(cornell, 200, np.random.default_rng(4))
     k = 20
     est = cornell.irradiance(pts, method="ray_map_knn", photons=6000, k=k, metric=metric)
     knn = est.estimator
@@ -202,11 +187,6 @@ def test_bits_do_not_depend_on_batches_or_groups(scenes_dir, metric):
         assert np.array_equal(a, acc) and np.array_equal(rr.view(np.uint32), r.view(np.uint32))
 
 
-@pytest.fixture(scope="module")
-def plane():
-    return oclgi.Engine(plane_scene(n_cells=16, half=4.0), progress=False)
-
-
 def test_point_light_plane(plane):
     """Plane metric, k-1, k = 400, 400,000 photons, 25 points within 0.8 of
     the centre (r_k about 0.07 there): the relative error's spread is the
@@ -215,10 +195,7 @@ def test_point_light_plane(plane):
     E over the radius, below 0.3% here), every point within 20% (4 sigma).
     The k estimator's sums are exactly k / (k-1) times the k-1 one's
     (equal photon powers) and its mean reads high by about k / (k-1)."""
-    rho = np.array([0.0, 0.2, 0.4, 0.6, 0.8])
-    ang = np.array([0.0, 1.3, 2.6, 3.9, 5.2])
-    p = np.array([(r * math.cos(a), 0.0, r * math.sin(a)) for r in rho for a in ang])
-    pts = np.hstack([p, np.tile([0.0, 1.0, 0.0], (len(p), 1))])
+    p, pts = ring_points((0.0, 0.2, 0.4, 0.6, 0.8))
     k = 400
     lo = plane.irradiance(pts, method="ray_map_knn", photons=400_000, k=k)
     hi = plane.irradiance(pts, method="ray_map_knn", photons=400_000, k=k, estimator="k")
@@ -264,16 +241,13 @@ def test_options_and_errors(cornell, monkeypatch):
     monkeypatch.undo()
     # k = 1 is fine for the k estimator; work counts come from the search
     e = cornell.irradiance(pt, method="ray_map_knn", photons=1000, k=1, estimator="k", count_work=True)
-    assert e.irradiance.shape == (1, 3)
-    assert e.work["u"] >= 1 and e.work["nodes"] >= 1
+    assert e.irradiance.shape == (1, 3) and e.work["u"] >= 1 and e.work["nodes"] >= 1
 
 
 def test_split_runs_joined_equal_one_run(cornell):
     """Two path ranges traced apart, their states joined as the ranks join
     them (float arrays concatenated in range order), equal one run bit for
     bit: the canonical order is the global slots' order."""
-    from oclgi.tracing.run import PathRange
-
     pts = cornell.camera_points(width=12, height=12)
     photons = 8000
     whole = cornell.irradiance(pts, method="ray_map_knn", photons=photons, k=12)

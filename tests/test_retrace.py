@@ -3,7 +3,6 @@ whole, bit for bit (the basis of incremental updates, DESIGN.md section 4)."""
 
 import numpy as np
 import pyopencl as cl
-import pytest
 
 import oclgi
 from oclgi.cl.layout import Segment
@@ -13,8 +12,7 @@ from test_instances import _rigid, _scene
 
 def _store(engine, photons, seed=3, depth=8):
     tracer = PhotonTracer(engine.queue, engine.compiled, seed, depth, photons)
-    batch = tracer.trace(0, photons)
-    return tracer, batch
+    return tracer, tracer.trace(0, photons)
 
 
 def _read(engine, batch):
@@ -27,11 +25,6 @@ def _retrace(engine, tracer, batch, paths, starts):
     pb = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.asarray(paths, np.int32))
     sb = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.asarray(starts, np.int32))
     tracer.retrace(batch, pb, sb, len(paths))
-
-
-@pytest.fixture(scope="module")
-def cornell(scenes_dir):
-    return oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
 
 
 def test_suffix_retrace_reproduces_the_path(cornell, rng):
@@ -58,8 +51,7 @@ def test_retrace_after_move_equals_fresh_trace(scenes_dir, rng):
     engine = oclgi.Engine(_scene(scenes_dir))
     photons = 10_000
     tracer, batch = _store(engine, photons)
-    m = _rigid(rng)
-    engine.move("bunny", m)
+    engine.move("bunny", _rigid(rng))
     _t2, fresh = _store(engine, photons)
     want, want_len = _read(engine, fresh)
     before, _ = _read(engine, batch)
@@ -73,6 +65,5 @@ def test_retrace_after_move_equals_fresh_trace(scenes_dir, rng):
     assert 0 < len(changed) < photons
     _retrace(engine, tracer, batch, changed, first)
     got, got_len = _read(engine, batch)
-    assert got.tobytes() == want.tobytes()
-    assert np.array_equal(got_len, want_len)
+    assert got.tobytes() == want.tobytes() and np.array_equal(got_len, want_len)
     engine.move("bunny", np.eye(4))

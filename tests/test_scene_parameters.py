@@ -49,19 +49,16 @@ def test_engine_update_equals_an_engine_loaded_with_the_values(scenes_dir, engin
     assert engine.compiled.fingerprint() == loaded.compiled.fingerprint()
     a = engine.render(width=16, height=16)  # photons: the updated default
     b = loaded.render(width=16, height=16, photons=12_000)
-    assert a.stats.photons == 12_000
-    assert np.array_equal(a.radiance, b.radiance)
+    assert a.stats.photons == 12_000 and np.array_equal(a.radiance, b.radiance)
 
 
 def test_an_engine_update_does_not_reach_open_sessions(scenes_dir, engine, rng):
-    pts = _points(engine, rng, 50)
-    s = oclgi.Session(engine, pts, photons=PHOTONS, radius=0.05)
+    s = oclgi.Session(engine, _points(engine, rng, 50), photons=PHOTONS, radius=0.05)
     before = s.accumulators()
     params = engine.parameters()
     params[LEFT] = (0.9, 0.9, 0.9)
     params.update()
-    assert np.array_equal(s.accumulators(), before)
-    assert s.parameters()[LEFT] == (0.63, 0.065, 0.05)
+    assert np.array_equal(s.accumulators(), before) and s.parameters()[LEFT] == (0.63, 0.065, 0.05)
     s.close()
 
 
@@ -95,10 +92,8 @@ def test_session_update_recomputes_only_what_depends_on_it(engine, case):
     for k, v in changes.items():
         params[k] = v
     done = params.update()
-    assert done.changed == sorted(changes)
-    assert done.paths_traced == expect["paths"]
-    assert done.paths_dropped == expect.get("dropped", 0)
-    assert done.points_traced == expect["points"]
+    assert done.changed == sorted(changes) and done.paths_traced == expect["paths"]
+    assert done.paths_dropped == expect.get("dropped", 0) and done.points_traced == expect["points"]
     assert done.resummed == expect["resummed"]
     # what the store's tracers did: every path traced anew, the added ones only, or none
     if expect["paths"] == PHOTONS:
@@ -136,8 +131,7 @@ def test_a_material_update_equals_a_scene_loaded_with_it(scenes_dir, engine):
 
 
 def test_photon_map_session_updates(engine, rng):
-    pts = _points(engine, rng, 60)
-    s = oclgi.PhotonMapSession(engine, pts, photons=PHOTONS, k=20, mode="exact")
+    s = oclgi.PhotonMapSession(engine, _points(engine, rng, 60), photons=PHOTONS, k=20, mode="exact")
     s.move("bunny", _shift(0.2))
     params = s.parameters()
     params["photons"] = PHOTONS + 2_000
@@ -157,14 +151,13 @@ def test_bad_values_are_refused_and_change_nothing(engine, rng):
     s = oclgi.Session(engine, _points(engine, rng, 30), photons=PHOTONS, radius=0.05)
     before = s.accumulators()
     params = s.parameters()
-    with pytest.raises(oclgi.OclgiError, match=r"no parameter 'material\.nope\.albedo'"):
-        params["material.nope.albedo"] = (1, 1, 1)
-    with pytest.raises(oclgi.OclgiError, match="takes 3 finite numbers"):
-        params[LEFT] = (0.1, 0.2)
-    with pytest.raises(oclgi.OclgiError, match="finite"):
-        params["light.lamp.position"] = (0.0, float("nan"), 0.0)
-    with pytest.raises(oclgi.OclgiError, match="no parameter 'camera'"):
-        params["camera"] = engine.view_camera()  # a session over points has no camera
+    for key, value, words in (("material.nope.albedo", (1, 1, 1), r"no parameter 'material\.nope\.albedo'"),
+                              (LEFT, (0.1, 0.2), "takes 3 finite numbers"),
+                              ("light.lamp.position", (0.0, float("nan"), 0.0), "finite"),
+                              # a session over points has no camera
+                              ("camera", engine.view_camera(), "no parameter 'camera'")):
+        with pytest.raises(oclgi.OclgiError, match=words):
+            params[key] = value
     for key, value, words in ((LEFT, (2.0, 0.1, 0.1), "albedo"), ("photons", 0, "photons"),
                               ("method", "photon_map", "no exact incremental update"),
                               ("light.lamp.intensity", (-1.0, 1.0, 1.0), "intensity")):

@@ -10,10 +10,16 @@ import copy
 import functools
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 import oclgi
 import oclgi.estimators
+import oclgi.estimators.detp_disc_index as ddi
+from analytic_scenes import quad
+from oclgi.cl.constants import CELL_OUTSIDE_BIT
+from oclgi.incremental.dynamic_view import DynamicView
+from oclgi.incremental.segment_store import MAX_CELLS, SegmentStore, grid_dims
 from test_instances import _rigid
 
 N_MOVES = 50
@@ -51,6 +57,27 @@ def _moves(rng, n):
     return out
 
 
+def _in_view(rng, n):
+    """_moves kept within 0.6 of the origin: in the camera's view, dynamic points every frame."""
+    moves = _moves(rng, n)
+    for m in moves:
+        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)
+    return moves
+
+
+def _camera_engine(scenes_dir, width=24, height=24):
+    """The scene seen by the Cornell box's camera."""
+    scene = _scene(scenes_dir)
+    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=width, height=height)
+    return oclgi.Engine(scene)
+
+
+def _plain_view(session):
+    """Plain DETP over a fresh camera pass at the session's pose."""
+    at = session.engine
+    return at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
+
+
 @pytest.fixture(scope="module")
 def engine(scenes_dir):
     return oclgi.Engine(_scene(scenes_dir))
@@ -81,8 +108,7 @@ def test_incremental_equals_recomputation(engine, rng, method):
     first_segments = session.segments()[0]
     touched = 0
     for m in _moves(rng, N_MOVES):
-        stats = session.move("bunny", m)
-        touched += stats.paths
+        touched += session.move("bunny", m).paths
     assert touched > 0
     fresh = oclgi.Session(session.engine, pts, method=method, radius=0.05)  # at the session's pose
     assert np.array_equal(session.accumulators(), fresh.accumulators())
@@ -104,16 +130,14 @@ def test_move_statistics(engine, rng):
     a, b = engine.scene.object_ranges()[1]
     on_bunny = ((segs["tri"] >= a) & (segs["tri"] < b)).reshape(session.params.photons, -1).any(axis=1)
     stats = session.move("bunny", far)  # out of the box: every path that hit it changes
-    assert stats.paths >= on_bunny.sum() > 100
-    assert stats.segments_removed > 0
+    assert stats.paths >= on_bunny.sum() > 100 and stats.segments_removed > 0
     before = session.accumulators()
     # The same pose again: the only paths re-traced are those that hit the
     # bunny (out there, through the open front), and nothing changes.
     segs, _ = session.segments()
     on_bunny = ((segs["tri"] >= a) & (segs["tri"] < b)).reshape(session.params.photons, -1).any(axis=1)
     again = session.move("bunny", far)
-    assert again.paths == on_bunny.sum()
-    assert again.segments_removed == again.segments_added
+    assert again.paths == on_bunny.sum() and again.segments_removed == again.segments_added
     assert np.array_equal(session.accumulators(), before)
     session.move("bunny", np.eye(4))
 
@@ -122,10 +146,7 @@ def test_move_statistics(engine, rng):
 def test_camera_session_equals_recomputation(scenes_dir, rng, method):
     """A camera session: pixels that see the object (or saw it) are dynamic
     points, recomputed; after 20 moves the view equals a fresh session's."""
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
-    engine = oclgi.Engine(scene)
-    session = oclgi.Session(engine, method=method, radius=0.05, photons=10_000)
+    session = oclgi.Session(_camera_engine(scenes_dir), method=method, radius=0.05, photons=10_000)
     first_radiance, _ = session.render()
     recomputed = 0
     for m in _moves(rng, 20):
@@ -135,9 +156,7 @@ def test_camera_session_equals_recomputation(scenes_dir, rng, method):
     assert session.points.positions.tobytes() == fresh.points.positions.tobytes()
     assert np.array_equal(session.accumulators(), fresh.accumulators())
     if method.startswith("detp"):  # every DETP variant equals plain DETP over the whole view
-        at = session.engine
-        plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
-        assert np.array_equal(session.accumulators(), plain.accumulators)
+        assert np.array_equal(session.accumulators(), _plain_view(session).accumulators)
     assert np.array_equal(session.render()[0], fresh.render()[0])
     session.move("bunny", np.eye(4))
     assert np.array_equal(session.render()[0], first_radiance)
@@ -152,18 +171,11 @@ def test_dynamic_points_by_every_variant(scenes_dir, rng, dynamic):
     variant; disc indexing sums them in the find pass over the old store
     and corrects them with the changed suffixes, the others sum the new
     store. All equal plain DETP over a fresh full view."""
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=32, height=32)
-    engine = oclgi.Engine(scene)
+    engine = _camera_engine(scenes_dir, 32, 32)
     engine.move("bunny", np.eye(4))
     session = oclgi.Session(engine, method="detp_disc_index", dynamic=dynamic, radius=0.05, photons=10_000)
-    dynamic_points = 0
-    for m in _moves(rng, 8):
-        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # stay in view: dynamic points every frame
-        dynamic_points += session.move("bunny", m).points
-    assert dynamic_points > 50
-    at = session.engine
-    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
+    assert sum(session.move("bunny", m).points for m in _in_view(rng, 8)) > 50
+    plain = _plain_view(session)
     assert np.array_equal(session.accumulators(), plain.accumulators)
     np.testing.assert_array_equal(session.irradiance(), plain.irradiance)
 
@@ -174,19 +186,12 @@ def test_binary_disc_tree_session(scenes_dir, rng):
     and dynamic estimators and the find pass that sums the dynamic points
     (kernels/update.cl, built with the estimator's defines). Equal to plain
     DETP after the moves."""
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
-    engine = oclgi.Engine(scene)
-    session = oclgi.Session(engine, method="detp_disc_index", radius=0.05, photons=10_000, tree="binary")
+    session = oclgi.Session(_camera_engine(scenes_dir), method="detp_disc_index", radius=0.05, photons=10_000,
+                            tree="binary")
     assert session.estimator.tree == "binary"
-    dynamic_points = 0
-    for m in _moves(rng, 6):
-        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)
-        dynamic_points += session.move("bunny", m).points
+    dynamic_points = sum(session.move("bunny", m).points for m in _in_view(rng, 6))
     assert dynamic_points > 20 and session.dyn_est is not None and session.dyn_est.tree == "binary"
-    at = session.engine
-    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
-    assert np.array_equal(session.accumulators(), plain.accumulators)
+    assert np.array_equal(session.accumulators(), _plain_view(session).accumulators)
 
 
 @pytest.mark.parametrize("count_emitted", [True, False])
@@ -197,14 +202,10 @@ def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
     equal after every move, bit for bit, for the static points and the
     dynamic ones (pixels on the bunny, summed in the find pass, whose sums
     the suffix passes then update)."""
-    moves = _moves(rng, 12)
-    for m in moves:
-        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # in view: dynamic points every frame
+    moves = _in_view(rng, 12)
     runs = {}
     for summed in (False, True):
-        scene = _scene(scenes_dir)
-        scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
-        session = oclgi.Session(oclgi.Engine(scene), method="detp_disc_index", radius=0.05, photons=10_000,
+        session = oclgi.Session(_camera_engine(scenes_dir), method="detp_disc_index", radius=0.05, photons=10_000,
                                 count_emitted=count_emitted, count_work=True)
         session.sum_changes = summed
         session.dynamic_pass = "find"
@@ -225,8 +226,6 @@ def test_listed_crossings_equal_walks(engine, rng, monkeypatch):
     re-traced again, the accumulators equal walking every segment, bit for
     bit, after every move; lists that overflow are left out; after a move
     with the plain passes (no lists made) the older lists are not used."""
-    import oclgi.estimators.detp_disc_index as ddi
-
     pts = _points(engine, rng, 2000)
     engine.move("bunny", np.eye(4))
     for per_path in (ddi.LISTED_PER_PATH, 4):
@@ -262,14 +261,10 @@ def test_dynamic_passes_agree(scenes_dir, rng):
     and visits fewer nodes (it leaves those paths' root visits out); its
     index is built while the device re-traces, the paths listed by the
     find in a box around the points, the one scan of the masks a move."""
-    moves = _moves(rng, 10)
-    for m in moves:
-        m[:3, 3] = np.clip(m[:3, 3], -0.6, 0.6)  # in view: dynamic points every frame
+    moves = _in_view(rng, 10)
     runs, work = {}, {}
     for mode in ("store", "find", "listed"):
-        scene = _scene(scenes_dir)
-        scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
-        session = oclgi.Session(oclgi.Engine(scene), method="detp_disc_index", radius=0.05, photons=10_000,
+        session = oclgi.Session(_camera_engine(scenes_dir), method="detp_disc_index", radius=0.05, photons=10_000,
                                 count_work=True)
         session.dynamic_pass = mode
         listings = []
@@ -285,9 +280,7 @@ def test_dynamic_passes_agree(scenes_dir, rng):
         for i, ((pa, acc_a), (pb, acc_b)) in enumerate(zip(runs["store"], runs[mode])):
             assert pa == pb
             assert np.array_equal(acc_a, acc_b), f"{mode}, move {i}: {(acc_a != acc_b).any(axis=-1).sum()} differ"
-    at = session.engine
-    plain = at.irradiance(at.camera_points(), method="detp", radius=0.05, photons=10_000)
-    assert np.array_equal(runs["listed"][-1][1], plain.accumulators)
+    assert np.array_equal(runs["listed"][-1][1], _plain_view(session).accumulators)
     assert work["listed"]["u"] == work["store"]["u"], work
     assert work["listed"]["nodes"] < work["store"]["nodes"], work
 
@@ -307,11 +300,8 @@ def test_view_rectangle_holds_every_pixel_on_the_object(scenes_dir, rng):
     pixel that sees the object (else a dynamic point would be missed), also
     when the object is close to the eye or partly behind it; the composite
     view then equals a full camera pass bit for bit."""
-    from oclgi.incremental.dynamic_view import DynamicView
-
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=96, height=80)
-    engine = oclgi.Engine(scene)
+    engine = _camera_engine(scenes_dir, 96, 80)
+    scene = engine.scene
     view = DynamicView(engine)
     seen = 0
     for i in range(40):
@@ -339,8 +329,6 @@ def test_cell_masks_find_what_a_full_scan_finds(engine, rng):
     """The find examines only paths whose cell mask meets the object's old
     and new boxes: over random moves (kept up to date by re-tracing) it must
     list exactly the paths and first bounces a scan of every path lists."""
-    from oclgi.incremental.segment_store import SegmentStore
-
     engine.move("bunny", np.eye(4))
     masked, full = (SegmentStore(engine, 20_000, 5, 10) for _ in range(2))
     full._region = lambda boxes: None  # every path, every move
@@ -368,8 +356,6 @@ def test_a_box_past_one_face_lists_only_the_paths_leaving_through_it(engine):
     the open front go on downwards, below the floor's plane, outside: a
     bit for every face a segment's box reaches past would list them. The
     find still equals a full scan."""
-    from oclgi.incremental.segment_store import SegmentStore
-
     engine.move("bunny", np.eye(4))
     seg = None
     for shift in ([0.0, -30.0, 0.0], [0.0, 0.0, -30.0]):
@@ -421,8 +407,6 @@ def _reference_cells(store) -> np.ndarray:
     kernel's operations in its order (kernels/update.cl update_path_cells):
     box_slab on every padded cell within the segment's box, one cell at a
     time (the slow, obvious form of the kernel's 8 columns at once)."""
-    from oclgi.cl.constants import CELL_OUTSIDE_BIT
-
     f32 = np.float32
     seg = store.segments().reshape(store.photons, store.max_depth)
     plen = store.path_len()
@@ -471,14 +455,17 @@ def _reference_cells(store) -> np.ndarray:
     return masks
 
 
+def _cells(store) -> np.ndarray:
+    """The store's cell masks, read from the device."""
+    got = np.empty((store.photons, 2), np.uint64)
+    cl.enqueue_copy(store.queue, got, store.cells)
+    return got
+
+
 def test_cell_masks_equal_a_cell_by_cell_reference(engine):
     """The kernel's masks (8 columns at a time) equal a float32 reference
     that tests each cell alone, bit for bit, after the trace and after
     re-traces (the re-traced paths' masks are made again)."""
-    import pyopencl as cl
-
-    from oclgi.incremental.segment_store import SegmentStore
-
     engine.move("bunny", np.eye(4))
     store = SegmentStore(engine, 4_000, 9, 10)
     obj = engine.scene.object_id("bunny")
@@ -488,9 +475,7 @@ def test_cell_masks_equal_a_cell_by_cell_reference(engine):
             a = store.find(obj)
             if len(a):
                 store.retrace(a)
-        got = np.empty((store.photons, 2), np.uint64)
-        cl.enqueue_copy(store.queue, got, store.cells)
-        want = _reference_cells(store)
+        got, want = _cells(store), _reference_cells(store)
         assert np.array_equal(got, want), f"{int((got != want).any(axis=1).sum())} paths differ"
         assert (got[:, 0] != 0).sum() > store.photons // 2  # cells were marked, not only the outside bit
     # rows of more than 8 columns (two float8 runs) and of 1 (a long scene's grids)
@@ -499,23 +484,16 @@ def test_cell_masks_equal_a_cell_by_cell_reference(engine):
         store.dims = np.array(dims)
         store.cell = extent / store.dims
         store._mark_cells(store.all_paths, store.photons)
-        got = np.empty((store.photons, 2), np.uint64)
-        cl.enqueue_copy(store.queue, got, store.cells)
-        assert np.array_equal(got, _reference_cells(store)), dims
+        assert np.array_equal(_cells(store), _reference_cells(store)), dims
     engine.move("bunny", np.eye(4))
     # under a sun, whose paths start outside the grid and enter it from above
-    quad = lambda y, h, name, movable: {  # noqa: E731
-        "name": name, "vertices": [[-h, y, -h], [h, y, -h], [h, y, h], [-h, y, h]], "faces": [[0, 2, 1], [0, 3, 2]],
-        "albedo": [0.7] * 3, "movable": movable}
-    sunlit = oclgi.Engine(oclgi.load_dict({"mesh": [quad(0.0, 3.0, "ground", False), quad(0.5, 0.5, "roof", True)],
+    sunlit = oclgi.Engine(oclgi.load_dict({"mesh": [quad(0.0, 3.0, 0.7, name="ground", movable=False),
+                                                    quad(0.5, 0.5, 0.7, name="roof", movable=True)],
                                            "sun": {"direction": [0.3, -1.0, 0.2], "irradiance": [1.0] * 3},
                                            "photons": {"count": 4_000, "seed": 2, "max_depth": 4}}))
     store = SegmentStore(sunlit, 4_000, 2, 4)
-    got = np.empty((store.photons, 2), np.uint64)
-    cl.enqueue_copy(store.queue, got, store.cells)
-    want = _reference_cells(store)
-    assert np.array_equal(got, want)
-    from oclgi.cl.constants import CELL_OUTSIDE_BIT
+    got = _cells(store)
+    assert np.array_equal(got, _reference_cells(store))
     faces = (got[:, 1] >> np.uint64(CELL_OUTSIDE_BIT - 64)) & np.uint64(63)
     assert (faces != 0).all()  # every sun path starts outside the grid
     top = (faces & np.uint64(8)) != 0
@@ -523,8 +501,6 @@ def test_cell_masks_equal_a_cell_by_cell_reference(engine):
 
 
 def test_grid_dims_fit_the_mask_and_follow_the_scene():
-    from oclgi.incremental.segment_store import MAX_CELLS, grid_dims
-
     for extent, expect in (([2, 2, 2], [5, 5, 4]), ([35.5, 17.4, 16.3], [7, 4, 4]), ([1, 1, 0], [11, 11, 1]),
                            ([1e6, 1, 1], [122, 1, 1])):
         dims = grid_dims(extent)

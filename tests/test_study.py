@@ -22,18 +22,22 @@ box (E = pi Le / (1 - rho)).
 
 import csv
 import math
+import re
 import sys
+from html.parser import HTMLParser
 
 import numpy as np
 import pytest
 from analytic_scenes import box, disc_mean, exact, face_points, plane_scene
-from cli_run import run
+from cli_run import in_process, run
 from scipy.stats import chi2
-from small_scene import BOX_OBJ
+from small_scene import BOX_MTL, BOX_OBJ
 
 import oclgi
+from oclgi.errors import OclgiError
 from oclgi.queries import QueryPoints
-from oclgi.study import Config, equal_time, run_study
+from oclgi.study import Config, bounds, equal_time, run_study
+from oclgi.study.reference import Reference
 
 SEEDS = 8
 K = 10  # small k: the k / (k-1) over-estimate (11%) stands well clear of the noise
@@ -104,8 +108,6 @@ def test_photon_map_variance_gamma_law_and_bound(furnace_study):
     (k/(k-1))^2 for k), whatever the photon count; the thesis' bound is
     smaller than that (the study says so: ratio > 1). Medians over the
     points: single points have shown a rare outlier run far in the tail."""
-    from oclgi.study import bounds
-
     res = furnace_study
     inputs = res.inputs
     e = math.pi / (1 - 0.5)
@@ -165,14 +167,11 @@ def test_detp_unbiased_in_the_furnace(furnace_study):
 def test_reference_from_detp_states_its_error(plane):
     """The high-photon DETP reference: several runs, its standard error from
     their spread, close to the exact values within it."""
-    from oclgi.study.reference import Reference
-
     pts = np.array([[x, 0.0, 0.0, 0.0, 1.0, 0.0] for x in (0.0, 0.3, 0.6)])
     res = run_study(plane, [Config("detp", [20_000], radius=0.1)], points=pts, seeds=2,
                     reference=Reference("detp", photons=400_000, radius=0.1, method="detp_disc_index", runs=4))
     ref = res.reference
-    assert "400,000 photons" in ref.description
-    assert (ref.std_error > 0).all()
+    assert "400,000 photons" in ref.description and (ref.std_error > 0).all()
     truth = np.array([[disc_mean(x, 0.0, 0.1)] * 3 for x in (0.0, 0.3, 0.6)])
     assert (np.abs(ref.values - truth) < 5 * ref.std_error).all()
 
@@ -226,8 +225,6 @@ def test_report_files_parse_back(plane_study, tmp_path):
 
 
 def test_api_rejects_bad_input(plane):
-    from oclgi.errors import OclgiError
-
     pts = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]] * 2)
     for bad, match in ((lambda: Config("detp_fast", [1000]), "unknown method"),
                        (lambda: Config("detp", [1000, 0]), "photon counts"),
@@ -243,8 +240,6 @@ def test_api_rejects_bad_input(plane):
 
 
 def test_mitsuba_reference_missing_is_a_clear_error(plane, monkeypatch):
-    from oclgi.errors import OclgiError
-
     monkeypatch.setitem(sys.modules, "mitsuba", None)  # as if the optional extra were not installed
     with pytest.raises(OclgiError, match=r"needs the mitsuba package: pip install 'oclgi\[mitsuba\]'"):
         run_study(plane, [Config("detp", [1000])], points="random:4", seeds=2, reference="mitsuba")
@@ -252,24 +247,21 @@ def test_mitsuba_reference_missing_is_a_clear_error(plane, monkeypatch):
 
 # -- the command line ------------------------------------------------------------------
 
-MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 5 5 5\n"
 SCENE = "[[mesh]]\npath = \"box.obj\"\n[photons]\ncount = 4000\n[estimator]\nradius = 0.1\n"
 
 
 @pytest.fixture
 def scene(tmp_path):
     (tmp_path / "box.obj").write_text(BOX_OBJ)
-    (tmp_path / "box.mtl").write_text(MTL)
+    (tmp_path / "box.mtl").write_text(BOX_MTL)
     (tmp_path / "s.toml").write_text(SCENE)
     np.save(tmp_path / "p.npy", np.array([[0, 0.0, 0, 0, 1, 0], [0.5, 0.0, 0.5, 0, 1, 0]], float))
     return tmp_path / "s.toml"
 
 
-
 def test_cli_study(scene, tmp_path):
     res = run(tmp_path, "study", "s.toml", "--methods", "detp,photon_map:k=20,impact", "--photons", "2000,4e3",
-              "--seeds", "3", "--points", "random:25", "--reference", "detp:40000", "-O", "leaf_size=8",
-              "-o", "out")
+              "--seeds", "3", "--points", "random:25", "--reference", "detp:40000", "-O", "leaf_size=8", "-o", "out")
     assert res.returncode == 0, res.stderr
     assert "Traceback" not in res.stderr
     out = tmp_path / "out"
@@ -288,8 +280,7 @@ def test_cli_study(scene, tmp_path):
     res = run(tmp_path, "study", "s.toml", "--methods", "detp", "--photons", "2000", "--seeds", "2",
               "--points", "p.npy", "--reference", "ref.npy", "--quiet", "-o", "out2")
     assert res.returncode == 0, res.stderr
-    assert res.stderr == ""
-    assert "exact (given values)" in (tmp_path / "out2" / "study.md").read_text()
+    assert res.stderr == "" and "exact (given values)" in (tmp_path / "out2" / "study.md").read_text()
 
 
 def files_under(d):
@@ -311,24 +302,14 @@ def files_under(d):
 ])
 def test_cli_bad_input(scene, tmp_path, monkeypatch, capsys, args, match):
     """One line on stderr, exit 2, nothing on stdout, no output folder."""
-    from oclgi.cli import main
-
-    monkeypatch.chdir(tmp_path)
     before = files_under(tmp_path)
-    try:
-        rc = main(["study", "s.toml", "--photons", "1000", "--seeds", "2", "--points", "random:5",
-                   "--reference", "detp:4000", *args, "-o", "out"])
-    except SystemExit as exc:  # argparse
-        rc = exc.code
-    out, err = capsys.readouterr()
-    lines = err.splitlines()
-    assert rc == 2, err
-    assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), err
-    import re
-
+    res = in_process(monkeypatch, capsys, tmp_path, "study", "s.toml", "--photons", "1000", "--seeds", "2", "--points",
+                     "random:5", "--reference", "detp:4000", *args, "-o", "out")
+    lines = res.stderr.splitlines()
+    assert res.returncode == 2, res.stderr
+    assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), res.stderr
     assert re.search(match, lines[0]), lines[0]
-    assert out == ""
-    assert files_under(tmp_path) == before
+    assert res.stdout == "" and files_under(tmp_path) == before
 
 
 def test_cli_bad_input_subprocess(scene, tmp_path):
@@ -355,16 +336,13 @@ def test_writing_plots_leaves_the_users_matplotlib_alone(plane_study, tmp_path):
     try:
         matplotlib.use("svg")
         plane_study.write(tmp_path / "report")
-        assert matplotlib.get_backend() == "svg"
-        assert plt.get_fignums() == [fig.number]
+        assert matplotlib.get_backend() == "svg" and plt.get_fignums() == [fig.number]
     finally:
         plt.close(fig)
         matplotlib.use(before)
 
 
 def test_a_study_shows_as_a_table_in_a_notebook(plane_study):
-    from html.parser import HTMLParser
-
     cells = []
 
     class Cells(HTMLParser):

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+import trimesh
+from conftest import SCENES
 
 import oclgi
 from oclgi.scene import textures
@@ -61,7 +63,6 @@ def textured_room(tmp_path, movable=False):
         "v -0.6 0.05 -0.5\nv 0.6 0.05 -0.5\nv 0.6 1.25 -0.5\nv -0.6 1.25 -0.5\n"
         "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
         "usemtl painted\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
-    from conftest import SCENES
     return oclgi.load_dict({
         "mesh": [{"path": str(SCENES / "cornell-box" / "CornellBox-Original.obj")},
                  {"path": str(tmp_path / "panel.obj"), "movable": movable, "name": "panel"}],
@@ -74,14 +75,11 @@ def test_the_image_shows_the_texture(tmp_path):
     """The panel's pixels take the texture's colours where they should: blue
     in its top-left cell, red and green alternating."""
     engine = oclgi.Engine(textured_room(tmp_path))
-    r = engine.render(photons=50_000, radius=0.05, layers=True)
-    albedo = r.layers["albedo"]
-    pts = engine.camera_points()
-    panel = pts.tri.reshape(48, 48) >= 36
+    albedo = engine.render(photons=50_000, radius=0.05, layers=True).layers["albedo"]
+    panel = engine.camera_points().tri.reshape(48, 48) >= 36
     lin = textures.srgb_to_linear(np.array([[40, 40, 230], [230, 40, 40], [40, 200, 40]]) / 255)
     # every panel pixel's albedo is one of the three colours, or a blend at a cell's border
-    a = albedo[panel]
-    nearest = np.abs(a[:, None, :] - lin[None]).max(axis=2).min(axis=1)
+    nearest = np.abs(albedo[panel][:, None, :] - lin[None]).max(axis=2).min(axis=1)
     assert (nearest < 1e-3).mean() > 0.6
     # the top-left cell (as the camera sees the panel) is blue
     row = np.nonzero(panel.any(axis=1))[0].min()  # the panel's top edge, above the tall box
@@ -119,8 +117,7 @@ def test_session_with_a_textured_object_moving_equals_recomputation(tmp_path, rn
     seg, _ = session.segments()
     fresh_seg, _ = engine.trace(10_000, seed=3, max_depth=10)
     seg["power"] *= engine.photon_watts(10_000)
-    assert seg.tobytes() == fresh_seg.tobytes()
-    assert np.array_equal(session.render()[0], fresh.render()[0])
+    assert seg.tobytes() == fresh_seg.tobytes() and np.array_equal(session.render()[0], fresh.render()[0])
     session.move("panel", np.eye(4))
     assert np.array_equal(session.render()[0], first)
 
@@ -137,8 +134,6 @@ def test_a_missing_texture_is_one_warning(tmp_path):
 def coloured_room(scenes_dir):
     """The Cornell box with a panel whose vertices are coloured (a trimesh
     object with vertex colours, as glTF's COLOR_0 reads)."""
-    import trimesh
-
     panel = trimesh.Trimesh(vertices=[[-0.6, 0.05, -0.5], [0.6, 0.05, -0.5], [0.6, 1.25, -0.5], [-0.6, 1.25, -0.5]],
                             faces=[[0, 1, 2], [0, 2, 3]], process=False)
     panel.visual.vertex_colors = np.array([[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [255, 255, 255, 255]],

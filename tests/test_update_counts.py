@@ -12,25 +12,15 @@ room, so n_Rec counts exactly the paths that met it.
 
 import numpy as np
 import trimesh
+from analytic_scenes import box_mesh
 
 import oclgi
 
 R0 = np.sqrt(3.0)  # the room [-1, 1]^3: its bounding sphere's radius
 
 
-def _room():
-    v = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
-    tri = v[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    outward = np.einsum("ij,ij->i", n, tri.mean(axis=1)) > 0
-    faces[outward] = faces[outward][:, ::-1]  # the walls emit into the room
-    return v, faces
-
-
 def _engine(f):
-    room_v, room_f = _room()
+    room_v, room_f = box_mesh((-1, -1, -1), (1, 1, 1), inward=True)  # the walls emit into the room
     ball = trimesh.creation.icosphere(subdivisions=3)
     return oclgi.Engine(oclgi.load_dict({
         "mesh": [
@@ -52,8 +42,7 @@ def test_recomputed_segments_grow_like_f_squared():
     fs = np.array([0.05, 0.1, 0.2, 0.3, 0.4])
     ratios = []
     for f in fs:
-        engine = _engine(f)
-        session = oclgi.Session(engine, np.array([[0, -0.99, 0, 0, 1, 0]]), radius=0.05)
+        session = oclgi.Session(_engine(f), np.array([[0, -0.99, 0, 0, 1, 0]]), radius=0.05)
         n_r = int(session.segments()[1].sum())
         stats = session.move("ball", _translate(0, 0, 30))  # out of the room
         ratios.append(stats.segments_removed / n_r)

@@ -1,13 +1,15 @@
 """Small things a user reaches for: paths as pathlib.Path, inline images in
 notebooks, the command's version."""
 
-import pathlib
 import tomllib
 
 import numpy as np
 import pytest
+import trimesh
 from cli_run import in_process
 from small_scene import MOVING_BLOCK
+from trimesh.visual import TextureVisuals
+from trimesh.visual.material import PBRMaterial
 
 import oclgi
 from oclgi.io import read_image
@@ -20,8 +22,7 @@ def test_a_mesh_path_may_be_a_pathlib_path(scenes_dir):
 
 
 def test_a_render_shows_inline_as_the_png_it_writes(tmp_path):
-    engine = oclgi.Engine(oclgi.load_dict(tomllib.loads(MOVING_BLOCK)))
-    result = engine.render(photons=5_000)
+    result = oclgi.Engine(oclgi.load_dict(tomllib.loads(MOVING_BLOCK))).render(photons=5_000)
     png = result._repr_png_()
     assert png.startswith(b"\x89PNG\r\n\x1a\n")
     path = tmp_path / "inline.png"
@@ -42,10 +43,6 @@ F = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7]])
 
 
 def _trimesh_scene():
-    import trimesh
-    from trimesh.visual import TextureVisuals
-    from trimesh.visual.material import PBRMaterial
-
     floor = trimesh.Trimesh(V[:4], F[:2], process=False)
     light = trimesh.Trimesh(V[4:], F[2:] - 4, process=False)
     floor.visual = TextureVisuals(material=PBRMaterial(baseColorFactor=[204, 51, 51, 255]))
@@ -79,8 +76,6 @@ def test_a_trimesh_scene_without_a_camera_renders_from_trimeshs_default(recwarn)
     """trimesh gives every Scene a default camera (``Scene.camera``): a
     scene without one renders from it, with a note, and is not changed; a
     scene file without [camera] still says it has none."""
-    import trimesh
-
     scene = _trimesh_scene()
     assert not scene.has_camera
     engine = oclgi.Engine(scene)
@@ -112,14 +107,13 @@ def test_face_arrays_are_checked():
         oclgi.load_dict({"mesh": [{"trimesh": "box"}]})
 
 
-def test_the_summary_stages_add_up_to_the_total(scenes_dir):
+def test_the_summary_stages_add_up_to_the_total(cornell):
     # which stages are reported and how they nest; how long they take is bench/'s
-    engine = oclgi.Engine(oclgi.load_file(scenes_dir / "cornell_box.toml"))
     for method in ("detp_disc_index", "photon_map"):
-        stats = engine.render(method=method, photons=50_000, width=16, height=16).stats
+        stats = cornell.render(method=method, photons=50_000, width=16, height=16).stats
         s = stats.seconds
         assert list(s) == ["load", "setup", "camera", "trace", "estimate", "resolve", "total"]
-        assert s["load"] == engine.scene.load_seconds and s["setup"] == engine.setup_seconds
+        assert s["load"] == cornell.scene.load_seconds and s["setup"] == cornell.setup_seconds
         # the run's stages are intervals within its total
         assert s["camera"] + s["trace"] + s["estimate"] + s["resolve"] <= s["total"], s
         engine_part, run_part = stats.summary().split(" | ")[1:]
@@ -137,10 +131,6 @@ def _up_and_down_sums(engine):
 
 
 def test_vertex_albedo_gives_the_bits_of_the_glb_with_its_colours(tmp_path):
-    import trimesh
-    from trimesh.visual import TextureVisuals
-    from trimesh.visual.material import PBRMaterial
-
     # 8-bit colours, as a glTF's COLOR_0 holds them after trimesh's export
     rgb8 = np.array([[230, 40, 40], [40, 230, 40], [40, 40, 230], [200, 200, 200]], np.uint8)
     floor = trimesh.Trimesh(V[:4], F[:2], vertex_colors=np.hstack([rgb8, np.full((4, 1), 255, np.uint8)]),

@@ -4,6 +4,7 @@ wrote; the EXR stays linear; the view is recorded and chosen from the
 command line."""
 
 import numpy as np
+import OpenImageIO as oiio
 import pyopencl as cl
 import pytest
 
@@ -125,13 +126,10 @@ def test_render_view_keeps_the_radiance_and_records_itself(engine):
 
 
 def test_cli_view(monkeypatch, capsys, tmp_path):
-    import OpenImageIO as oiio
-
     args = ("render", SCENES / "cornell_box.toml", "--photons", "20000", "--width", "16", "--height", "16", "--quiet")
     r = in_process(monkeypatch, capsys, tmp_path, *args, "--view", "agx", "-o", tmp_path / "a.png")
     assert r.returncode == 0, r.stderr
-    spec = oiio.ImageInput.open(str(tmp_path / "a.png")).spec()
-    assert spec.getattribute("oclgi:view") == "agx"
+    assert oiio.ImageInput.open(str(tmp_path / "a.png")).spec().getattribute("oclgi:view") == "agx"
     r = in_process(monkeypatch, capsys, tmp_path, *args, "--view", "log", "-o", tmp_path / "b.png")
     assert r.returncode == 2 and r.stderr.strip().splitlines() == [
         "oclgi: error: argument --view: expected one of srgb, agx, filmic, got 'log' (see `oclgi render --help`)"]
