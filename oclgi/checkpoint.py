@@ -56,14 +56,9 @@ def points_hash(points) -> str:
 
 
 def _jsonable(value):
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (np.floating,)):
-        return float(value)
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    if isinstance(value, Path):
-        return str(value)
+    for kind, plain in ((np.integer, int), (np.floating, float), (np.bool_, bool), (Path, str)):
+        if isinstance(value, kind):
+            return plain(value)
     return value
 
 
@@ -229,16 +224,11 @@ class Saver:
 
     def __init__(self, path: Path, options: dict | None = None, every: float = DEFAULT_EVERY,
                  command: dict | None = None):
-        self.path = Path(path)
-        self.options = options
-        self.command = command
-        self.every = float(every)
+        self.path, self.options, self.command, self.every = Path(path), options, command, float(every)
         self.last = time.monotonic()
-        self.saves = 0
 
     def save(self, run) -> None:
         save(self.path, run, self.options, self.command)
-        self.saves += 1
         self.last = time.monotonic()
 
     def on_batch(self, run) -> None:

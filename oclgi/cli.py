@@ -96,11 +96,19 @@ def _integer(text):
     return params.integral(params.number_text(text))
 
 
-def _positive_int(text):
-    value = _integer(text)
-    if value is None or value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
+def _integer_type(ok, expected: str):
+    """An argparse type reading an integer (``_integer``) for which ``ok(value)`` holds."""
+    def read(text):
+        value = _integer(text)
+        if value is None or not ok(value):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return value
+    return read
+
+
+_positive_int = _integer_type(lambda v: v > 0, "a positive integer")
+_int_text = _integer_type(lambda v: True, "an integer")
+_port = _integer_type(lambda v: 0 <= v <= 65535, "a port number from 0 to 65535")
 
 
 def _positive_float(text):
@@ -110,13 +118,6 @@ def _positive_float(text):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
-
-
-def _int_text(text):
-    value = _integer(text)
-    if value is None:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}")
     return value
 
 
@@ -402,33 +403,31 @@ def cmd_render(args):
         engine = _mpi_engine(args, comm)
         result = distributed.render(engine, comm, width=args.width, height=args.height, exposure=args.exposure,
                                     spp=args.spp, view=args.view, **_est_kwargs(args))
-        if distributed.is_root(comm):
-            write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths},
-                         metadata=result.metadata)
+        if not distributed.is_root(comm):
+            return
+        write_images({p: result.radiance if p.suffix.lower() == ".exr" else result.pixels for p in paths},
+                     metadata=result.metadata)
+        summary = f"{result.stats.summary()} | {comm.size} ranks"
+    else:
+        engine = _engine(args)
+
+        def write(run, est):  # all or none: a failure leaves neither file
+            result = engine.render_result(run, est, args.exposure, args.layers, args.view)
+            exr, channels = result.exr_channels()
+            write_images({p: exr if p.suffix.lower() == ".exr" else result.pixels for p in paths},
+                         metadata=result.metadata, channels={p: channels for p in paths if p.suffix.lower() == ".exr"})
+            return result
+
+        def snapshot(run, est):
+            write(run, est)
             if not args.quiet:
-                print(f"{result.stats.summary()} | {comm.size} ranks", file=sys.stderr)
-            for p in paths:
-                print(f"wrote {p}")
-        return
-    engine = _engine(args)
+                print(f"oclgi: {run.traced:,} photons: wrote {', '.join(map(str, paths))}", file=sys.stderr)
 
-    def write(run, est):  # all or none: a failure leaves neither file
-        result = engine.render_result(run, est, args.exposure, args.layers, args.view)
-        exr, channels = result.exr_channels()
-        write_images({p: exr if p.suffix.lower() == ".exr" else result.pixels for p in paths},
-                     metadata=result.metadata, channels={p: channels for p in paths if p.suffix.lower() == ".exr"})
-        return result
-
-    def snapshot(run, est):
-        write(run, est)
-        if not args.quiet:
-            print(f"oclgi: {run.traced:,} photons: wrote {', '.join(map(str, paths))}", file=sys.stderr)
-
-    run, est = resumable.execute(args, engine, lambda **kw: engine.render_run(width=args.width, height=args.height,
-                                                                              spp=args.spp, **kw), snapshot)
-    result = write(run, est)
+        run, est = resumable.execute(args, engine, lambda **kw: engine.render_run(
+            width=args.width, height=args.height, spp=args.spp, **kw), snapshot)
+        summary = write(run, est).stats.summary()
     if not args.quiet:
-        print(result.stats.summary(), file=sys.stderr)
+        print(summary, file=sys.stderr)
     for p in paths:
         print(f"wrote {p}")
 
@@ -459,20 +458,18 @@ def cmd_irradiance(args):
         points = distributed.on_root(comm, from_file, args.points)
         engine = _mpi_engine(args, comm)
         est = distributed.irradiance(engine, points, comm, **_est_kwargs(args))
-        if distributed.is_root(comm):
-            values, columns = _irradiance_output(args, est)
-            path = write_array(args.output, values, points, columns)
-            if not args.quiet:
-                print(f"{est.stats.summary()} | {comm.size} ranks", file=sys.stderr)
-            print(f"wrote {path}")
-        return
-    points = from_file(args.points)
-    engine = _engine(args)
-    _run, est = resumable.execute(args, engine, lambda **kw: engine.run(points, **kw))
+        if not distributed.is_root(comm):
+            return
+        ranks = f" | {comm.size} ranks"
+    else:
+        points = from_file(args.points)
+        engine = _engine(args)
+        _run, est = resumable.execute(args, engine, lambda **kw: engine.run(points, **kw))
+        ranks = ""
     values, columns = _irradiance_output(args, est)
     path = write_array(args.output, values, points, columns)
     if not args.quiet:
-        print(est.stats.summary(), file=sys.stderr)
+        print(est.stats.summary() + ranks, file=sys.stderr)
     print(f"wrote {path}")
 
 
@@ -617,13 +614,6 @@ def cmd_warm(args):
     if not args.quiet:
         print(f"oclgi warm: {done['programs']} programs, {done['kernels']} kernels compiled into the cache "
               f"in {done['seconds']:.1f}s", file=sys.stderr)
-
-
-def _port(text):
-    value = _integer(text)
-    if value is None or not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a port number from 0 to 65535, got {text!r}")
-    return value
 
 
 def cmd_view(args):

@@ -145,19 +145,15 @@ def _agree(comm, error: str | None):
 @contextmanager
 def _phase(comm):
     """Local work of every rank, then the exchange of outcomes."""
-    unexpected = None
-    error = None
+    unexpected = error = None
     try:
         yield
-    except PeerError as exc:  # an inner phase already agreed; say it once more
-        error = str(exc)
-    except OclgiError as exc:
+    except OclgiError as exc:  # a PeerError too: an inner phase already agreed; say it once more
         error = str(exc)
     except KeyboardInterrupt as exc:  # Ctrl-C (mpiexec passes it to every rank)
         unexpected, error = exc, "interrupted"
     except BaseException as exc:  # noqa: BLE001 - a bug, or an exit: still end every rank, then go on here
-        unexpected = exc
-        error = f"unexpected {type(exc).__name__}: {exc}"
+        unexpected, error = exc, f"unexpected {type(exc).__name__}: {exc}"
     try:
         _agree(comm, error)
     except OclgiError:
@@ -492,12 +488,10 @@ class Session:
         out = None
         with _phase(self.comm):
             if self.comm.rank == 0:
-                import pyopencl as cl
+                from .cl.programs import read_buffer
 
                 est = self.resolver
                 est.restore({"acc": self.total, "work": np.zeros(3, np.uint64)})
-                out = np.empty((est.n, 4), np.float32)
-                cl.enqueue_copy(self.engine.queue, out, est.resolve(self.scale))
-                out = out[:, :3]
+                out = read_buffer(self.engine.queue, est.resolve(self.scale), (est.n, 4), np.float32)[:, :3]
         return out
 

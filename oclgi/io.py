@@ -155,13 +155,11 @@ def atomic_paths(paths, sync: bool = True):
             tempfiles.release(tmp)
         for folder in {p.parent for p in paths} if sync else ():
             _sync_folder(folder)
-    except OSError as exc:
+    except BaseException as exc:
         for tmp in temps:
             tempfiles.remove(tmp)
-        raise OclgiError(f"cannot write {current}: {_reason(exc)}") from None
-    except BaseException:
-        for tmp in temps:
-            tempfiles.remove(tmp)
+        if isinstance(exc, OSError):
+            raise OclgiError(f"cannot write {current}: {_reason(exc)}") from None
         raise
 
 
@@ -211,11 +209,10 @@ def staged_folder(path):
             stage.rmdir()
         tempfiles.release(stage)
         _sync_folder(path.parent if not existed else path)
-    except OSError as exc:
+    except BaseException as exc:
         tempfiles.remove(stage)
-        raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
-    except BaseException:
-        tempfiles.remove(stage)
+        if isinstance(exc, OSError):
+            raise OclgiError(f"cannot write {path}: {_reason(exc)}") from None
         raise
 
 

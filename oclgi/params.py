@@ -123,24 +123,17 @@ def method(value, name: str = "method") -> str:
     return value
 
 
-def _integer_in(value, name: str, lo: int, hi: int, wanted: str) -> int:
-    """``value`` as an int in lo..hi, else ParamError "expected WANTED"."""
-    n = integral(value)
-    if n is None or not lo <= n <= hi:
+def _in_range(value, name: str, lo, hi, wanted: str, read=integral):
+    """``value`` read as an int (or with ``_real``, a finite float) in lo..hi,
+    else ParamError "expected WANTED"."""
+    v = read(value)
+    if v is None or not lo <= v <= hi:
         raise ParamError(name, f"expected {wanted}, got {_show(value)}")
-    return n
-
-
-def _real_in(value, name: str, lo: float, hi: float, wanted: str) -> float:
-    """``value`` as a finite float in lo..hi, else ParamError "expected WANTED"."""
-    r = _real(value)
-    if r is None or not lo <= r <= hi:
-        raise ParamError(name, f"expected {wanted}, got {_show(value)}")
-    return r
+    return v
 
 
 def photons(value, name: str = "photons") -> int:
-    return _integer_in(value, name, 1, MAX_PHOTONS, "a positive integer up to 2^31")
+    return _in_range(value, name, 1, MAX_PHOTONS, "a positive integer up to 2^31")
 
 
 def photon_counts(values, name: str = "photons") -> list:
@@ -159,27 +152,27 @@ def photon_counts(values, name: str = "photons") -> list:
 
 
 def seed(value, name: str = "seed") -> int:
-    return _integer_in(value, name, 0, 2**64 - 1, "an integer in 0..2^64-1")
+    return _in_range(value, name, 0, 2**64 - 1, "an integer in 0..2^64-1")
 
 
 MAX_SPP = 256
 
 
 def samples_per_pixel(value, name: str = "spp") -> int:
-    return _integer_in(value, name, 1, MAX_SPP, f"an integer in 1..{MAX_SPP}")
+    return _in_range(value, name, 1, MAX_SPP, f"an integer in 1..{MAX_SPP}")
 
 
 def max_depth(value, name: str = "max_depth") -> int:
-    return _integer_in(value, name, 1, MAX_DEPTH_LIMIT, f"an integer in 1..{MAX_DEPTH_LIMIT}")
+    return _in_range(value, name, 1, MAX_DEPTH_LIMIT, f"an integer in 1..{MAX_DEPTH_LIMIT}")
 
 
 def radius(value, name: str = "radius") -> float:
-    return _real_in(value, name, MIN_RADIUS, MAX_LENGTH, f"a number from {_number(MIN_RADIUS)} to "
-                    f"{_number(MAX_LENGTH)} (the device squares it in float32)")
+    return _in_range(value, name, MIN_RADIUS, MAX_LENGTH, f"a number from {_number(MIN_RADIUS)} to "
+                     f"{_number(MAX_LENGTH)} (the device squares it in float32)", _real)
 
 
 def extension(value, name: str = "extension") -> float:
-    return _real_in(value, name, 0.0, MAX_LENGTH, f"a number from 0 to {_number(MAX_LENGTH)}")
+    return _in_range(value, name, 0.0, MAX_LENGTH, f"a number from 0 to {_number(MAX_LENGTH)}", _real)
 
 
 def count_emitted(value, name: str = "count_emitted") -> bool:
@@ -241,7 +234,7 @@ def view(value, name: str = "view") -> str:
 
 def image_size(value, name: str = "width") -> int:
     """An image's width or height in pixels (the camera's limit, oclgi/scene/description.py)."""
-    return _integer_in(value, name, 1, MAX_IMAGE_SIDE, f"an integer in 1..{MAX_IMAGE_SIDE}")
+    return _in_range(value, name, 1, MAX_IMAGE_SIDE, f"an integer in 1..{MAX_IMAGE_SIDE}")
 
 
 def frames(value, name: str = "frames") -> int:
@@ -249,23 +242,23 @@ def frames(value, name: str = "frames") -> int:
     an image file: beyond MAX_FRAMES a run is no animation one could wait
     for (nor a folder one could list), and its poses alone would take
     gigabytes (oclgi.budget.frames says how many)."""
-    return _integer_in(value, name, 1, MAX_FRAMES, f"an integer in 1..{MAX_FRAMES:,}")
+    return _in_range(value, name, 1, MAX_FRAMES, f"an integer in 1..{MAX_FRAMES:,}")
 
 
 def seed_count(value, name: str = "seeds") -> int:
     """A study's number of seeds: at least 2 for a variance, at most one
     per seed of the study's range (oclgi/study/reference.py)."""
-    return _integer_in(value, name, 2, MAX_SEEDS, f"an integer from 2 (for a variance) to {MAX_SEEDS:,}")
+    return _in_range(value, name, 2, MAX_SEEDS, f"an integer from 2 (for a variance) to {MAX_SEEDS:,}")
 
 
 def batch_bytes(value, name: str = "batch_bytes") -> int:
     """The bytes of one batch of traced segments (the engine's batching)."""
-    return _integer_in(value, name, 1 << 16, 1 << 40, "a number of bytes from 64 KiB to 1 TiB")
+    return _in_range(value, name, 1 << 16, 1 << 40, "a number of bytes from 64 KiB to 1 TiB")
 
 
 def local_size(value, name: str = "local_size") -> int:
     """A work-group size (the device's own limit is checked by the engine)."""
-    return _integer_in(value, name, 1, 2**31 - 1, "a positive integer")
+    return _in_range(value, name, 1, 2**31 - 1, "a positive integer")
 
 
 READERS = {"method": method, "photons": photons, "radius": radius, "seed": seed, "max_depth": max_depth,

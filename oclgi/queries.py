@@ -82,20 +82,18 @@ class QueryPoints:
         n = len(pos)
         nrm = _array(self.normals, "normals", (3, 4), n)
         bary = _array(self.barys, "barycentrics", (2,), n)
+        xyz = pos[:, :3]
         if pos.dtype == np.float32 and pos.shape[1] == 4:
             tri = pos[:, 3].view(np.int32)
-            xyz = pos[:, :3]
+        elif pos.shape[1] == 4:
+            w = pos[:, 3].astype(np.float64)
+            whole = np.isfinite(w) & (w == np.round(w)) & (np.abs(w) < 2**31)
+            if not whole.all():
+                raise OclgiError(f"query point {int(np.argmax(~whole))}: positions' 4th column (the triangle "
+                                 f"id) must be an integer, got {w[np.argmax(~whole)]!r}")
+            tri = w.astype(np.int32)
         else:
-            xyz = pos[:, :3]
-            if pos.shape[1] == 4:
-                w = pos[:, 3].astype(np.float64)
-                whole = np.isfinite(w) & (w == np.round(w)) & (np.abs(w) < 2**31)
-                if not whole.all():
-                    raise OclgiError(f"query point {int(np.argmax(~whole))}: positions' 4th column (the triangle "
-                                     f"id) must be an integer, got {w[np.argmax(~whole)]!r}")
-                tri = w.astype(np.int32)
-            else:
-                tri = np.full(n, -1, np.int32)
+            tri = np.full(n, -1, np.int32)
         _finite_rows(xyz, "position", MAX_COORDINATE)
         bad = tri < -1
         if bad.any():
@@ -270,8 +268,7 @@ def from_file(path) -> QueryPoints:
     if suffix == ".npy":
         from .io import read_npy
 
-        a = read_npy(path, "points")
-        a = a.astype(np.float64)
+        a = read_npy(path, "points").astype(np.float64)
     elif suffix == ".csv":
         from .io import read_csv
 

@@ -56,6 +56,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 
 from .errors import OclgiError
+from .scene.lights import all_lights as _lights  # point lights first, then the others
 
 MATERIAL_FIELDS = ("albedo", "emission", "specular", "exponent", "ior", "roughness", "transmission")
 RUN_FIELDS = ("photons", "seed", "max_depth", "method", "radius", "extension", "count_emitted")
@@ -74,10 +75,6 @@ class Updated:
     resummed: bool = False  # the stored paths summed again
     tables: bool = False  # materials' and emitters' device tables rebuilt
     seconds: float = 0.0
-
-
-def _lights(scene) -> list:
-    return [*scene.point_lights, *scene.lights]
 
 
 def _light_key(light, i: int) -> str:
@@ -136,14 +133,11 @@ def coerce(key: str, value, current):
         if len(v) != len(current) or not all(math.isfinite(c) for c in v):
             raise OclgiError(f"{key} takes {len(current)} finite numbers, got {value!r}")
         return v
-    if isinstance(current, bool):
-        if not isinstance(value, bool):
-            raise OclgiError(f"{key} takes true or false, got {value!r}")
-        return value
-    if isinstance(current, str):
-        if not isinstance(value, str):
-            raise OclgiError(f"{key} takes a name, got {value!r}")
-        return value
+    for kind, what in ((bool, "true or false"), (str, "a name")):
+        if isinstance(current, kind):
+            if not isinstance(value, kind):
+                raise OclgiError(f"{key} takes {what}, got {value!r}")
+            return value
     if isinstance(current, int) and key in RUN_FIELDS:
         return value  # the run's readers check it (oclgi/params.py)
     if not _is_number(value) or not math.isfinite(value):
@@ -214,9 +208,7 @@ class Parameters(Mapping):
         self._pending: dict = {}
 
     def __getitem__(self, key):
-        if key in self._pending:
-            return self._pending[key]
-        return self._values[key]
+        return self._pending[key] if key in self._pending else self._values[key]
 
     def __iter__(self):
         return iter(self._values)

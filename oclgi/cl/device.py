@@ -130,10 +130,8 @@ def check_device(dev: cl.Device) -> None:
     """The engine needs 64-bit integer atomics for its order-independent sums."""
     ext = dev.extensions.split()
     if "cl_khr_int64_base_atomics" not in ext:
-        raise OclgiError(
-            f"OpenCL device {dev.name!r} lacks cl_khr_int64_base_atomics, which oclgi's "
-            "fixed-point accumulation needs; choose another device with --device / OCLGI_DEVICE"
-        )
+        raise OclgiError(f"OpenCL device {dev.name!r} lacks cl_khr_int64_base_atomics, which oclgi's "
+                         "fixed-point accumulation needs; choose another device with --device / OCLGI_DEVICE")
 
 
 # One context per device and process, shared by every engine on that device:
@@ -176,10 +174,8 @@ def describe_devices() -> str:
     lines = []
     for pi, di, d in devices:
         mark = "*" if chosen is not None and d.int_ptr == chosen.int_ptr else " "
-        lines.append(
-            f"{mark} {pi}:{di}  {d.platform.name} | {d.name} | {_kind(d)} | "
-            f"{d.max_compute_units} units | {d.global_mem_size / 2**30:.1f} GiB "
-            f"(max alloc {d.max_mem_alloc_size / 2**30:.1f} GiB) | {d.version}"
-        )
+        lines.append(f"{mark} {pi}:{di}  {d.platform.name} | {d.name} | {_kind(d)} | "
+                     f"{d.max_compute_units} units | {d.global_mem_size / 2**30:.1f} GiB "
+                     f"(max alloc {d.max_mem_alloc_size / 2**30:.1f} GiB) | {d.version}")
     lines.append("* = default (override with --device P:D, OCLGI_DEVICE or PYOPENCL_CTX)")
     return "\n".join(lines)

@@ -129,10 +129,7 @@ class Program:
     """A built program and its kernels, fetched once (``program.kernels[name]``)."""
 
     def __init__(self, program: cl.Program, stem: str, options: tuple[str, ...], log: str = ""):
-        self.program = program
-        self.stem = stem
-        self.options = options
-        self.log = log
+        self.program, self.stem, self.options, self.log = program, stem, options, log
         self.kernels = {}
         for k in program.all_kernels():
             k.set_scalar_arg_dtypes(scalar_arg_dtypes(k))
@@ -263,12 +260,8 @@ def _show_log(name: str, options, log: str) -> None:
 
 
 def _program_log(program: cl.Program) -> str:
-    logs = []
-    for dev in program.get_info(cl.program_info.DEVICES):
-        log = program.get_build_info(dev, cl.program_build_info.LOG)
-        if log and log.strip():
-            logs.append(log.strip())
-    return "\n".join(logs)
+    logs = (program.get_build_info(dev, cl.program_build_info.LOG) for dev in program.get_info(cl.program_info.DEVICES))
+    return "\n".join(log.strip() for log in logs if log and log.strip())
 
 
 _caches: dict[tuple, ProgramCache] = {}
@@ -348,6 +341,13 @@ def timed_slices(queue: cl.CommandQueue, key, total: int, unit: int = 1, first: 
         start += count
         if count == step:
             step = _slice_items[key] = _next_slice(count, time.perf_counter() - t0, unit)
+
+
+def read_buffer(queue: cl.CommandQueue, buf: cl.Buffer, shape, dtype) -> np.ndarray:
+    """A new host array of ``shape`` and ``dtype`` holding ``buf``'s bytes (waits for them)."""
+    out = np.empty(shape, dtype)
+    cl.enqueue_copy(queue, out, buf)
+    return out
 
 
 def launch(queue: cl.CommandQueue, kernel: cl.Kernel, n: int, *args, local_size: int | None = None):

@@ -14,9 +14,15 @@ import math
 import numpy as np
 import pyopencl as cl
 
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from . import detp_direct, gather_options, radius_options
+
+
+def work_counts(queue, buf: cl.Buffer) -> dict:
+    """The work counters of ``buf`` (kernels/work.h): t, u and nodes."""
+    t, u, nodes = (int(x) for x in read_buffer(queue, buf, 3, np.uint64))
+    return {"t": t, "u": u, "nodes": nodes}
 
 
 class Estimator:
@@ -28,14 +34,8 @@ class Estimator:
 
     def __init__(self, queue, compiled, points, count_emitted: bool = True,
                  local_size: int | None = None, count_work: bool = False):
-        self.queue = queue
-        self.ctx = queue.context
-        self.compiled = compiled
-        self.points = points
-        self.n = len(points)
-        self.count_emitted = bool(count_emitted)
-        self.local_size = local_size
-        self.count_work = bool(count_work)
+        self.queue, self.ctx, self.compiled, self.points, self.n = queue, queue.context, compiled, points, len(points)
+        self.count_emitted, self.local_size, self.count_work = bool(count_emitted), local_size, bool(count_work)
         self.defines = {"count_work": 1} if count_work else {}
         self.work_buf = self.zeros(3 * 8)
 
@@ -55,11 +55,7 @@ class Estimator:
         return cl.Buffer(self.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=array)
 
     def work(self) -> dict | None:
-        if not self.count_work:
-            return None
-        out = np.empty(3, np.uint64)
-        cl.enqueue_copy(self.queue, out, self.work_buf)
-        return {"t": int(out[0]), "u": int(out[1]), "nodes": int(out[2])}
+        return work_counts(self.queue, self.work_buf) if self.count_work else None
 
     # Sums kept per query point (DETP, Photon Maps) must be recomputed when a
     # point changes; sums kept per triangle (Impact Count) need not.
@@ -80,9 +76,7 @@ class Estimator:
 
     def accumulators(self) -> np.ndarray:
         """The int64 sums, one RGB row per point (Impact Count: per triangle)."""
-        out = np.empty((self.n, 3), np.int64)
-        cl.enqueue_copy(self.queue, out, self.acc)
-        return out
+        return read_buffer(self.queue, self.acc, (self.n, 3), np.int64)
 
     def move_points(self, index: np.ndarray, new) -> None:
         """The points ``index`` replaced by ``new`` on the host and the device
@@ -108,9 +102,7 @@ class Estimator:
         """What the sums of the paths accumulated so far are, on the host:
         the int64 accumulators and the work counters. ``restore`` of it
         gives an estimator that goes on as this one would."""
-        work = np.empty(3, np.uint64)
-        cl.enqueue_copy(self.queue, work, self.work_buf)
-        return {"acc": self.accumulators(), "work": work}
+        return {"acc": self.accumulators(), "work": read_buffer(self.queue, self.work_buf, 3, np.uint64)}
 
     def restore(self, state: dict) -> None:
         """Take the sums of ``state`` (from ``state()`` of an estimator of

@@ -44,10 +44,6 @@ class Detp(DetpEstimator):
         for start, count in timed_slices(self.queue, ("detp_plain", self.n), batch.n_paths, unit, first):
             segments = batch.segments if count == batch.n_paths else batch.segments.get_sub_region(
                 start * path_bytes, count * path_bytes)
-            launch(
-                self.queue, self.k_plain, (self.n + LANES - 1) // LANES,
-                self.positions, self.normals, self.n, segments, count,
-                batch.max_depth, self.count_emitted, self.radius2_buf,
-                self.ext, self.acc, self.work_buf,
-                local_size=self.local_size,
-            )
+            launch(self.queue, self.k_plain, (self.n + LANES - 1) // LANES, self.positions, self.normals, self.n,
+                   segments, count, batch.max_depth, self.count_emitted, self.radius2_buf, self.ext, self.acc,
+                   self.work_buf, local_size=self.local_size)

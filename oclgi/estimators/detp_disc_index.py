@@ -142,8 +142,7 @@ class DetpDiscIndex(DetpEstimator):
             raise OclgiError(f"builder must be one of {', '.join(map(repr, BUILDERS))}, got {builder!r}")
         self.leaf_size = int(leaf_size)
         self._crossings, self._no_list = None, None
-        self.tree = tree
-        self.builder = builder
+        self.tree, self.builder = tree, builder
         if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
             self.defines = dict(self.defines, disc_tree_binary=1)
         prog = self.program("detp_disc_index")
@@ -220,13 +219,9 @@ class DetpDiscIndex(DetpEstimator):
             c["runs"], c["ids"] = runs, ids  # the next move's lists (kept until then)
         else:
             args = (none, -1, none, none, none, none, 0, none)
-        launch(
-            self.queue, self.k_change, n,
-            self.nodes, self.blocks, old.segments, store.segments, affected.paths_buf, affected.starts_buf,
-            n, store.max_depth, self.count_emitted, self.ext,
-            self.acc, self.work_buf, *args,
-            local_size=self.local_size,
-        )
+        launch(self.queue, self.k_change, n, self.nodes, self.blocks, old.segments, store.segments,
+               affected.paths_buf, affected.starts_buf, n, store.max_depth, self.count_emitted, self.ext,
+               self.acc, self.work_buf, *args, local_size=self.local_size)
 
     def forget_store(self, store) -> None:
         """``store`` is gone (a session resized or re-traced it): its crossing
@@ -259,10 +254,5 @@ class DetpDiscIndex(DetpEstimator):
     def _walk(self, batch, listed, n: int, cull: bool):
         """detp_disc_index over ``n`` paths of ``batch``: its first n, or those ``listed``."""
         lo, hi = (np.append(b, 0.0).astype(np.float32) for b in self.root_box)  # float32 values: exact
-        launch(
-            self.queue, self.k_walk, n,
-            self.nodes, self.blocks, batch.segments, listed, n, batch.max_depth,
-            self.count_emitted, self.ext, int(cull), lo, hi,
-            self.acc, self.work_buf,
-            local_size=self.local_size,
-        )
+        launch(self.queue, self.k_walk, n, self.nodes, self.blocks, batch.segments, listed, n, batch.max_depth,
+               self.count_emitted, self.ext, int(cull), lo, hi, self.acc, self.work_buf, local_size=self.local_size)

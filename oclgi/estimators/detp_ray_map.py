@@ -72,17 +72,51 @@ MAX_PIECES = 64  # pieces per segment, at most
 PIECE_BUDGET = 4  # pieces per segment of a batch, on average at most (memory)
 
 
-def clip_segments(org, dirs, tmax, lo, hi):
-    """Parameter interval [enter, leave] of each segment o + t w, 0 <= t <=
+def clip_segments(org, dirs, tmax, lo, hi, tmin=0.0):
+    """Parameter interval [enter, leave] of each segment o + t w, tmin <= t <=
     tmax, inside the box [lo, hi] (float64); enter > leave when it misses."""
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / dirs
         t0 = (lo - org) * inv
         t1 = (hi - org) * inv
     # w_a = 0: the slab is all or nothing; 0 * inf gives NaN, which fmin/fmax drop
-    enter = np.maximum(np.fmax.reduce(np.fmin(t0, t1), axis=1), 0.0)
+    enter = np.maximum(np.fmax.reduce(np.fmin(t0, t1), axis=1), tmin)
     leave = np.minimum(np.fmin.reduce(np.fmax(t0, t1), axis=1), tmax)
     return enter, leave
+
+
+def piece_counts(enter, leave, length: float) -> np.ndarray:
+    """Pieces per segment [enter, leave]: at most MAX_PIECES, none longer
+    than ``length`` (0: segments whole), the length growing until there are
+    at most PIECE_BUDGET per segment on average (memory O(segments))."""
+    n = len(enter)
+    k = np.ones(n, np.int64)
+    while length > 0:
+        k = np.clip(np.ceil((leave - enter) / length), 1, MAX_PIECES).astype(np.int64)
+        if k.sum() <= PIECE_BUDGET * n:
+            break
+        length *= 1.25 * k.sum() / (PIECE_BUDGET * n)
+    return k
+
+
+def cut_pieces(enter, leave, k):
+    """Segment [enter, leave] cut into k equal pieces: (segment of each
+    piece, its float32 edges t_a and t_b, the t it claims from claim_lo to
+    claim_hi). Piece j spans [e_j, e_j+1] (e_0 = enter, e_k = leave) and
+    claims the t in [e_j, e_j+1), the outer edges opened to -inf and +inf:
+    a partition of the line, so one piece claims each crossing."""
+    seg = np.repeat(np.arange(len(k), dtype=np.int64), k)
+    start = np.zeros(len(k), np.int64)
+    np.cumsum(k[:-1], out=start[1:])
+    j = np.arange(len(seg)) - start[seg]
+    step = (leave - enter) / k
+    t_a = (enter[seg] + j * step[seg]).astype(np.float32)
+    t_b = np.empty_like(t_a)
+    t_b[:-1] = t_a[1:]
+    t_b[start + k - 1] = leave.astype(np.float32)  # the last piece ends at leave
+    claim_lo = np.where(j == 0, np.float32(-np.inf), t_a)
+    claim_hi = np.where(j + 1 == k[seg], np.float32(np.inf), t_b)
+    return seg, t_a, t_b, claim_lo, claim_hi
 
 
 class DetpRayMap(DetpEstimator):
@@ -146,32 +180,11 @@ class DetpRayMap(DetpEstimator):
         if not len(met):
             return None
         slots, s, org, w, enter, leave = slots[met], s[met], org[met], w[met], enter[met], leave[met]
-        # Cut long segments into at most MAX_PIECES pieces of at most
-        # piece_length. Piece j of a segment spans [e_j, e_j+1] (float32
-        # edges, e_0 = enter, e_k = leave) and claims the crossings whose
-        # parameter t lies in [e_j, e_j+1), the outer edges opened to -inf
-        # and +inf: a partition of the line, so one piece claims each.
-        k = np.ones(len(slots), np.int64)
-        length = self.piece_length
-        while length > 0:
-            k = np.clip(np.ceil((leave - enter) / length), 1, MAX_PIECES).astype(np.int64)
-            if k.sum() <= PIECE_BUDGET * len(slots):
-                break
-            length *= 1.25 * k.sum() / (PIECE_BUDGET * len(slots))  # keep memory O(n_R)
+        # Long segments cut into pieces of at most piece_length, each claiming its own range of t.
+        k = piece_counts(enter, leave, self.piece_length)
         self.pieces += int(k.sum())
         self.indexed += len(slots)
-        seg = np.repeat(np.arange(len(slots)), k)
-        start = np.zeros(len(slots), np.int64)
-        np.cumsum(k[:-1], out=start[1:])
-        j = np.arange(len(seg)) - start[seg]
-        last = j + 1 == k[seg]
-        step = (leave - enter) / k
-        t_a = (enter[seg] + j * step[seg]).astype(np.float32)
-        t_b = np.empty_like(t_a)
-        t_b[:-1] = t_a[1:]
-        t_b[start + k - 1] = leave.astype(np.float32)  # the last piece ends at leave
-        claim_lo = np.where(j == 0, np.float32(-np.inf), t_a)
-        claim_hi = np.where(last, np.float32(np.inf), t_b)
+        seg, t_a, t_b, claim_lo, claim_hi = cut_pieces(enter, leave, k)
         # Boxes in float32: the rounding of o + t w (a few ulps of the
         # coordinates) is far below the pad.
         o_s, w_s = org[seg], w[seg]
@@ -215,12 +228,8 @@ class DetpRayMap(DetpEstimator):
         if built is None:
             return
         nodes, blocks, _ = built
-        launch(
-            self.queue, self.k_query, self.n_active,
-            nodes, blocks, self.discs, self.n_active, batch.segments, self.radius**2,
-            self.ext, self.acc, self.work_buf,
-            local_size=self.local_size,
-        )
+        launch(self.queue, self.k_query, self.n_active, nodes, blocks, self.discs, self.n_active, batch.segments,
+               self.radius**2, self.ext, self.acc, self.work_buf, local_size=self.local_size)
         self.queue.finish()  # the tree's buffers are released when this returns
         self.query_seconds += time.perf_counter() - t1
         for buf in (nodes, blocks):

@@ -94,7 +94,7 @@ from ..accel import ordering
 from ..cl.constants import SC_MAX_LEVELS as MAX_LEVELS
 from ..cl.constants import SC_MU as MU  # noqa: F401  (the slack of the kernel's sphere test, for host checks)
 from ..cl.layout import ScRecord
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from .base import DetpEstimator
 
@@ -131,11 +131,9 @@ class DetpSphereCache(DetpEstimator):
                                        or run_length < 1):
             raise OclgiError(f"run_length must be a positive integer, got {run_length!r}")
         super().__init__(queue, compiled, points, radius, **kw)
-        self.q = float(q)
-        self.order = order
+        self.q, self.order = float(q), order
         prog = programs(self.ctx).get("detp_sphere_cache", **self.defines)
-        self.k_gather = prog.sc_gather
-        self.k_runs = prog.sc_runs
+        self.k_gather, self.k_runs = prog.sc_gather, prog.sc_runs
 
         # Points without a normal (camera pixels that see nothing, placed at
         # the origin) receive nothing and are skipped by the kernel: they do
@@ -198,11 +196,6 @@ class DetpSphereCache(DetpEstimator):
         share = self.scratch_bytes // (ENTRY_BYTES * self.n_runs) - 1
         return int(min(most, max(1024, guess, share)))
 
-    def _read_status(self) -> np.ndarray:
-        st = np.empty(3, np.int32)
-        cl.enqueue_copy(self.queue, st, self.status)
-        return st
-
     # -- the estimator ------------------------------------------------------------
     def accumulate(self, batch):
         q = self.queue
@@ -213,9 +206,7 @@ class DetpSphereCache(DetpEstimator):
                batch.max_depth, self.count_emitted, PATHS_PER_ITEM, self.c0,
                self.radii[0], self.ext, rec0, slot0, self._n0, self.work_buf,
                local_size=self.local_size)
-        n0 = np.empty(1, np.int32)
-        cl.enqueue_copy(q, n0, self._n0)
-        n0 = int(n0[0])
+        n0 = int(read_buffer(q, self._n0, 1, np.int32)[0])
         if n0 == 0:
             return
 
@@ -249,7 +240,7 @@ class DetpSphereCache(DetpEstimator):
                            count, batch.segments, self.radii_buf, self.levels,
                            self.radius, self.radius**2, srec, sslot,
                            cap, self.acc, self.status, self.work_buf, local_size=self.run_local_size)
-                st = self._read_status()
+                st = read_buffer(q, self.status, 3, np.int32)
                 peak = max(peak, st[2] / count)
                 if st[0] == 0:
                     break

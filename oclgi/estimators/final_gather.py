@@ -118,14 +118,12 @@ class FinalGather(Estimator):
         self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
-        hits, weights = gather_rays(queue, compiled, self.positions, self.normals, self.n, n_rays,
-                                    gather_key(int(seed), self.gather_seed), self.local_size)
-        self.hits = hits
-        self.hit_weights = weights
+        self.hits, self.hit_weights = gather_rays(queue, compiled, self.positions, self.normals, self.n, n_rays,
+                                                  gather_key(int(seed), self.gather_seed), self.local_size)
         # The variant's own discs at the hits, with their own exact direct light.
-        self.inner = variant(queue, compiled, hits, radius, direct="exact", count_work=count_work, **kw)
+        self.inner = variant(queue, compiled, self.hits, radius, direct="exact", count_work=count_work, **kw)
         self.radius = self.inner.radius
-        self.weights_buf = self.upload(weights)
+        self.weights_buf = self.upload(self.hit_weights)
         self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
         self.k_resolve = self.program("final_gather").final_gather_resolve
 

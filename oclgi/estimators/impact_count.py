@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from .base import Estimator
 
@@ -41,10 +41,8 @@ class ImpactCount(Estimator):
         # radius and extension are DETP parameters; Impact Count has none
         super().__init__(queue, compiled, points, **kw)
         prog = self.program("impact_count")
-        self.k_acc = prog.impact_count_accumulate
-        self.k_tri = prog.impact_count_triangles
-        self.k_vert = prog.impact_count_vertices
-        self.k_interp = prog.impact_count_interpolate
+        self.k_acc, self.k_tri = prog.impact_count_accumulate, prog.impact_count_triangles
+        self.k_vert, self.k_interp = prog.impact_count_vertices, prog.impact_count_interpolate
         scene = compiled.scene
         self.n_tris = scene.n_triangles
         self.n_vertices = len(scene.vertices)
@@ -54,8 +52,7 @@ class ImpactCount(Estimator):
         self.positions = self.upload(points.positions)
         self.barys = self.upload(points.barys)
         starts, lists = vertex_triangles(scene.faces, self.n_vertices)
-        self.starts = self.upload(starts)
-        self.lists = self.upload(lists)
+        self.starts, self.lists = self.upload(starts), self.upload(lists)
         self.acc = self.zeros(self.n_tris * 3 * 8)
         self.tri_irr = self.zeros(self.n_tris * 16)
         self.vert_irr = self.zeros(self.n_vertices * 16)
@@ -73,24 +70,20 @@ class ImpactCount(Estimator):
         cl.enqueue_copy(self.queue, self.barys, self.points.barys)
 
     def accumulate(self, batch):
-        launch(self.queue, self.k_acc, batch.n_slots, batch.segments, batch.n_slots,
-               batch.max_depth, self.count_emitted, self.acc,
-               local_size=self.local_size)
+        launch(self.queue, self.k_acc, batch.n_slots, batch.segments, batch.n_slots, batch.max_depth,
+               self.count_emitted, self.acc, local_size=self.local_size)
 
     def resolve(self, scale: float) -> cl.Buffer:
         c = self.compiled
-        launch(self.queue, self.k_tri, self.n_tris, self.acc, c.tri_areas, self.n_tris,
-               1.0 / scale, self.tri_irr)
-        launch(self.queue, self.k_vert, self.n_vertices, self.tri_irr, self.starts, self.lists,
-               self.n_vertices, self.vert_irr)
-        launch(self.queue, self.k_interp, self.n, self.positions, self.barys, self.n, c.faces,
-               self.vert_irr, self.irr)
+        launch(self.queue, self.k_tri, self.n_tris, self.acc, c.tri_areas, self.n_tris, 1.0 / scale, self.tri_irr)
+        launch(self.queue, self.k_vert, self.n_vertices, self.tri_irr, self.starts, self.lists, self.n_vertices,
+               self.vert_irr)
+        launch(self.queue, self.k_interp, self.n, self.positions, self.barys, self.n, c.faces, self.vert_irr,
+               self.irr)
         return self.irr
 
     def accumulators(self) -> np.ndarray:
-        out = np.empty((self.n_tris, 3), np.int64)
-        cl.enqueue_copy(self.queue, out, self.acc)
-        return out
+        return read_buffer(self.queue, self.acc, (self.n_tris, 3), np.int64)
 
 
 def locate(queue, compiled, points):
@@ -106,15 +99,13 @@ def locate(queue, compiled, points):
     bary = np.empty((len(points), 2), np.float32)
     bary_buf = cl.Buffer(ctx, mf.WRITE_ONLY, bary.nbytes)
     delta = 1e-4 * compiled.scene.diagonal
-    launch(queue, k, len(points), *compiled.scene_args, pos_buf, nrm_buf, len(points),
-           delta, bary_buf)
+    launch(queue, k, len(points), *compiled.scene_args, pos_buf, nrm_buf, len(points), delta, bary_buf)
     cl.enqueue_copy(queue, pos, pos_buf)
     cl.enqueue_copy(queue, bary, bary_buf)
     tri = pos[:, 3].view(np.int32)
     if (tri < 0).any():
         bad = np.nonzero(tri < 0)[0]
-        raise OclgiError(
-            f"Impact Count needs points on a surface: {len(bad)} of {len(points)} points (first: {int(bad[0])}) "
-            f"are farther than {delta:.3g} from any triangle along their normal; use method 'detp' for them"
-        )
+        raise OclgiError(f"Impact Count needs points on a surface: {len(bad)} of {len(points)} points (first: "
+                         f"{int(bad[0])}) are farther than {delta:.3g} from any triangle along their normal; use "
+                         "method 'detp' for them")
     return QueryPoints(pos, points.normals, bary, points.kind, points.shape)

@@ -93,7 +93,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.point_index import KnnIndex, check_index, query_order
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from .base import Estimator
 
@@ -111,6 +111,7 @@ def max_impacts(device) -> int:
 
 
 DEFAULT_K = 50  # neighbours per estimate
+IMPACT_KEYS = ("impact_positions", "impact_directions", "impact_powers")  # a run state's
 
 
 def point_buffers(est, points) -> tuple:
@@ -122,17 +123,86 @@ def point_buffers(est, points) -> tuple:
             est.zeros(est.n * 3 * 8), est.zeros(est.n * 4), est.zeros(est.n * 16))
 
 
-def _check_k(k, estimator):
+def check_k(k, estimator, name: str = "photon_map"):
+    """k and the estimator kind of a k-nearest estimate (Photon Maps' and ray_map_knn's)."""
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_K:
-        raise OclgiError(f"photon_map: k must be an integer in 1..{MAX_K}, got {k!r}")
+        raise OclgiError(f"{name}: k must be an integer in 1..{MAX_K}, got {k!r}")
     if estimator not in ESTIMATOR_KINDS:
-        raise OclgiError(f"photon_map: estimator must be one of {', '.join(map(repr, ESTIMATOR_KINDS))}, "
+        raise OclgiError(f"{name}: estimator must be one of {', '.join(map(repr, ESTIMATOR_KINDS))}, "
                          f"got {estimator!r}")
     if estimator == "k-1" and k < 2:
-        raise OclgiError("photon_map: the 'k-1' estimator needs k >= 2")
+        raise OclgiError(f"{name}: the 'k-1' estimator needs k >= 2")
 
 
-class PhotonMap(Estimator):
+class KnnMap(Estimator):
+    """What the k-nearest estimates (Photon Maps, ray_map_knn) share: the
+    map's arrays gathered batch by batch in ``chunks`` (canonical order), at
+    most ``limit`` of them (``what``: impacts or segments, ``bytes_each`` on
+    the device), and the search's radii and work."""
+
+    what = "impact"
+    bytes_each = BYTES_PER_IMPACT
+
+    def _check_room(self, count: int) -> None:
+        if count > self.limit:
+            raise OclgiError(
+                f"{self.name}: more than {self.limit:,} {self.what}s ({count:,} so far); the "
+                f"k-nearest search keeps them all in device memory ({self.bytes_each} bytes each, "
+                f"{DEVICE_FRACTION:.0%} of {self.queue.device.global_mem_size / 2**30:.1f} GiB); "
+                f"trace fewer photons or use method 'detp'")
+
+    def _check_projected(self, count: int, paths_done: int, paths_total: int) -> None:
+        """The map grows with the photons: a run projected (from its first
+        batch) to hold more than ``limit`` stops at its start."""
+        if paths_done <= 0 or paths_done >= paths_total:
+            return
+        projected = count / paths_done * paths_total
+        if projected > self.limit:
+            raise OclgiError(
+                f"{self.name}: {paths_total:,} photons would make about {projected:,.0f} {self.what}s (from the "
+                f"first {paths_done:,}), more than the {self.limit:,} this device holds for the k-nearest search "
+                f"({self.bytes_each} bytes each); trace fewer photons or use a DETP method, whose memory does not "
+                "grow with the photon count")
+
+    def _joined(self, empty: tuple) -> tuple:
+        """All gathered arrays in canonical order (``empty`` when none)."""
+        if not self.chunks:
+            return empty
+        if len(self.chunks) > 1:  # concatenate once, keep one chunk
+            self.chunks = [tuple(np.concatenate(c) for c in zip(*self.chunks))]
+        return self.chunks[0]
+
+    def _restore_chunks(self, state: dict, keys: tuple, flat: tuple = ()) -> int:
+        """The map of ``state`` (float32 arrays ``keys``, (m, 3) or (m,) for
+        those in ``flat``) as the only chunk; returns its length."""
+        got = []
+        for key in keys:
+            a = state.get(key)
+            ndim = 1 if key in flat else 2
+            if not isinstance(a, np.ndarray) or a.dtype != np.float32 or a.ndim != ndim or \
+                    (ndim == 2 and a.shape[1] != 3):
+                raise OclgiError(f"run state: {self.name} expects {key!r} as float32 "
+                                 f"{'(m,)' if ndim == 1 else '(m, 3)'}")
+            got.append(np.ascontiguousarray(a))
+        if len({len(a) for a in got}) != 1:
+            raise OclgiError(f"run state: {self.name}'s {self.what} arrays differ in length")
+        if len(got[0]) > self.limit:
+            raise OclgiError(f"run state: {len(got[0]):,} {self.what}s, more than this device holds "
+                             f"({self.limit:,})")
+        self.chunks = [tuple(got)] if len(got[0]) else []
+        return len(got[0])
+
+    def radii(self) -> np.ndarray:
+        """r_k per point (inf where fewer than k neighbours were found), after resolve."""
+        return np.sqrt(read_buffer(self.queue, self.r2, self.n, np.float32))
+
+    def work(self) -> dict | None:
+        """Work of the search (u: distance tests of impacts or segment
+        pieces, nodes: BVH nodes or grid cells visited)."""
+        return super().work() if not self.count_work or self.knn is None else self.knn.work()
+
+
+class PhotonMap(KnnMap):
     """The estimator (module docstring): gathers impacts batch by batch,
     searches at ``resolve``; ``impacts``, ``neighbours`` and ``radii``
     expose the map for tests and studies."""
@@ -147,15 +217,12 @@ class PhotonMap(Estimator):
                  front_only: bool = True, leaf_size: int = 16, radius=None, extension=None, **kw):
         # radius and extension are DETP parameters; the k-th neighbour sets the radius here
         super().__init__(queue, compiled, points, **kw)
-        _check_k(k, estimator)
+        check_k(k, estimator)
         check_index(index, leaf_size)
         if not isinstance(front_only, (bool, np.bool_)):
             raise OclgiError(f"photon_map: front_only must be true or false, got {front_only!r}")
-        self.k = int(k)
-        self.estimator = estimator
-        self.index = index
-        self.front_only = bool(front_only)
-        self.leaf_size = leaf_size
+        self.k, self.estimator, self.index = int(k), estimator, index
+        self.front_only, self.leaf_size = bool(front_only), leaf_size
         self.limit = max_impacts(queue.device)
         prog = programs(self.ctx).get("photon_map")  # compaction and resolve do not depend on k
         self.k_count, self.k_gather, self.k_resolve = prog.pm_count, prog.pm_gather, prog.pm_resolve
@@ -171,61 +238,30 @@ class PhotonMap(Estimator):
         c = self.compiled
         args = (batch.segments, n_paths, batch.max_depth, int(self.count_emitted), c.tri_material, c.materials)
         launch(self.queue, self.k_count, n_paths, *args, counts_buf, local_size=self.local_size)
-        counts = np.empty(n_paths, np.int32)
-        cl.enqueue_copy(self.queue, counts, counts_buf)
+        counts = read_buffer(self.queue, counts_buf, n_paths, np.int32)
         offsets = np.zeros(n_paths, np.int64)
         np.cumsum(counts[:-1], out=offsets[1:])
         m = int(offsets[-1] + counts[-1])
-        if self.n_impacts + m > self.limit:
-            raise OclgiError(
-                f"photon_map: more than {self.limit:,} impacts ({self.n_impacts + m:,} so far); the "
-                f"k-nearest search keeps them all in device memory ({BYTES_PER_IMPACT} bytes each, "
-                f"{DEVICE_FRACTION:.0%} of {self.queue.device.global_mem_size / 2**30:.1f} GiB); "
-                f"trace fewer photons or use method 'detp'")
+        self._check_room(self.n_impacts + m)
         if m == 0:
             return
         mf = cl.mem_flags
         off_buf = cl.Buffer(self.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=offsets.astype(np.int32))
         bufs = [cl.Buffer(self.ctx, mf.WRITE_ONLY, m * 12) for _ in range(3)]
         launch(self.queue, self.k_gather, n_paths, *args, off_buf, *bufs, local_size=self.local_size)
-        host = [np.empty((m, 3), np.float32) for _ in range(3)]
-        for h, b in zip(host, bufs):
-            cl.enqueue_copy(self.queue, h, b)
-        self.chunks.append(tuple(host))
+        self.chunks.append(tuple(read_buffer(self.queue, b, (m, 3), np.float32) for b in bufs))
         self.n_impacts += m
         self.knn = None  # indexes the impacts gathered before these
 
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
-        """The impacts grow with the photons: a run projected (from its first
-        batch) to hold more than ``limit`` stops here, at its start."""
-        if paths_done <= 0 or paths_done >= paths_total:
-            return
-        projected = self.n_impacts / paths_done * paths_total
-        if projected > self.limit:
-            raise OclgiError(
-                f"photon_map: {paths_total:,} photons would make about {projected:,.0f} impacts (from the first "
-                f"{paths_done:,}), more than the {self.limit:,} this device holds for the k-nearest search "
-                f"({BYTES_PER_IMPACT} bytes each); trace fewer photons or use a DETP method, whose memory does not "
-                "grow with the photon count")
+        self._check_projected(self.n_impacts, paths_done, paths_total)
 
     def state(self) -> dict:
         """A Photon Map's state is its impacts (the sums come at the search)."""
-        pos, dirs, power = self.impacts()
-        return {"impact_positions": pos, "impact_directions": dirs, "impact_powers": power}
+        return dict(zip(IMPACT_KEYS, self.impacts()))
 
     def restore(self, state: dict) -> None:
-        got = []
-        for key in ("impact_positions", "impact_directions", "impact_powers"):
-            a = state.get(key)
-            if not isinstance(a, np.ndarray) or a.dtype != np.float32 or a.ndim != 2 or a.shape[1] != 3:
-                raise OclgiError(f"run state: photon_map expects {key!r} as float32 (m, 3)")
-            got.append(np.ascontiguousarray(a))
-        if len({len(a) for a in got}) != 1:
-            raise OclgiError("run state: photon_map's impact arrays differ in length")
-        if len(got[0]) > self.limit:
-            raise OclgiError(f"run state: {len(got[0]):,} impacts, more than this device holds ({self.limit:,})")
-        self.chunks = [tuple(got)] if len(got[0]) else []
-        self.n_impacts, self.knn = len(got[0]), None
+        self.n_impacts, self.knn = self._restore_chunks(state, IMPACT_KEYS), None
 
     def clear_impacts(self):
         """Forget the gathered impacts and their index (a session gathers its
@@ -234,12 +270,8 @@ class PhotonMap(Estimator):
 
     def impacts(self):
         """All impacts in canonical order: positions, directions, powers, (N, 3) float32."""
-        if not self.chunks:
-            z = np.zeros((0, 3), np.float32)
-            return z, z, z
-        if len(self.chunks) > 1:  # concatenate once, keep one chunk
-            self.chunks = [tuple(np.concatenate(c) for c in zip(*self.chunks))]
-        return self.chunks[0]
+        z = np.zeros((0, 3), np.float32)
+        return self._joined((z, z, z))
 
     # -- the estimate ---------------------------------------------------------
     def build_index(self) -> KnnIndex:
@@ -281,21 +313,9 @@ class PhotonMap(Estimator):
         The Morton order of the full search is kept: it only serves locality."""
         self.move_points(index, new)
 
-    def radii(self) -> np.ndarray:
-        """r_k per point (inf where fewer than k impacts were found), after resolve."""
-        r2 = np.empty(self.n, np.float32)
-        cl.enqueue_copy(self.queue, r2, self.r2)
-        return np.sqrt(r2)
-
     def neighbours(self, k: int | None = None):
         """The k nearest front-side impacts of this estimator's points (ids
         in canonical order, see ``impacts``), as KnnIndex.neighbours."""
         k = self.k if k is None else k
         return self.build_index().neighbours(self.points.positions[:, :3], self.points.normals[:, :3], k,
                                              self.front_only)
-
-    def work(self) -> dict | None:
-        """Work of the search (u: impact distance tests, nodes: BVH nodes or grid cells visited)."""
-        if not self.count_work or self.knn is None:
-            return super().work()
-        return self.knn.work()

@@ -136,19 +136,17 @@ from ..accel.boxes import PAD, active_discs
 from ..accel.bvh_build import build_bvh
 from ..accel.point_index import knn_local_size, query_order
 from ..cl.constants import LANES, POINT_BVH_STACK
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
-from .base import Estimator
-from .photon_map import DEFAULT_K, ESTIMATOR_KINDS, MAX_K, point_buffers
+from .base import work_counts
+from .detp_ray_map import PIECE_BUDGET, clip_segments, cut_pieces, piece_counts
+from .photon_map import DEFAULT_K, DEVICE_FRACTION, MAX_K, KnnMap, check_k, point_buffers  # noqa: F401 (MAX_K)
 
 METRICS = ("plane", "ray", "line")  # kernels/ray_map_knn.cl's RMK_PLANE, RMK_RAY, RMK_LINE
 MAX_LEAF = 64
-MAX_PIECES = 64  # pieces per segment, at most
-PIECE_BUDGET = 4  # pieces per segment, on average at most (memory)
 ROWS = 9  # float rows of a piece (kernels/ray_map_knn.cl)
 BYTES_PER_SEGMENT = 256  # device: power 16 + 4 pieces x 40 + nodes (module docstring)
 HOST_BYTES_PER_PIECE = 320  # the build's peak (module docstring)
-DEVICE_FRACTION = 0.75  # of global memory for the map; the rest: batch, scene, points
 NODE_BYTES = 32  # oclgi.cl.layout.BvhNode
 R0_FACTOR = 2.0  # the search's first radius over the uniform density's k-th distance (first_radius)
 M2_SHRINK = 1.0 - 1e-3  # M^2 a little smaller: the bound stays below float32 distances beyond B_M
@@ -166,12 +164,7 @@ def _fail(message: str):
 
 
 def check_options(k, estimator, metric, leaf_size, piece):
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= MAX_K:
-        _fail(f"k must be an integer in 1..{MAX_K}, got {k!r}")
-    if estimator not in ESTIMATOR_KINDS:
-        _fail(f"estimator must be one of {', '.join(map(repr, ESTIMATOR_KINDS))}, got {estimator!r}")
-    if estimator == "k-1" and k < 2:
-        _fail("the 'k-1' estimator needs k >= 2")
+    check_k(k, estimator, "ray_map_knn")
     if metric not in METRICS:
         _fail(f"metric must be one of {', '.join(map(repr, METRICS))}, got {metric!r}")
     if isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer)) or \
@@ -180,19 +173,6 @@ def check_options(k, estimator, metric, leaf_size, piece):
     if isinstance(piece, bool) or not isinstance(piece, (int, float, np.integer, np.floating)) or \
             not 0 <= piece < math.inf:
         _fail(f"piece must be a number >= 0 (0: segments are not cut), got {piece!r}")
-
-
-def _clip(org, dirs, t0, t1, lo, hi):
-    """The part [enter, leave] of each line o + t w, t0 <= t <= t1, inside
-    the box [lo, hi] (float64); enter > leave when it misses."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / dirs
-        a = (lo - org) * inv
-        b = (hi - org) * inv
-    # w_a = 0: the slab is all or nothing; 0 * inf gives NaN, which fmin/fmax drop
-    enter = np.maximum(np.fmax.reduce(np.fmin(a, b), axis=1), t0)
-    leave = np.minimum(np.fmin.reduce(np.fmax(a, b), axis=1), t1)
-    return enter, leave
 
 
 class SegmentKnnIndex:
@@ -210,9 +190,7 @@ class SegmentKnnIndex:
         self.queue, self.ctx = queue, queue.context
         self.metric = metric
         self.count_work = bool(count_work)
-        org = np.ascontiguousarray(org, np.float32)
-        dirs = np.ascontiguousarray(dirs, np.float32)
-        tmax = np.ascontiguousarray(tmax, np.float32)
+        org, dirs, tmax = (np.ascontiguousarray(a, np.float32) for a in (org, dirs, tmax))
         n = self.n = len(org)
         if n == 0:
             _fail("no segments to search (no photon was traced)")
@@ -231,33 +209,14 @@ class SegmentKnnIndex:
             t0, t1 = np.full(n, -np.inf), np.full(n, np.inf)
         else:
             t0, t1 = np.zeros(n), tmax.astype(np.float64)
-        enter, leave = _clip(o64, w64, t0, t1, lo, hi)
+        enter, leave = clip_segments(o64, w64, t1, lo, hi, t0)
         # a zero-length segment (t_end = 0 with no extension) or rounding at B_M's edge
         leave = np.maximum(leave, enter)
-        # Pieces: piece j of a segment spans [e_j, e_j+1] (float32 edges)
-        # and claims the t in [e_j, e_j+1), the outer edges opened to -inf
-        # and +inf: a partition of the line.
-        k = np.ones(n, np.int64)
-        length = float(piece) * m
-        span = leave - enter
-        while length > 0:
-            k = np.clip(np.ceil(span / length), 1, MAX_PIECES).astype(np.int64)
-            if k.sum() <= PIECE_BUDGET * n:
-                break
-            length *= 1.25 * k.sum() / (PIECE_BUDGET * n)  # keep memory O(n)
+        # Pieces, each claiming its own range of t (detp_ray_map.cut_pieces): a partition of the line.
+        k = piece_counts(enter, leave, float(piece) * m)
         budget.check(budget.Need(f"the k-nearest map of {n:,} segments", {}, int(k.sum()) * HOST_BYTES_PER_PIECE,
                                  "trace fewer photons or use a DETP method"))
-        seg = np.repeat(np.arange(n, dtype=np.int64), k)
-        start = np.zeros(n, np.int64)
-        np.cumsum(k[:-1], out=start[1:])
-        j = np.arange(len(seg)) - start[seg]
-        step = span / k
-        t_a = (enter[seg] + j * step[seg]).astype(np.float32)
-        t_b = np.empty_like(t_a)
-        t_b[:-1] = t_a[1:]
-        t_b[start + k - 1] = leave.astype(np.float32)
-        claim_lo = np.where(j == 0, np.float32(-np.inf), t_a)
-        claim_hi = np.where(j + 1 == k[seg], np.float32(np.inf), t_b)
+        seg, t_a, t_b, claim_lo, claim_hi = cut_pieces(enter, leave, k)
         # Boxes in float64, padded far beyond float32's rounding of o + t w.
         pad = PAD * max(scale, m)
         p0 = o64[seg] + t_a[:, None].astype(np.float64) * w64[seg]
@@ -296,9 +255,7 @@ class SegmentKnnIndex:
         return cl.Buffer(self.ctx, flags | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(array))
 
     def kernel(self, k: int):
-        defines = {"knn_k": int(k)}
-        if self.count_work:
-            defines["count_work"] = 1
+        defines = {"knn_k": int(k), **({"count_work": 1} if self.count_work else {})}
         return programs(self.ctx).get("ray_map_knn", **defines).rmk_knn
 
     def search(self, qpos: cl.Buffer, qnrm: cl.Buffer, order: cl.Buffer, n_points: int, k: int,
@@ -321,30 +278,24 @@ class SegmentKnnIndex:
         order, -1 / inf past the last one found; the sums and radii of the
         estimate. For tests and studies."""
         n = len(positions)
-        pos = np.zeros((n, 4), np.float32)
-        nrm = np.zeros((n, 4), np.float32)
+        pos, nrm = np.zeros((n, 4), np.float32), np.zeros((n, 4), np.float32)
         pos[:, :3], nrm[:, :3] = np.asarray(positions)[:, :3], np.asarray(normals)[:, :3]
         bufs = [self._upload(pos), self._upload(nrm), self._upload(query_order(pos))]
         rw = cl.mem_flags.READ_WRITE
         out = [cl.Buffer(self.ctx, rw, max(size, 8)) for size in (n * 24, n * 4, n * k * 4, n * k * 4)]
         self.search(*bufs, n, k, include_kth, *out, local_size=local_size, r0=r0)
-        host = [np.empty((n, 3), np.int64), np.empty(n, np.float32), np.empty((n, k), np.int32),
-                np.empty((n, k), np.float32)]
-        for h, b in zip(host, out):
-            cl.enqueue_copy(self.queue, h, b)
-        acc, r2, ids, d2 = host
+        acc, r2, ids, d2 = (read_buffer(self.queue, b, shape, dtype) for b, shape, dtype in zip(
+            out, ((n, 3), n, (n, k), (n, k)), (np.int64, np.float32, np.int32, np.float32)))
         return ids, d2, acc, r2
 
     def work(self) -> dict:
-        out = np.empty(3, np.uint64)
-        cl.enqueue_copy(self.queue, out, self.work_buf)
-        return {"t": int(out[0]), "u": int(out[1]), "nodes": int(out[2])}
+        return work_counts(self.queue, self.work_buf)
 
 
 STATE_KEYS = ("segment_origins", "segment_directions", "segment_lengths", "segment_powers")
 
 
-class RayMapKnn(Estimator):
+class RayMapKnn(KnnMap):
     """The estimator (module docstring): gathers segments batch by batch,
     searches at ``resolve``; ``segments``, ``neighbours`` and ``radii``
     expose the map for tests and studies."""
@@ -353,6 +304,7 @@ class RayMapKnn(Estimator):
     family = "ray_map_knn"
     # A removed segment changes other points' neighbour sets: no exact add/subtract.
     incremental = False
+    what, bytes_each = "segment", BYTES_PER_SEGMENT
 
     def __init__(self, queue, compiled, points, k: int = DEFAULT_K, estimator: str = "k-1", metric: str = "plane",
                  leaf_size: int = 16, piece: float = 0.05, radius=None, extension: float = 0.0, **kw):
@@ -380,10 +332,7 @@ class RayMapKnn(Estimator):
             keep[::batch.max_depth] = False  # bounce 0: the segments leaving the lights
         s = segs[keep]
         m = len(s)
-        if self.n_segments + m > self.limit:
-            _fail(f"more than {self.limit:,} segments ({self.n_segments + m:,} so far); the k-nearest search "
-                  f"keeps them all in device memory ({BYTES_PER_SEGMENT} bytes each, {DEVICE_FRACTION:.0%} of "
-                  f"{self.queue.device.global_mem_size / 2**30:.1f} GiB); trace fewer photons or use method 'detp'")
+        self._check_room(self.n_segments + m)
         if m == 0:
             return
         self.chunks.append((np.ascontiguousarray(s["org"]), np.ascontiguousarray(s["dir"]),
@@ -392,48 +341,21 @@ class RayMapKnn(Estimator):
         self.knn = None  # indexes the segments gathered before these
 
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
-        """The map grows with the photons: a run projected (from its first
-        batch) to hold more than ``limit`` segments stops here, at its start."""
-        if paths_done <= 0 or paths_done >= paths_total:
-            return
-        projected = self.n_segments / paths_done * paths_total
-        if projected > self.limit:
-            _fail(f"{paths_total:,} photons would make about {projected:,.0f} segments (from the first "
-                  f"{paths_done:,}), more than the {self.limit:,} this device holds for the k-nearest search "
-                  f"({BYTES_PER_SEGMENT} bytes each); trace fewer photons or use a DETP method, whose memory "
-                  "does not grow with the photon count")
+        self._check_projected(self.n_segments, paths_done, paths_total)
 
     def segments(self):
         """All gathered segments in canonical order: origins, directions
         (N, 3), lengths (N,), powers (N, 3), float32 (powers in units of the
         largest photon power)."""
-        if not self.chunks:
-            z = np.zeros((0, 3), np.float32)
-            return z, z, np.zeros(0, np.float32), z
-        if len(self.chunks) > 1:  # concatenate once, keep one chunk
-            self.chunks = [tuple(np.concatenate(c) for c in zip(*self.chunks))]
-        return self.chunks[0]
+        z = np.zeros((0, 3), np.float32)
+        return self._joined((z, z, np.zeros(0, np.float32), z))
 
     def state(self) -> dict:
         """The state is the segments (the sums come at the search)."""
         return dict(zip(STATE_KEYS, self.segments()))
 
     def restore(self, state: dict) -> None:
-        got = []
-        for key in STATE_KEYS:
-            a = state.get(key)
-            ndim = 1 if key == "segment_lengths" else 2
-            if not isinstance(a, np.ndarray) or a.dtype != np.float32 or a.ndim != ndim or \
-                    (ndim == 2 and a.shape[1] != 3):
-                raise OclgiError(f"run state: ray_map_knn expects {key!r} as float32 "
-                                 f"{'(m,)' if ndim == 1 else '(m, 3)'}")
-            got.append(np.ascontiguousarray(a))
-        if len({len(a) for a in got}) != 1:
-            raise OclgiError("run state: ray_map_knn's segment arrays differ in length")
-        if len(got[0]) > self.limit:
-            raise OclgiError(f"run state: {len(got[0]):,} segments, more than this device holds ({self.limit:,})")
-        self.chunks = [tuple(got)] if len(got[0]) else []
-        self.n_segments, self.knn = len(got[0]), None
+        self.n_segments, self.knn = self._restore_chunks(state, STATE_KEYS, flat=("segment_lengths",)), None
 
     # -- the estimate ---------------------------------------------------------
     def build_index(self) -> SegmentKnnIndex:
@@ -479,21 +401,9 @@ class RayMapKnn(Estimator):
         self.order = self.upload(query_order(self.points.positions))
         self.knn = None
 
-    def radii(self) -> np.ndarray:
-        """r_k per point (inf where fewer than k segments were found), after resolve."""
-        r2 = np.empty(self.n, np.float32)
-        cl.enqueue_copy(self.queue, r2, self.r2)
-        return np.sqrt(r2)
-
     def neighbours(self, k: int | None = None):
         """The k nearest front-side segments of this estimator's points:
         (ids, d2), ids in canonical order (see ``segments``)."""
         k = self.k if k is None else k
         ids, d2, _, _ = self.build_index().neighbours(self.points.positions, self.points.normals, k)
         return ids, d2
-
-    def work(self) -> dict | None:
-        """Work of the search (u: piece tests, nodes: BVH nodes visited)."""
-        if not self.count_work or self.knn is None:
-            return super().work()
-        return self.knn.work()

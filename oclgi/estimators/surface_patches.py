@@ -105,7 +105,7 @@ class SurfacePatches:
         sphere) or a point on no triangle (tri < 0)."""
         import pyopencl as cl
 
-        from ..cl.programs import launch, programs
+        from ..cl.programs import launch, programs, read_buffer
 
         n = len(positions)
         if n == 0:
@@ -123,12 +123,10 @@ class SurfacePatches:
         pos[:, :3] = np.asarray(positions)[:, :3]
         pos_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=pos)
         tri_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(tri, np.int32))
-        out = np.empty(n, np.float32)
-        out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, out.nbytes)
+        out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, n * 4)
         launch(queue, programs(ctx).get("surface_patches").patch_boundary_distance, n, pos_buf, tri_buf, label,
                offsets, edges, n, out_buf, local_size=local_size)
-        cl.enqueue_copy(queue, out, out_buf)
-        return out.astype(np.float64)
+        return read_buffer(queue, out_buf, n, np.float32).astype(np.float64)
 
     def patch_size(self, tri: np.ndarray) -> np.ndarray:
         """Half the radius of the disc with the area of each point's patch:

@@ -120,6 +120,16 @@ def _poses(spec: str, frames: int) -> list[np.ndarray]:
     return [_translate_rotate(*(c[i] for c in cols)) for i in range(frames)]
 
 
+def _write_frame(stage: Path, f: int, radiance, pixels, write_exr: bool) -> None:
+    from ..io import write_images
+
+    stem = stage / _frame_stem(f)
+    images = {stem.with_suffix(".png"): pixels}
+    if write_exr:
+        images[stem.with_suffix(".exr")] = radiance
+    write_images(images, sync=False)  # the staged folder flushes them all at its end
+
+
 def frame_paths(out_dir: Path, frames: int) -> list[Path]:
     """The PNG frames ``animate`` wrote into ``out_dir``, in order."""
     return [Path(out_dir) / (_frame_stem(f) + ".png") for f in range(frames)]
@@ -134,19 +144,14 @@ def animate(session, name: str, spec: str, frames: int, out_dir: Path, exposure:
     inside it when it exists) and moved into it at the end: a run that fails
     part-way adds no frame to it.
     """
-    from ..io import staged_folder, write_array_text, write_images
+    from ..io import staged_folder, write_array_text
 
     rows = []
     path = poses(spec, frames)
     with staged_folder(out_dir) as stage:
         for f, pose in enumerate(path):
             stats = session.move(name, pose)
-            radiance, pixels = session.render(exposure)
-            stem = stage / _frame_stem(f)
-            images = {stem.with_suffix(".png"): pixels}
-            if write_exr:
-                images[stem.with_suffix(".exr")] = radiance
-            write_images(images, sync=False)  # the staged folder flushes them all at its end
+            _write_frame(stage, f, *session.render(exposure), write_exr)
             rows.append({"frame": f, "paths": stats.paths, "segments_removed": stats.segments_removed,
                          "segments_added": stats.segments_added, "points": stats.points,
                          **{f"{k}_s": v for k, v in stats.seconds.items()}})
@@ -167,7 +172,7 @@ def animate_light(reuse, out_dir: Path, exposure: float = 1.0, write_exr: bool =
     estimator's (method, radius, options)."""
     import time
 
-    from ..io import staged_folder, write_array_text, write_images
+    from ..io import staged_folder, write_array_text
 
     engine = reuse.engine
     t0 = time.perf_counter()
@@ -182,11 +187,7 @@ def animate_light(reuse, out_dir: Path, exposure: float = 1.0, write_exr: bool =
             t2 = time.perf_counter()
             radiance, pixels = engine.shade(points, est.device_irradiance, exposure)
             t3 = time.perf_counter()
-            stem = stage / _frame_stem(f)
-            images = {stem.with_suffix(".png"): pixels}
-            if write_exr:
-                images[stem.with_suffix(".exr")] = radiance
-            write_images(images, sync=False)
+            _write_frame(stage, f, radiance, pixels, write_exr)
             rows.append({"frame": f, "paths": reuse.n_paths,
                          "trace_s": reuse.seconds["trace"] if f == 0 else 0.0,
                          "weights_s": reuse.seconds["weights"] if f == 0 else 0.0,

@@ -38,9 +38,7 @@ class AttachedPoints:
         """``as_loaded``: the points are where the objects were loaded (a
         tessellation of the scene file's geometry); else where the engine
         has the objects now (a session's points as given when it opens)."""
-        self.engine = engine
-        self.given = points
-        self.points = points.copy()
+        self.engine, self.given, self.points = engine, points, points.copy()
         scene = engine.scene
         tri = points.tri
         self.groups = []  # (object, point ids, the object's pose when the session opened)

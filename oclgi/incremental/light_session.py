@@ -49,8 +49,7 @@ class LightSession(SessionBase):
 
     def __init__(self, engine, points=None, light=None, positions=None, directions=None, photons=None, seed=None,
                  max_depth=None, method=None, radius=None, camera=None, **options):
-        from ..tracing.light_reuse import LightReuse
-        from ..tracing.light_reuse import find_light
+        from ..tracing.light_reuse import LightReuse, find_light
 
         if positions is None:  # the light's own path, from the scene file
             _, found = find_light(engine.scene, 0 if light is None else light)
@@ -156,9 +155,7 @@ class LightSession(SessionBase):
         return self.result.accumulators
 
     def render(self, exposure: float = 1.0):
-        self._check_open()
-        if self.camera is None:
-            raise OclgiError("render() needs a camera session (points=None)")
+        self._check_camera(self.camera is not None, "render")
         return self.engine.shade(self.points, self.device_irradiance, exposure)
 
     # -- changing what is estimated ----------------------------------------------------------
@@ -170,20 +167,15 @@ class LightSession(SessionBase):
                                    self.params.radius if radius is None else radius, **options)
         self._set_estimator(est)
         self.params, self.options = self.reuse.run_params, dict(options)
-        self.move_light(self.position, self._direction())
+        self.move_light(self.position, self.direction)
         return time.perf_counter() - t0
 
     def set_camera(self, camera) -> float:
         """View through ``camera`` (camera sessions only); the light's current position estimated again."""
-        self._check_open()
-        if self.camera is None:
-            raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
+        self._check_camera(self.camera is not None, "set_camera")
         t0 = time.perf_counter()
         self.points = self._points(None, camera)
         self._set_estimator(self.reuse.estimator(self.points, self.params.method, self.params.radius,
                                                  **self.options))
-        self.move_light(self.position, self._direction())
+        self.move_light(self.position, self.direction)
         return time.perf_counter() - t0
-
-    def _direction(self):
-        return self.direction

@@ -63,7 +63,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..accel.bvh_build import build_bvh
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..engine import as_query_points
 from ..errors import OclgiError
 from ..accel.boxes import PAD, active_discs, check_depth, coordinate_scale, outward_f32
@@ -108,7 +108,6 @@ class BallIndex:
         self.balls = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=ids[bvh.order].astype(np.int32))
 
 
-
 class PhotonMapSession(SessionBase):
     """Photon Map irradiance at query points, kept up to date under moves.
 
@@ -135,10 +134,7 @@ class PhotonMapSession(SessionBase):
         self.options = dict(k=k, estimator=estimator, index=index, front_only=front_only, leaf_size=leaf_size)
         self.view = None
         if points is None:
-            from .dynamic_view import DynamicView
-
-            self.view = DynamicView(self.engine, camera)
-            self.points = self.view.points.copy()
+            self._new_view(camera)
         else:
             self.points = as_query_points(points).copy()
         self.map = self.engine.estimator(self.points, self.params, **self.options)  # validates the options
@@ -152,6 +148,19 @@ class PhotonMapSession(SessionBase):
         self.setup_seconds = time.perf_counter() - t0
 
     # -- setup --------------------------------------------------------------
+    def _new_view(self, camera) -> None:
+        """The visible points of ``camera`` as the query points."""
+        from .dynamic_view import DynamicView
+
+        self.view = DynamicView(self.engine, camera)
+        self.points = self.view.points.copy()
+
+    def _new_map(self, options: dict) -> None:
+        """A map with ``options`` (validated) over the current points, every point searched in the store."""
+        self.map = self.engine.estimator(self.points.copy(), self.params, **options)
+        self.options, self.points = options, self.map.points
+        self._search_all()
+
     def _search_all(self):
         """Every point searched in the store's impacts (a fresh session's
         state at the session's pose), the balls and their marks anew."""
@@ -181,11 +190,7 @@ class PhotonMapSession(SessionBase):
             raise OclgiError(f"unknown Photon Map session option(s) {', '.join(unknown)}; "
                              f"known: {', '.join(self.options)}")
         t0 = time.perf_counter()
-        new = dict(self.options, **options)
-        new_map = self.engine.estimator(self.points.copy(), self.params, **new)  # validates them
-        self.options, self.map = new, new_map
-        self.points = new_map.points
-        self._search_all()
+        self._new_map(dict(self.options, **options))
         return time.perf_counter() - t0
 
     def set_photons(self, photons: int) -> float:
@@ -200,9 +205,7 @@ class PhotonMapSession(SessionBase):
         store, _ = self.store.resized(new_params.photons)
         old, self.store, self.params, self.scale = self.store, store, new_params, store.scale
         self._release_store(old)
-        self.map = self.engine.estimator(self.points.copy(), self.params, **self.options)
-        self.points = self.map.points
-        self._search_all()
+        self._new_map(self.options)
         return time.perf_counter() - t0
 
     def _apply_parameters(self, changes: dict):
@@ -226,14 +229,9 @@ class PhotonMapSession(SessionBase):
         done = Updated(tables=compiled is not None)
         self._renew_store(scene, compiled, what, new, done)
         if self.view is not None and ("camera" in what or (compiled is not None and self.view.through)):
-            from .dynamic_view import DynamicView
-
-            self.view = DynamicView(self.engine, changes.get("camera", self.view.cam))
-            done.points_traced = len(self.view.points)
-            self.points = self.view.points.copy()
-        self.map = self.engine.estimator(self.points.copy(), self.params, **self.options)
-        self.points = self.map.points
-        self._search_all()
+            self._new_view(changes.get("camera", self.view.cam))
+            done.points_traced = len(self.points)
+        self._new_map(self.options)
         done.resummed = True
         done.seconds = time.perf_counter() - t0
         return done
@@ -242,16 +240,10 @@ class PhotonMapSession(SessionBase):
         """View through ``camera`` from now on (camera sessions only): its
         points traced at the session's pose and searched in the stored
         impacts; no photon is re-traced. Returns the seconds it took."""
-        self._check_open()
-        if self.view is None:
-            raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
-        from .dynamic_view import DynamicView
-
+        self._check_camera(self.view is not None, "set_camera")
         t0 = time.perf_counter()
-        self.view = DynamicView(self.engine, camera)
-        self.points = self.view.points.copy()
-        self.map = self.engine.estimator(self.points, self.params, **self.options)
-        self._search_all()
+        self._new_view(camera)
+        self._new_map(self.options)
         return time.perf_counter() - t0
 
     def _gather(self):
@@ -276,8 +268,7 @@ class PhotonMapSession(SessionBase):
         return out
 
     def _balls(self) -> BallIndex:
-        r2 = np.empty(len(self.points), np.float32)
-        cl.enqueue_copy(self.queue, r2, self.map.r2)
+        r2 = read_buffer(self.queue, self.map.r2, len(self.points), np.float32)
         return BallIndex(self.queue, self.engine.compiled, self.points, r2, unbounded=self.mode == "exact")
 
     def _place_points(self, obj: int, matrix) -> np.ndarray:
@@ -299,9 +290,7 @@ class PhotonMapSession(SessionBase):
     def irradiance(self) -> np.ndarray:
         """(n, 3) irradiance at the query points (their current positions), W/m^2."""
         self._check_open()
-        out = np.empty((len(self.points), 4), np.float32)
-        cl.enqueue_copy(self.queue, out, self.map.irradiance_buffer(self.scale))
-        return out[:, :3]
+        return read_buffer(self.queue, self.map.irradiance_buffer(self.scale), (len(self.points), 4), np.float32)[:, :3]
 
     def accumulators(self) -> np.ndarray:
         """The exact fixed-point sums behind the irradiance, (n, 3) int64."""
@@ -310,9 +299,7 @@ class PhotonMapSession(SessionBase):
 
     def render(self, exposure: float = 1.0):
         """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
-        self._check_open()
-        if self.view is None:
-            raise OclgiError("render() needs a camera session (points=None)")
+        self._check_camera(self.view is not None, "render")
         buf = self.map.irradiance_buffer(self.scale)
         return self.engine.shade(self.view.points, buf, exposure)  # the composite: positions and path weights
 
@@ -341,11 +328,8 @@ class PhotonMapSession(SessionBase):
     # -- moving -------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
         """Place movable object ``name`` (4x4 world-from-object matrix) and update."""
-        self._check_open()
-        engine, q = self.engine, self.queue
-        obj = engine.scene.object_id(name)
-        t0 = time.perf_counter()
-        engine.place(name, matrix)
+        obj, t0 = self._place(name, matrix)
+        q = self.queue
         moved = self._place_points(obj, matrix)
         if self.view is not None:
             moved, _ = self.view.update()  # the pixels that may see a movable object, traced again
@@ -403,9 +387,7 @@ class PhotonMapSession(SessionBase):
 
     def _listed(self) -> np.ndarray:
         """The points the exact mode listed (O(listed) to read); their marks cleared."""
-        n = np.empty(1, np.int32)
-        cl.enqueue_copy(self.queue, n, self.n_listed)
-        ids = np.empty(int(n[0]), np.int32)
+        ids = np.empty(int(read_buffer(self.queue, self.n_listed, 1, np.int32)[0]), np.int32)
         if len(ids):
             cl.enqueue_copy(self.queue, ids, self.listed)
             launch(self.queue, self.k_unmark, len(ids), self.listed, len(ids), self.marks)

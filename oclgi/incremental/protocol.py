@@ -21,6 +21,7 @@ needs.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -137,9 +138,24 @@ class SessionBase:
                 est.forget_store(old)
         release(old, keep=(self,))
 
+    def _place(self, name: str, matrix) -> tuple[int, float]:
+        """A move's start: object ``name`` placed at ``matrix``; (its id, when the move began)."""
+        self._check_open()
+        obj = self.engine.scene.object_id(name)
+        t0 = time.perf_counter()
+        self.engine.place(name, matrix)
+        return obj, t0
+
     def _check_open(self) -> None:
         if self.closed:
             raise OclgiError(f"this {type(self).__name__} is closed")
+
+    def _check_camera(self, is_camera: bool, method: str) -> None:
+        """Open, and a camera session, as ``method`` (render, set_camera) needs."""
+        self._check_open()
+        if not is_camera:
+            raise OclgiError(f"{method}() needs a camera session (points=None)"
+                             + ("; this one has fixed points" if method == "set_camera" else ""))
 
     def __enter__(self):
         return self

@@ -105,10 +105,8 @@ class SegmentStore:
 
     def __init__(self, engine, photons: int, seed: int, max_depth: int, first: int = 0, total: int | None = None,
                  copy: "SegmentStore | None" = None):
-        self.engine = engine
-        self.queue = engine.queue
-        self.photons, self.max_depth = int(photons), int(max_depth)
-        self.first_path = int(first)
+        self.engine, self.queue = engine, engine.queue
+        self.photons, self.max_depth, self.first_path = int(photons), int(max_depth), int(first)
         self.total = self.photons if total is None else int(total)
         nbytes = self.photons * self.max_depth * Segment.itemsize
         limit = engine.queue.device.max_mem_alloc_size

@@ -32,6 +32,7 @@ from dataclasses import replace
 import numpy as np
 import pyopencl as cl
 
+from ..cl.programs import read_buffer
 from ..engine import as_query_points
 from ..errors import OclgiError
 from ..estimators.detp_disc_index import DetpDiscIndex
@@ -115,7 +116,6 @@ class Session(SessionBase):
     @staticmethod
     def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
         from ..estimators import ESTIMATORS
-
         from ..estimators.gather_options import refuse_incremental
 
         cls = ESTIMATORS[method]
@@ -259,9 +259,7 @@ class Session(SessionBase):
         points are traced again at the session's pose and summed over the
         stored paths; no photon is re-traced. Camera sessions only. Returns
         the seconds it took."""
-        self._check_open()
-        if not self.is_camera:
-            raise OclgiError("set_camera() needs a camera session (points=None); this one has fixed points")
+        self._check_camera(self.is_camera, "set_camera")
         t0 = time.perf_counter()
         self._new_view(camera)
         self._accumulate_all()
@@ -269,13 +267,10 @@ class Session(SessionBase):
 
     # -- reading ------------------------------------------------------------
     def _irradiance4(self) -> np.ndarray:
-        buf = self.estimator.resolve(self.scale)
-        out = np.empty((len(self.points), 4), np.float32)
-        cl.enqueue_copy(self.queue, out, buf)
+        out = read_buffer(self.queue, self.estimator.resolve(self.scale), (len(self.points), 4), np.float32)
         if self.dyn_est is not None:
-            dyn = np.empty((len(self.dyn_index), 4), np.float32)
-            cl.enqueue_copy(self.queue, dyn, self.dyn_est.resolve(self.scale))
-            out[self.dyn_index] = dyn
+            out[self.dyn_index] = read_buffer(self.queue, self.dyn_est.resolve(self.scale), (len(self.dyn_index), 4),
+                                              np.float32)
         return out
 
     def irradiance(self) -> np.ndarray:
@@ -300,9 +295,8 @@ class Session(SessionBase):
 
     def render(self, exposure: float = 1.0):
         """(radiance (H, W, 3), tone-mapped pixels (H, W, 4)) of the camera view."""
-        self._check_open()
-        if self.points.kind != "camera":
-            raise OclgiError("render() needs a camera session (points=None)")
+        self._check_open()  # (before its points are read)
+        self._check_camera(self.points.kind == "camera", "render")
         irr = self._irradiance4()
         buf = cl.Buffer(self.engine.ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=irr)
         return self.engine.shade(self.points, buf, exposure)
@@ -310,12 +304,8 @@ class Session(SessionBase):
     # -- moving -----------------------------------------------------------------
     def move(self, name: str, matrix) -> UpdateStats:
         """Place object ``name`` (4x4 world-from-object matrix) and update."""
-        self._check_open()
-        engine, q = self.engine, self.queue
-        obj = engine.scene.object_id(name)
-        t0 = time.perf_counter()
-        engine.place(name, matrix)
-        seconds = {}
+        obj, t0 = self._place(name, matrix)
+        q, seconds = self.queue, {}
         # A disc-indexed dynamic estimator takes its sums over the old store
         # in the find pass ("find", dynamic_pass); the suffix passes below
         # then update them as they update the static points (update.cl).

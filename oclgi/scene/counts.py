@@ -93,9 +93,7 @@ def _check_ply(path, data):
     # the least each row takes: a byte per scalar and its separator in ASCII,
     # the scalars and list lengths in binary
     def least(e):
-        if fmt == "ascii":
-            return 2 * len(e.props)
-        return sum(np.dtype(a).itemsize for a, _ in e.props)
+        return 2 * len(e.props) if fmt == "ascii" else sum(np.dtype(a).itemsize for a, _ in e.props)
     need = sum(e.count * least(e) for e in elements)
     if need > body:
         counts = _counts(elements)

@@ -73,7 +73,6 @@ In the dict form a mesh may give ``vertices`` and ``faces`` arrays instead of
 from __future__ import annotations
 
 import math
-import os
 import time
 import tomllib
 from dataclasses import replace
@@ -87,14 +86,13 @@ from .mesh import from_trimesh, is_file, load_mesh, transform_normals
 from .materials import TABLE_KEYS, FileMaterial, from_file, from_table
 from . import light_tables, lights as lights_mod
 from .values import check_keys as _check_keys, number as _number, radiant as _radiant, table_list as _table_list
-from .values import vec3 as _vec3
+from .values import file_path, vec3 as _vec3
 from .scene import MAX_COORDINATE, Camera, Material, Scene, SceneObject
 
 
 _TOP = {"mesh", *lights_mod.TABLES, "camera", "photons", "estimator", "name", "smooth"}
-_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "vertex_albedo", "trimesh", "albedo", "emission", "material",
-         "lumens", "materials",
-         "transform", "movable", "name", "smooth"}
+_MESH = {"path", "vertices", "faces", "face_albedo", "face_emission", "vertex_albedo", "trimesh", "albedo",
+         "emission", "material", "lumens", "materials", "transform", "movable", "name", "smooth"}
 _CAMERA = {"position", "look_at", "up", "fov", "width", "height"}
 # The run parameters a scene file sets: (table, key) -> RunParams field.
 _SETTINGS = {("photons", "count"): "photons", ("photons", "seed"): "seed", ("photons", "max_depth"): "max_depth",
@@ -139,13 +137,7 @@ class _Readers:
     def texture(self, value, where):
         from . import textures
 
-        if isinstance(value, os.PathLike):
-            value = os.fspath(value)
-        if not isinstance(value, str) or not value.strip():
-            raise OclgiError(f"{where}: expected an image file name, got {value!r}")
-        path = Path(value)
-        if not path.is_absolute() and self.base_dir is not None:
-            path = self.base_dir / path
+        path = file_path(value, where, "an image file name", self.base_dir)
         if not is_file(path, "texture"):
             raise OclgiError(f"{where}: texture not found: {path}")
         return textures.read(path)
@@ -198,11 +190,8 @@ def _mesh(desc, i, base_dir, materials, lights=None, smooth=True):
     loaded = None
     # vertex_albedo is the albedo itself: the mesh's albedo (which multiplies it) is 1 unless given
     plain = (1.0, 1.0, 1.0) if "vertex_albedo" in desc else (0.5, 0.5, 0.5)
-    default = Material(
-        name=f"{where}.default",
-        albedo=_vec3(desc.get("albedo", plain), where + ".albedo"),
-        emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"),
-    )
+    default = Material(name=f"{where}.default", albedo=_vec3(desc.get("albedo", plain), where + ".albedo"),
+                       emission=_radiant(desc.get("emission", (0, 0, 0)), where + ".emission"))
     if "material" in desc:  # the kind and parameters of the faces the file gives no material
         _check_keys(desc["material"], TABLE_KEYS, where + ".material")
         for key in ("albedo", "emission"):
@@ -214,24 +203,13 @@ def _mesh(desc, i, base_dir, materials, lights=None, smooth=True):
     if not isinstance(overrides, dict):
         raise OclgiError(f"{where}.materials: expected a table of material names, got {overrides!r}")
     file_lights = []  # a glTF's punctual lights (the other formats have none)
-    if "path" in desc:
-        given = desc["path"]
-        if isinstance(given, os.PathLike):  # pathlib.Path from Python
-            given = os.fspath(given)
-        if not isinstance(given, str) or not given.strip():
-            raise OclgiError(f"{where}.path: expected a file name, got {desc['path']!r}")
-        path = Path(given)
-        if not path.is_absolute() and base_dir is not None:
-            path = base_dir / path
+    if "path" in desc:  # a string, or a pathlib.Path from Python
+        path = file_path(desc["path"], where + ".path", "a file name", base_dir)
         loaded = load_mesh(path)
-        vertices, faces, fmat, names, file_mats = (
-            loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
         file_lights = loaded.lights  # a glTF's punctual lights
         label = path.name
     elif "trimesh" in desc:
         loaded = from_trimesh(desc["trimesh"], where + ".trimesh")
-        vertices, faces, fmat, names, file_mats = (
-            loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
         label = desc.get("name", where)
     elif "vertices" in desc and "faces" in desc:
         vertices, faces = _inline_arrays(desc["vertices"], desc["faces"], where)
@@ -239,6 +217,9 @@ def _mesh(desc, i, base_dir, materials, lights=None, smooth=True):
         label = where
     else:
         raise OclgiError(f"{where}: give 'path', 'trimesh', or 'vertices' and 'faces'")
+    if loaded is not None:
+        vertices, faces, fmat, names, file_mats = (
+            loaded.vertices, loaded.faces, loaded.face_material, loaded.names, loaded.materials)
     unknown = set(overrides) - set(names)
     if unknown:
         raise OclgiError(f"{where}.materials: {sorted(unknown)} not in the mesh's materials {sorted(n for n in names if n)}")
@@ -442,15 +423,12 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
         _check_keys(c, _CAMERA, "camera")
         if "position" not in c or "look_at" not in c:
             raise OclgiError("camera: 'position' and 'look_at' are required")
-        camera = Camera(
+        camera = validate_camera(Camera(
             position=_vec3(c["position"], "camera.position", MAX_COORDINATE),
             look_at=_vec3(c["look_at"], "camera.look_at", MAX_COORDINATE),
-            up=_vec3(c.get("up", (0, 1, 0)), "camera.up"),
-            fov=_number(c.get("fov", 40.0), "camera.fov"),
+            up=_vec3(c.get("up", (0, 1, 0)), "camera.up"), fov=_number(c.get("fov", 40.0), "camera.fov"),
             width=_number(c.get("width", 256), "camera.width", int),
-            height=_number(c.get("height", 256), "camera.height", int),
-        )
-        camera = validate_camera(camera)
+            height=_number(c.get("height", 256), "camera.height", int)))
     elif any(c[0] is not None for c in cameras):  # none named: the first mesh's own (glTF, trimesh)
         camera, camera_note = next(c for c in cameras if c[0] is not None)
         camera = validate_camera(camera)
@@ -462,23 +440,13 @@ def load_dict(desc: dict, base_dir=None) -> Scene:
     settings = params.RunParams.read({field: tables[t][k] for (t, k), field in given.items()},
                                      names={field: f"{t}.{k}" for (t, k), field in given.items()})
 
-    return Scene(
-        vertices=np.concatenate(verts),
-        faces=np.concatenate(faces),
-        tri_material=np.concatenate(fmats),
-        materials=materials,
-        tri_object=np.concatenate(fobjs),
-        tri_uv=np.concatenate(uvs) if any_uv else None,
-        tri_colour=np.concatenate(colours) if any_colour else None,
-        tri_vertex_normals=np.concatenate(normals) if any_normal else None,
-        objects=objects,
-        point_lights=point_lights,
-        lights=lights,
-        camera=camera,
-        camera_note=camera_note,
-        settings=settings,
-        name=str(desc.get("name", "scene")),
-    )
+    return Scene(vertices=np.concatenate(verts), faces=np.concatenate(faces), tri_material=np.concatenate(fmats),
+                 materials=materials, tri_object=np.concatenate(fobjs),
+                 tri_uv=np.concatenate(uvs) if any_uv else None,
+                 tri_colour=np.concatenate(colours) if any_colour else None,
+                 tri_vertex_normals=np.concatenate(normals) if any_normal else None,
+                 objects=objects, point_lights=point_lights, lights=lights, camera=camera, camera_note=camera_note,
+                 settings=settings, name=str(desc.get("name", "scene")))
 
 
 def _flag(value, where) -> bool:

@@ -71,10 +71,9 @@ def _numbers(value, n, where):
 
 
 def _local(node: dict, where: str) -> np.ndarray:
-    m = np.eye(4)
     if "matrix" in node:
-        m = _numbers(node["matrix"], 16, where + ".matrix").reshape(4, 4).T  # column-major
-        return m
+        return _numbers(node["matrix"], 16, where + ".matrix").reshape(4, 4).T  # column-major
+    m = np.eye(4)
     if "scale" in node:
         m = np.diag([*_numbers(node["scale"], 3, where + ".scale"), 1.0])
     if "rotation" in node:
@@ -202,13 +201,13 @@ def _light(d, world: np.ndarray, where: str):
         raise OclgiError(f"{where}.intensity: expected a number >= 0, got {value!r}")
     if value == 0 or not colour.max() > 0 or (colour < 0).any():
         return None  # dark: nothing to trace (a negative colour is no light either)
-    position = world[:3, 3]
+    position = tuple(float(x) for x in world[:3, 3])
     direction = -world[:3, 2]
     if not np.linalg.norm(direction) > 0:
         raise OclgiError(f"{where}: its node's transform has no -Z axis (scale 0)")
     direction = tuple(float(x) for x in direction / np.linalg.norm(direction))
     if kind == "point":
-        return PointLight(tuple(float(x) for x in position), intensity_from_candela(value, colour))
+        return PointLight(position, intensity_from_candela(value, colour))
     if kind == "spot":
         spot = d.get("spot") or {}
         outer = spot.get("outerConeAngle", math.pi / 4)
@@ -219,7 +218,7 @@ def _light(d, world: np.ndarray, where: str):
         if not 0 <= inner < outer <= math.pi / 2:
             raise OclgiError(f"{where}.spot: expected 0 <= innerConeAngle < outerConeAngle <= pi/2, "
                              f"got {inner!r} and {outer!r}")
-        return SpotLight(tuple(float(x) for x in position), direction, intensity_from_candela(value, colour),
+        return SpotLight(position, direction, intensity_from_candela(value, colour),
                          cone_angle=math.degrees(outer), cone_delta=math.degrees(outer - inner))
     if kind == "directional":
         return SunLight(direction, irradiance_from_lux(value, colour))

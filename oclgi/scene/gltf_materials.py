@@ -13,6 +13,9 @@ from .gltf_lights import document
 EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
 TRANSMISSION = "KHR_materials_transmission"
 IOR = "KHR_materials_ior"
+# (what extensions() calls it, the extension, its field, the field's default)
+_READ = (("emissive_strength", EMISSIVE_STRENGTH, "emissiveStrength", 1.0),
+         ("transmission", TRANSMISSION, "transmissionFactor", 0.0), ("ior", IOR, "ior", 1.5))
 
 
 def _number(table, key, default):
@@ -31,13 +34,7 @@ def extensions(data: bytes, suffix: str) -> dict:
         ext = m.get("extensions") if isinstance(m, dict) else None
         if not isinstance(ext, dict) or not isinstance(m.get("name"), str):
             continue
-        found = {}
-        if EMISSIVE_STRENGTH in ext:
-            found["emissive_strength"] = _number(ext[EMISSIVE_STRENGTH], "emissiveStrength", 1.0)
-        if TRANSMISSION in ext:
-            found["transmission"] = _number(ext[TRANSMISSION], "transmissionFactor", 0.0)
-        if IOR in ext:
-            found["ior"] = _number(ext[IOR], "ior", 1.5)
+        found = {key: _number(ext[name], field, default) for key, name, field, default in _READ if name in ext}
         if found:
             out[m["name"].strip()] = found
     return out

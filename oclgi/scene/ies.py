@@ -261,6 +261,19 @@ def smoothstep_integral(c_lo, c_hi, cos_total: float, cos_start: float) -> np.nd
     return antiderivative(c_hi) - antiderivative(c_lo)
 
 
+def cdf_tables(weight: np.ndarray, total: float):
+    """(row CDF (R,), column CDFs (R, C)) of a table of sampling weights
+    summing to ``total``, as kernels/light.h samples it (a row, then a
+    column of it); a dark row's CDF is uniform (it is never chosen)."""
+    row = weight.sum(axis=1)
+    rows = np.cumsum(row) / total
+    rows[-1] = 1.0
+    uniform = np.cumsum(np.ones_like(weight), axis=1) / weight.shape[1]
+    cols = np.where(row[:, None] > 0, np.cumsum(weight, axis=1) / np.where(row > 0, row, 1.0)[:, None], uniform)
+    cols[:, -1] = 1.0
+    return rows, cols
+
+
 def tables(profile: IesProfile, cos_total: float = -1.0, cos_start: float = -1.0):
     """(table, flux, bound): the device's table (kernels/light.h: V, H, the
     vertical edges as -cos gamma ascending, the horizontal edges in radians,
@@ -281,12 +294,7 @@ def tables(profile: IesProfile, cos_total: float = -1.0, cos_start: float = -1.0
     if not (flux > 0 and bound > 0):
         raise OclgiError(f"{profile.name}: no light of the IES profile falls within the spot's cone")
     w = weight.T  # (V, H): a row per vertical bin
-    row = w.sum(axis=1)
-    rows = np.cumsum(row) / bound
-    rows[-1] = 1.0
-    uniform = np.cumsum(np.ones_like(w), axis=1) / w.shape[1]  # a dark row is never chosen
-    cols = np.where(row[:, None] > 0, np.cumsum(w, axis=1) / np.where(row > 0, row, 1.0)[:, None], uniform)
-    cols[:, -1] = 1.0
+    rows, cols = cdf_tables(w, bound)
     nv, nh = w.shape
     table = np.concatenate([[nv, nh], -cos_e, np.radians(he), rows, cols.ravel()])
     return table, flux, bound

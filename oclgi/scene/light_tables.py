@@ -36,7 +36,6 @@ _IES_ONLY = ("lumens", "c0", "matrix")
 def read(desc: dict, base_dir=None) -> tuple[list, list]:
     """(point lights, other lights) from a scene description's light tables
     (an environment map's file is relative to ``base_dir``)."""
-
     points, others = [], []
     for name, many in TABLES.items():
         if name not in desc:
@@ -76,12 +75,11 @@ def _path(rows, where: str, widest: int) -> tuple:
                          f" numbers, got rows of {sorted({len(r) for r in rows})}")
     out = []
     for i, r in enumerate(rows):
-        pos = values.vec3(r[:3], f"{where}[{i}]", MAX_COORDINATE)
+        row = values.vec3(r[:3], f"{where}[{i}]", MAX_COORDINATE)
         if width == 6:
-            out.append((*pos, *_unit(values.vec3(r[3:], f"{where}[{i}] axis"), f"{where}[{i}] axis")))
-        else:
-            out.append(tuple(pos))
-    return tuple(tuple(float(c) for c in row) for row in out)
+            row += tuple(_unit(values.vec3(r[3:], f"{where}[{i}] axis"), f"{where}[{i}] axis"))
+        out.append(tuple(float(c) for c in row))
+    return tuple(out)
 
 
 def _required(t: dict, key: str, where: str):
@@ -95,7 +93,6 @@ _UNITS = {"intensity": "W/sr", "irradiance": "W/m^2"}
 
 def _photometric(t: dict, where: str, radiometric: str, photometric: str, convert, unit: str):
     """``radiometric`` (3 numbers), or ``photometric`` with an optional ``colour``."""
-
     if photometric in t:
         if radiometric in t:
             raise OclgiError(f"{where}: give {radiometric} ({_UNITS[radiometric]}) or {photometric}, not both")
@@ -110,7 +107,6 @@ def _photometric(t: dict, where: str, radiometric: str, photometric: str, conver
 
 
 def _direction(t: dict, key: str, where: str):
-
     v = values.vec3(_required(t, key, where), f"{where}.{key}")
     return tuple(float(x) for x in _unit(v, f"{where}.{key}"))
 
@@ -139,29 +135,11 @@ def _read_spot(t: dict, where: str) -> SpotLight:
         direction=_direction(t, "direction", where),
         intensity=_photometric(t, where, "intensity", "candela", intensity_from_candela, "a luminous intensity"),
         cone_angle=values.number(t.get("cone_angle", SPOT_CONE_ANGLE), where + ".cone_angle"),
-        cone_delta=values.number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"),
-        name=_name(t, where),
-    )
+        cone_delta=values.number(t.get("cone_delta", SPOT_CONE_DELTA), where + ".cone_delta"), name=_name(t, where))
     if "cone_delta" not in t:  # the default band, within a narrow cone
         light.cone_delta = min(light.cone_delta, light.cone_angle)
     light.validate(where)
     return light
-
-
-def _file_path(t: dict, key: str, where: str, base_dir, what: str):
-    """The file a light's ``key`` names (a string or a path-like), relative to ``base_dir``."""
-    import os
-    from pathlib import Path
-
-    given = t[key]
-    if isinstance(given, os.PathLike):
-        given = os.fspath(given)
-    if not isinstance(given, str) or not given.strip():
-        raise OclgiError(f"{where}.{key}: expected {what}, got {t[key]!r}")
-    path = Path(given)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
-    return path
 
 
 def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
@@ -174,7 +152,7 @@ def _read_ies(t: dict, where: str, base_dir, spot: bool) -> IesLight:
                          "candela = the peak, or lumens = the flux)")
     if "candela" in t and "lumens" in t:
         raise OclgiError(f"{where}: give candela (the peak) or lumens (the flux), not both")
-    profile = ies.read(_file_path(t, "ies", where, base_dir, "an IES file name"), where + ".ies")
+    profile = ies.read(values.file_path(t["ies"], where + ".ies", "an IES file name", base_dir), where + ".ies")
     direction, c0 = _ies_frame(t, where, spot)
     light = IesLight(position=values.vec3(_required(t, "position", where), where + ".position", MAX_COORDINATE),
                      profile=profile, direction=direction, c0=c0,
@@ -248,7 +226,7 @@ def _read_envmap(t: dict, where: str, base_dir) -> EnvMapLight:
     other = sorted({"radiance", "hemisphere", "up"} & set(t))
     if other:
         raise OclgiError(f"{where}: map takes no {', '.join(other)} (the image is the radiance, +y its zenith)")
-    path = _file_path(t, "map", where, base_dir, "an image file name")
+    path = values.file_path(t["map"], where + ".map", "an image file name", base_dir)
     scale = values.number(t.get("scale", 1.0), where + ".scale")
     if not scale > 0:
         raise OclgiError(f"{where}.scale: expected a number > 0, got {t['scale']!r}")

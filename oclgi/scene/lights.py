@@ -91,6 +91,7 @@ from ..errors import OclgiError
 from ..params import MAX_LENGTH as MAX_COORDINATE  # as for vertices (oclgi/scene/scene.py)
 from ..photometry import LUMINANCE
 from . import values
+from .ies import cdf_tables
 
 # The scene file's tables, and whether each is a list ([[name]]) or one table ([name]).
 TABLES = {"point_light": True, "spot_light": True, "sun": True, "sky": False}
@@ -402,13 +403,7 @@ class EnvMapLight:
         lum = lrgb @ LUMINANCE
         weight = lum * self._omega()[:, None]  # texel probability, unnormalised
         total = float(weight.sum())
-        row = weight.sum(axis=1)
-        rows = np.cumsum(row) / total
-        rows[-1] = 1.0
-        cum = np.cumsum(weight, axis=1)
-        uniform = np.cumsum(np.ones_like(weight), axis=1) / weight.shape[1]  # a dark row: never chosen
-        cols = np.where(row[:, None] > 0, cum / np.where(row > 0, row, 1.0)[:, None], uniform)
-        cols[:, -1] = 1.0
+        rows, cols = cdf_tables(weight, total)
         ratio = np.divide(lrgb, lum[..., None], out=np.zeros_like(lrgb), where=lum[..., None] > 0)
         m = float(ratio.max())
         return rows, cols, ratio / m, total * m
@@ -606,10 +601,7 @@ def emitter_rows(scene) -> EmitterRows:
                            ("e1", rec.get("e1", (0.0, 0.0, 0.0))), ("e2", rec.get("e2", (0.0, 0.0, 0.0))),
                            ("a", rec.get("a", 0.0)), ("b", rec.get("b", 0.0)), ("power", watts), ("bound", bound)):
             cols[key].append(np.asarray([value]))
-    out = {k: np.concatenate(v) for k, v in cols.items()}
-    out["kind"], out["tri"] = out["kind"].astype(np.int32), out["tri"].astype(np.int32)
-    for k in ("p", "e1", "e2", "a", "b", "power", "bound"):
-        out[k] = out[k].astype(np.float64)
+    out = {k: np.concatenate(v).astype(np.int32 if k in ("kind", "tri") else np.float64) for k, v in cols.items()}
     return EmitterRows(**out, table=np.concatenate(tables) if tables else np.zeros(0))
 
 
@@ -681,8 +673,7 @@ def mitsuba_emitters(mi, scene) -> dict:
     sphere = bounding_sphere(scene)
     out, counts = {}, {}
     for light in all_lights(scene):
-        i = counts.get(light.table, 0)
-        counts[light.table] = i + 1
+        i = counts[light.table] = counts.get(light.table, -1) + 1
         if power(light, sphere).max() > 0:
             entry = light.to_mitsuba(mi, sphere)
             if entry is not None:  # None: a kind Mitsuba lacks (it warned)

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -195,8 +195,7 @@ def from_table(name: str, table: dict, base: Material, read) -> Material:
     kind = table.get("kind", base.kind)
     if not isinstance(kind, str) or kind not in KINDS:
         raise OclgiError(f"{name}.kind: expected one of {', '.join(KINDS)}, got {kind!r}")
-    m = Material(**{f.name: getattr(base, f.name) for f in fields(Material)})
-    m.kind = kind
+    m = replace(base, kind=kind)
     if kind != "diffuse":
         m.texture = None  # a file's texture and colours went with the diffuse surface this table replaces
         m.vertex_colours = False
@@ -259,8 +258,7 @@ def from_file(label: str, fm: FileMaterial | None, default: Material, quiet: boo
     when ``quiet``: the scene file replaces the material). ``read_texture(
     value)``: the albedo texture a file names (``map_Kd``) or holds (glTF),
     as oclgi/scene/textures.py returns it, or None when it is missing."""
-    m = Material(**{f.name: getattr(default, f.name) for f in fields(Material)})
-    m.name = label
+    m = replace(default, name=label)
     if fm is None:
         return m
     ignored = []
@@ -377,9 +375,7 @@ def record(materials: list[Material], texture_index: list[int] | None = None) ->
         r["albedo"] = m.transmission if m.kind in ("dielectric", "rough_dielectric") else m.diffuse_albedo
         r["emission"] = m.emission
         r["specular"] = m.specular if m.kind != "diffuse" else (0.0, 0.0, 0.0)
-        r["exponent"] = m.exponent
-        r["ior"] = m.ior
-        r["roughness"] = m.roughness
+        r["exponent"], r["ior"], r["roughness"] = m.exponent, m.ior, m.roughness
         r["texture"] = texture_index[i] if texture_index is not None else -1
         if m.kind == "phong" and phong_weight_bound(r["albedo"], r["specular"], float(r["exponent"])) > 1.0 + 1e-6:
             raise OclgiError(f"material {m.name!r}: the Phong weight bound fails in float32")

@@ -116,9 +116,7 @@ def _load_zip(path: Path) -> LoadedMesh:
 
                 def read_lib(name):
                     member = (inner.parent / name).as_posix()
-                    if member not in names:
-                        return None
-                    return reader.read(member).decode("utf-8", errors="replace")
+                    return reader.read(member).decode("utf-8", errors="replace") if member in names else None
 
                 def read_member(name):
                     member = (inner.parent / name.replace("\\", "/")).as_posix()

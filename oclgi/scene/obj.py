@@ -34,8 +34,6 @@ _COLOURS = {"Kd": "albedo", "Ke": "emission", "Ks": "specular", "Tf": "transmiss
 _NUMBERS = {"Ns": "exponent", "Ni": "ior", "d": "dissolve"}
 
 
-
-
 @dataclass
 class ObjMesh:
     vertices: np.ndarray  # (V, 3) float64
@@ -231,15 +229,10 @@ def read_obj(path: Path, text: str | None = None,
 
     def face_normal():
         return _corner_values(face_lines, vns, _NORMAL, len(faces), path) if vns and face_lines else None
-    return ObjMesh(
-        vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
-        faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
-        face_material=np.asarray(face_mat, dtype=np.int64),
-        material_names=names,
-        materials=materials,
-        face_uv=face_uv,
-        face_normal=face_normal,
-    )
+    return ObjMesh(vertices=np.asarray(verts, dtype=np.float64).reshape(-1, 3),
+                   faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+                   face_material=np.asarray(face_mat, dtype=np.int64), material_names=names, materials=materials,
+                   face_uv=face_uv, face_normal=face_normal)
 
 
 @dataclass(frozen=True)

@@ -56,9 +56,7 @@ def place_record(record, box, m: np.ndarray, name: str) -> None:
     if not np.isfinite(world).all() or np.abs(world).max() > MAX_LENGTH:  # checked before any change
         raise OclgiError(f"the transform places object {name!r} beyond {MAX_LENGTH:.0e} of the origin, past what "
                          "the device's float32 coordinates hold")
-    inv = np.linalg.inv(m)
-    record["world_from_object"] = m[:3]
-    record["object_from_world"] = inv[:3]
+    record["world_from_object"], record["object_from_world"] = m[:3], np.linalg.inv(m)[:3]
     # The world box only culls; pad it for float rounding of the transform.
     pad = 1e-6 * (np.abs(world).max() + np.abs(hi - lo).max())
     record["lo"], record["hi"] = world.min(axis=0) - pad, world.max(axis=0) + pad

@@ -186,12 +186,9 @@ class Scene:
             keep = ~degenerate
             self.faces, self.tri_material = self.faces[keep], self.tri_material[keep]
             self.tri_object = np.asarray(self.tri_object)[keep]
-            if self.tri_uv is not None:
-                self.tri_uv = np.asarray(self.tri_uv)[keep]
-            if self.tri_colour is not None:
-                self.tri_colour = np.asarray(self.tri_colour)[keep]
-            if self.tri_vertex_normals is not None:
-                self.tri_vertex_normals = np.asarray(self.tri_vertex_normals)[keep]
+            for key in ("tri_uv", "tri_colour", "tri_vertex_normals"):
+                if getattr(self, key) is not None:
+                    setattr(self, key, np.asarray(getattr(self, key))[keep])
             warnings.warn(f"{self.name}: dropped {n_bad} degenerate triangles (zero area, "
                           "or too thin for the device's float32)", OclgiWarning, stacklevel=3)
             if len(self.faces) == 0:

@@ -75,9 +75,7 @@ def read(path: Path) -> np.ndarray:
         inp.close()
     if pixels is None:
         raise OclgiError(f"cannot read texture {path}: {oiio.geterror()}")
-    encoded = integer or "srgb" in space
-    if "linear" in space:
-        encoded = False
+    encoded = (integer or "srgb" in space) and "linear" not in space
     return from_array(np.asarray(pixels, np.float32).reshape(spec.height, spec.width, spec.nchannels), f"texture {path}",
                       encoded)
 

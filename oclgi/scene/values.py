@@ -8,6 +8,8 @@ naming the key (``where``), and unknown keys are errors.
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
@@ -85,6 +87,15 @@ def number(value, where, kind=float):
             raise OclgiError(f"{where}: expected an integer, got {value!r}")
         return int(value)
     return float(value)
+
+
+def file_path(value, where: str, what: str, base_dir=None) -> Path:
+    """The file ``value`` names (a string or a path-like), relative to ``base_dir``."""
+    given = os.fspath(value) if isinstance(value, os.PathLike) else value
+    if not isinstance(given, str) or not given.strip():
+        raise OclgiError(f"{where}: expected {what}, got {value!r}")
+    path = Path(given)
+    return path if path.is_absolute() or base_dir is None else Path(base_dir) / path
 
 
 def table_list(value, name):

@@ -61,7 +61,6 @@ from . import bounds
 from ..estimators.photon_map import DEFAULT_K
 
 
-
 @dataclass
 class BoundInputs:
     r_max: np.ndarray  # (3,) per channel
@@ -91,16 +90,10 @@ def scene_inputs(scene, reference: np.ndarray, point_emission: np.ndarray, l_max
         ref = np.where(np.isfinite(reference), reference, 0.0)
         l_max = np.maximum(emission.max(axis=0), (ref / math.pi).max(axis=0))
         l_max = np.maximum(l_max, point_emission.max(axis=0))
-    return BoundInputs(
-        r_max=_per_channel(albedo.max(axis=0) if r_max is None else r_max),
-        phi_total=np.asarray(power, np.float64).sum(axis=0),
-        l_max=_per_channel(l_max),
-        area=float(areas.sum()),
-        n_zones=len(scene.faces),
-        area_ratio=float(areas.max() / areas.min()),
-        valence=np.bincount(scene.faces.ravel(), minlength=len(scene.vertices)),
-        faces=scene.faces,
-    )
+    return BoundInputs(r_max=_per_channel(albedo.max(axis=0) if r_max is None else r_max),
+                       phi_total=np.asarray(power, np.float64).sum(axis=0), l_max=_per_channel(l_max),
+                       area=float(areas.sum()), n_zones=len(scene.faces), area_ratio=float(areas.max() / areas.min()),
+                       valence=np.bincount(scene.faces.ravel(), minlength=len(scene.vertices)), faces=scene.faces)
 
 
 def _per_channel(v) -> np.ndarray:

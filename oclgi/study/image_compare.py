@@ -160,9 +160,7 @@ def compare(test, reference, mask=None, scale: float = 0.2) -> Comparison:
     if t.shape != r.shape:
         raise OclgiError(f"test and reference images differ in shape: {t.shape} and {r.shape}")
     h, w = t.shape[:2]
-    if mask is None:
-        mask = np.zeros((h, w), bool)
-    mask = np.asarray(mask)
+    mask = np.zeros((h, w), bool) if mask is None else np.asarray(mask)
     if mask.shape != (h, w) or mask.dtype != bool:
         raise OclgiError(f"mask must be an (H, W) = ({h}, {w}) bool array, got {mask.dtype} {mask.shape}")
     if not (np.isfinite(scale) and scale > 0):

@@ -118,15 +118,7 @@ def world_triangles(scene_or_engine) -> np.ndarray:
     """
     scene, engine = _split(scene_or_engine)
     tri = scene.vertices[scene.faces]
-    if engine is None:
-        return tri
-    tri = tri.copy()
-    inst = engine.compiled.instances_host
-    for k, (a, b) in enumerate(scene.object_ranges()):
-        m = np.asarray(inst[k]["world_from_object"], dtype=np.float64)  # 3x4
-        if not np.array_equal(m, np.eye(4)[:3]):
-            tri[a:b] = tri[a:b] @ m[:, :3].T + m[:, 3]
-    return tri
+    return tri if engine is None else _placed(engine, tri, lambda t, m: t @ m[:, :3].T + m[:, 3])
 
 
 def world_vertex_normals(scene_or_engine) -> np.ndarray | None:
@@ -136,15 +128,19 @@ def world_vertex_normals(scene_or_engine) -> np.ndarray | None:
 
     scene, engine = _split(scene_or_engine)
     vn = scene.tri_vertex_normals
-    if vn is None or engine is None:
-        return vn
-    vn = vn.copy()
+    return vn if vn is None or engine is None else _placed(engine, vn, lambda n, m: transform_normals(n, m[:, :3]))
+
+
+def _placed(engine, per_triangle: np.ndarray, move) -> np.ndarray:
+    """A copy of ``per_triangle`` with each moved object's rows through
+    ``move(rows, m)``, m its current world-from-object transform (3x4)."""
+    out = per_triangle.copy()
     inst = engine.compiled.instances_host
-    for k, (a, b) in enumerate(scene.object_ranges()):
+    for k, (a, b) in enumerate(engine.scene.object_ranges()):
         m = np.asarray(inst[k]["world_from_object"], dtype=np.float64)
         if not np.array_equal(m, np.eye(4)[:3]):
-            vn[a:b] = transform_normals(vn[a:b], m[:, :3])
-    return vn
+            out[a:b] = move(out[a:b], m)
+    return out
 
 
 def max_depth_for(oclgi_max_depth: int) -> int:
@@ -183,14 +179,13 @@ def _mesh(mi, name, tris, bsdf, emitter=None, uv=None, colour=None, normals=None
 
 def _bsdf(mi, material: Material):
     d = to_mitsuba(material)
+    inner = d["bsdf"] if d["type"] == "twosided" else d
     if material.vertex_colours:
         if material.texture is not None:
             raise OclgiError(f"material {material.name!r}: the Mitsuba conversion takes a texture or vertex "
                              "colours, not both")
-        inner = d["bsdf"] if d["type"] == "twosided" else d
         inner["reflectance"] = {"type": "mesh_attribute", "name": "vertex_color"}
     if material.texture is not None:  # albedo x texture (linear), looked up as oclgi does
-        inner = d["bsdf"] if d["type"] == "twosided" else d
         pixels = np.ascontiguousarray(material.texture * np.asarray(material.albedo, np.float32))
         inner["reflectance"] = {"type": "bitmap", "bitmap": mi.Bitmap(pixels), "raw": True,
                                 "filter_type": "bilinear", "wrap_mode": "repeat"}

@@ -175,13 +175,6 @@ def _loglog(x, y):
     return x[keep], y[keep]
 
 
-def _log_axes(ax):
-    """Log scales when there is data to scale (an empty log axis raises)."""
-    if ax.has_data():
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-
-
 def plot_error_vs_time(result, path) -> None:
     fig, ax = _figure()
     for label, rows in result.families().items():
@@ -206,16 +199,14 @@ def plot_variance_vs_photons(result, path) -> None:
 
 
 def _finish(fig, ax, xlabel, ylabel, title, path) -> None:
-    _log_axes(ax)
+    if ax.has_data():  # log scales only with data to scale (an empty log axis raises)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    _save(fig, path)
-
-
-def _save(fig, path) -> None:
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=110)
 

@@ -265,34 +265,30 @@ class StudyResult:
             out.setdefault(r.label, []).append(r)
         return out
 
-    # writers (oclgi/study/report.py)
+    # writers (oclgi/study/report.py, imported when one is used)
     def _repr_html_(self) -> str:
         """The table, shown inline by Jupyter."""
-        from .report import html_table
-
-        return html_table(self)
+        return _report().html_table(self)
 
     def to_markdown(self) -> str:
-        from .report import markdown
-
-        return markdown(self)
+        return _report().markdown(self)
 
     def to_csv(self) -> str:
-        from .report import csv_text
-
-        return csv_text(self)
+        return _report().csv_text(self)
 
     def to_json(self) -> dict:
-        from .report import json_dict
-
-        return json_dict(self)
+        return _report().json_dict(self)
 
     def write(self, out_dir, stem: str = "study", plots: bool = True) -> list:
         """Write ``stem.md``, ``stem.csv`` and (``plots``) ``error_vs_time.png``
         and ``variance_vs_photons.png`` into ``out_dir``, all or nothing."""
-        from .report import write_all
+        return _report().write_all(self, out_dir, stem, plots)
 
-        return write_all(self, out_dir, stem, plots)
+
+def _report():
+    from . import report
+
+    return report
 
 
 # -- the study -------------------------------------------------------------------------
@@ -383,10 +379,7 @@ def run_study(engine, configs, points="random:256", seeds=8, reference=None, poi
         inputs = study_bounds.scene_inputs(scene, ref.values, _emission(scene, pts), **bound_params)
         total = sum(p for c in configs for p in c.photons) * len(seeds)
         bar = Progress("study", total, progress)
-        rows = []
-        for c in configs:
-            for n in c.photons:
-                rows.append(_run_row(engine, pts, c, n, seeds, inputs, bar))
+        rows = [_run_row(engine, pts, c, n, seeds, inputs, bar) for c in configs for n in c.photons]
         bar.close()
     finally:
         engine.progress = saved
@@ -417,19 +410,18 @@ def _albedo(scene, pts) -> np.ndarray:
     """Albedo of the triangle under each point (its diffuse part's, which turns
     irradiance into the radiance the study compares); R_max per channel where unknown."""
     albedo = np.array([m.diffuse_albedo for m in scene.materials], np.float64)
-    used = albedo[np.unique(scene.tri_material)]
-    tri = pts.tri
-    out = np.tile(used.max(axis=0), (len(pts), 1))
-    on = tri >= 0
-    out[on] = albedo[scene.tri_material[tri[on]]]
-    return out
+    return _under(scene, pts, albedo, albedo[np.unique(scene.tri_material)].max(axis=0))
 
 
 def _emission(scene, pts) -> np.ndarray:
-    emission = np.array([m.emission for m in scene.materials], np.float64)
-    out = np.zeros((len(pts), 3))
+    return _under(scene, pts, np.array([m.emission for m in scene.materials], np.float64), np.zeros(3))
+
+
+def _under(scene, pts, per_material: np.ndarray, unknown: np.ndarray) -> np.ndarray:
+    """(n, 3): the value of the material under each point, ``unknown`` where no triangle is."""
+    out = np.tile(unknown, (len(pts), 1))
     on = pts.tri >= 0
-    out[on] = emission[scene.tri_material[pts.tri[on]]]
+    out[on] = per_material[scene.tri_material[pts.tri[on]]]
     return out
 
 

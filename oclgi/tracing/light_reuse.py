@@ -92,6 +92,7 @@ batch_paths     paths per batch fed to an estimator (results do not depend on it
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +100,7 @@ import pyopencl as cl
 
 from .. import params as params_mod
 from ..cl.constants import BSDF_DIFFUSE, EMITTER_POINT, EMITTER_SPOT
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from ..params import MAX_LENGTH
 from .photon_trace import PathBatch, PhotonTracer
@@ -183,8 +184,7 @@ class LightReuse:
 
     def __init__(self, engine, light, positions, directions=None, photons=None, seed=None, max_depth=None,
                  batch_paths: int | None = None):
-        self.engine = engine
-        self.queue = engine.queue
+        self.engine, self.queue = engine, engine.queue
         c = self.compiled = engine.compiled
         self.light_index, self.light = find_light(engine.scene, light)
         positions, dirs = light_path(positions if directions is None else
@@ -340,10 +340,9 @@ class LightReuse:
         self.queue.finish()
         t1 = time.perf_counter()
         scale = self.compiled.fixed_scale(self.paths_per_position)
-        irr = np.empty((estimator.n, 4), np.float32)
         with self.light_at(frame):  # a resolve that reads the lights (direct = "exact") sees the frame's
             device = estimator.resolve(scale)
-            cl.enqueue_copy(self.queue, irr, device)
+            irr = read_buffer(self.queue, device, (estimator.n, 4), np.float32)
         t2 = time.perf_counter()
         p = getattr(self, "run_params", self.params)
         stats = Stats(photons=self.paths_per_position, segments=self.segments, points=estimator.n, method=p.method,
@@ -360,27 +359,18 @@ class LightReuse:
         return [self.estimate(j, est) for j in range(self.frames)]
 
     # -- recomputation, for comparison and free moves --------------------------------
+    @contextmanager
     def light_at(self, frame: int):
         """A context in which the engine's light stands at position
         ``frame`` (every ordinary run and render sees it there): a frame
         recomputed from scratch, what reuse is measured against."""
-        return _LightAt(self, frame)
-
-
-class _LightAt:
-    def __init__(self, reuse: LightReuse, frame: int):
-        self.reuse, self.frame = reuse, int(frame)
-
-    def __enter__(self):
-        r = self.reuse
-        cl.enqueue_copy(r.queue, r.compiled.emitters, r.records[self.frame:self.frame + 1])
-        return r.engine
-
-    def __exit__(self, *exc):
-        r = self.reuse
-        cl.enqueue_copy(r.queue, r.compiled.emitters, np.ascontiguousarray(r.compiled.emitters_host))
-        r.queue.finish()
-        return False
+        frame, c = int(frame), self.compiled
+        cl.enqueue_copy(self.queue, c.emitters, self.records[frame:frame + 1])
+        try:
+            yield self.engine
+        finally:
+            cl.enqueue_copy(self.queue, c.emitters, np.ascontiguousarray(c.emitters_host))
+            self.queue.finish()
 
 
 class _PositionTracer(PhotonTracer):

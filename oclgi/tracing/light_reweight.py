@@ -26,7 +26,7 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 
 
@@ -53,8 +53,7 @@ class Reweighting:
         counts = cl.Buffer(ctx, mf.READ_WRITE, n * 4)
         args = (estimator.nodes, estimator.blocks, reuse.store, n, md, estimator.ext)
         launch(q, self.prog.reweight_count, n, *args, counts, local_size=reuse.engine.local_size)
-        host = np.empty(n, np.int32)
-        cl.enqueue_copy(q, host, counts)
+        host = read_buffer(q, counts, n, np.int32)
         offsets = np.zeros(n, np.int64)
         np.cumsum(host[:-1], out=offsets[1:])
         self.n_pairs = int(host.sum(dtype=np.int64))

@@ -15,7 +15,7 @@ import numpy as np
 import pyopencl as cl
 
 from ..cl.layout import Segment
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 
 
 @dataclass
@@ -32,25 +32,17 @@ class PathBatch:
         return self.n_paths * self.max_depth
 
     def read_segments(self, queue) -> np.ndarray:
-        out = np.empty(self.n_slots, dtype=Segment)
-        cl.enqueue_copy(queue, out, self.segments)
-        return out
+        return read_buffer(queue, self.segments, self.n_slots, Segment)
 
     def read_path_len(self, queue) -> np.ndarray:
-        out = np.empty(self.n_paths, dtype=np.int32)
-        cl.enqueue_copy(queue, out, self.path_len)
-        return out
+        return read_buffer(queue, self.path_len, self.n_paths, np.int32)
 
 
 class PhotonTracer:
     def __init__(self, queue: cl.CommandQueue, compiled, seed: int, max_depth: int,
                  batch_paths: int, local_size: int | None = None):
-        self.queue = queue
-        self.compiled = compiled
-        self.seed = int(seed)
-        self.max_depth = int(max_depth)
-        self.batch_paths = int(batch_paths)
-        self.local_size = local_size
+        self.queue, self.compiled, self.local_size = queue, compiled, local_size
+        self.seed, self.max_depth, self.batch_paths = int(seed), int(max_depth), int(batch_paths)
         ctx = queue.context
         prog = programs(ctx).get("photon_trace")
         self.kernel, self.k_retrace = prog.photon_trace, prog.photon_retrace
@@ -71,8 +63,7 @@ class PhotonTracer:
         assert 0 < n_paths <= self.batch_paths
         self.launches += 1
         launch(self.queue, self.kernel, n_paths, *self.compiled.scene_args, *self._trace_args(),
-               path_offset, n_paths, self.segments, self.path_len,
-               local_size=self.local_size)
+               path_offset, n_paths, self.segments, self.path_len, local_size=self.local_size)
         return PathBatch(self.segments, self.path_len, path_offset, n_paths, self.max_depth)
 
     def retrace(self, batch: PathBatch, paths: cl.Buffer, starts: cl.Buffer, n_list: int):

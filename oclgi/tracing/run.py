@@ -30,6 +30,7 @@ import pyopencl as cl
 
 from .. import interrupt, params as params_mod
 from ..errors import OclgiError
+from ..cl.programs import read_buffer
 from .photon_trace import PhotonTracer
 
 SEGMENT_BYTES = 48  # oclgi/cl/layout.py Segment
@@ -119,9 +120,7 @@ class Run:
     """
 
     def __init__(self, engine, estimator, params, paths: PathRange | None = None):
-        self.engine = engine
-        self.estimator = estimator
-        self.params = params
+        self.engine, self.estimator, self.params = engine, estimator, params
         self.paths = paths or PathRange(0, params.photons)
         if not (0 <= self.paths.first and self.paths.count >= 0 and self.paths.end <= params.photons):
             raise OclgiError(f"paths {self.paths.first}..{self.paths.end} are not within the run's "
@@ -265,9 +264,7 @@ class Run:
         est = self.estimator
         scale = self.engine.compiled.fixed_scale(n)
         t0 = time.perf_counter()
-        irr_buf = est.resolve(scale)
-        irr = np.empty((est.n, 4), np.float32)
-        cl.enqueue_copy(self.engine.queue, irr, irr_buf)
+        irr = read_buffer(self.engine.queue, est.resolve(scale), (est.n, 4), np.float32)
         resolve = time.perf_counter() - t0  # a Photon Map's k-nearest search is here
         p = self.params
         stats = Stats(photons=n, segments=self.segments, points=est.n, method=p.method, radius=float(p.radius))
