@@ -130,6 +130,7 @@ class Run:
         self.marks = None  # batches end on multiples of this many paths (progressive images)
         self.camera, self.spp = None, 1  # a render run's view (Engine.render_run)
         self.seconds = {"trace": 0.0, "estimate": 0.0}
+        self.checked = False  # the estimator has checked the run from its first batch (step)
         self.set_batch(batch_paths(engine.batch_bytes, params.max_depth, max(1, self.paths.count)))
 
     def set_batch(self, paths: int) -> None:
@@ -175,6 +176,9 @@ class Run:
         self.next_path += n
         self.seconds["trace"] += tb - ta
         self.seconds["estimate"] += tc - tb
+        if not self.checked:  # the estimator's own check of the run (a Photon Map outgrowing the device)
+            self.checked = True
+            self.estimator.first_batch(self.traced, self.paths.count, self.segments)
         return n
 
     # -- state ----------------------------------------------------------------
@@ -226,9 +230,9 @@ class Run:
     def trace(self, progress: bool | None = None, on_batch=None, notice: bool = True) -> None:
         """Step to the end of the range, with a progress bar (``progress``
         as ``oclgi.progress.Progress`` takes it) and, after each batch,
-        ``on_batch(self)`` (e.g. a checkpoint). After the first batch the
-        estimator checks the run (``first_batch``) and, with ``notice``, a
-        run estimated to take over a minute says so."""
+        ``on_batch(self)`` (e.g. a checkpoint). After the first batch (which
+        the estimator checks, ``step``), with ``notice``, a run estimated to
+        take over a minute says so."""
         from .. import budget
         from ..progress import Progress
         from ..scene.scene import OclgiWarning
@@ -244,7 +248,6 @@ class Run:
                 bar.update(n)
                 if first:  # a long run says so, with its time from the first batch
                     first = False
-                    self.estimator.first_batch(self.traced, self.paths.count, self.segments)
                     line = budget.time_notice(n, time.perf_counter() - t0, self.paths.end - self.next_path + n)
                     if line and notice:
                         warnings.warn(line, OclgiWarning, stacklevel=4)

@@ -261,9 +261,7 @@ class Connection:
 
         engine, cam, args = self._render_plan(fields)
         poses = {name: engine.pose_matrix(name) for name in self.viewer.movable}
-        camera = dict(position=cam.position, look_at=cam.look_at, up=cam.up, fov=cam.fov, width=cam.width,
-                      height=cam.height)
-        return job_of(engine, poses, self.lights, camera, args, RENDER_BATCH)
+        return job_of(engine, poses, self.lights, cam, args, RENDER_BATCH)
 
     def _apply(self, req: Request) -> dict:
         info = {"kind": req.kind}
@@ -456,10 +454,7 @@ class Connection:
         while not run.done:  # a batch a call: other pages' requests run in between
             if self.ws.closed:
                 return None  # the page went away: its render stops here
-            first = run.traced == 0
-            await self.viewer.device(run.step)
-            if first:  # the estimator's own check of the run (a Photon Map outgrowing the device)
-                await self.viewer.device(run.estimator.first_batch, run.traced, run.paths.count, run.segments)
+            await self.viewer.device(run.step)  # the first also has the estimator check the run
             now = time.monotonic()
             if now - last >= 0.1 or run.done:
                 last = now

@@ -32,10 +32,10 @@ IN_PROCESS_PIXELS = 512 * 512  # at most this many pixels render in the server's
 PROGRESS_SECONDS = 0.1  # at most ten progress messages a second
 
 
-def job_of(engine, poses: dict, lights: dict, camera: dict, args: dict, batch: int) -> dict:
+def job_of(engine, poses: dict, lights: dict, camera, args: dict, batch: int) -> dict:
     """What the process needs (picklable): the scene, how the engine was
-    made, the poses (name -> 4x4), light changes, the camera's fields and
-    the run's arguments."""
+    made, the poses (name -> 4x4), light changes, the camera and the run's
+    arguments."""
     return {"scene": engine.scene, "device": engine.device_spec, "local_size": engine.local_size,
             "bvh": engine.compiled.bvh_quality, "poses": poses, "lights": dict(lights), "camera": camera,
             "args": args, "batch": batch}
@@ -47,21 +47,17 @@ def _render(pipe, job: dict) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops this
     try:
         from ..engine import Engine
-        from ..scene.scene import Camera
 
         engine = Engine(job["scene"], device=job["device"], local_size=job["local_size"], bvh=job["bvh"])
         for name, matrix in job["poses"].items():
             engine.place(name, matrix)
         if job["lights"]:
             engine._apply_parameters(job["lights"])
-        run = engine.render_run(Camera(**job["camera"]), **job["args"])
+        run = engine.render_run(job["camera"], **job["args"])
         run.set_batch(min(run.batch, job["batch"]))
         last = 0.0
         while not run.done:
-            first = run.traced == 0
             run.step()
-            if first:  # the estimator's own check of the run, as Engine.run's loop makes it
-                run.estimator.first_batch(run.traced, run.paths.count, run.segments)
             if time.monotonic() - last >= PROGRESS_SECONDS:
                 last = time.monotonic()
                 pipe.send(("progress", int(run.traced), int(run.paths.count)))
