@@ -15,8 +15,14 @@
  *     leaves the scene, is absorbed, meets the black back of a one-sided
  *     surface or is still going after OCLGI_CAMERA_MAX_DEPTH surfaces
  *     gives weight 0 and a zero normal (no disc: nothing can cross it).
- *     Emitted light (area lights, skies) is not gathered: the host refuses
- *     such scenes (their direct light would come by these rays).
+ *     Emitted light: what x sees of an emitter straight on is its direct
+ *     light (detp_direct.cl samples it), so a ray's first surface adds no
+ *     emission; past a mirror, glass or a highlight no light sample can
+ *     reach, so the front of an emitting triangle met there (tri_emitter)
+ *     or the sky the ray leaves to adds pi * weight * L_e to ``emitted``
+ *     (the radiance arriving at x is weight * L_e; cosine sampling's pdf
+ *     cos / pi). The sun's light through a mirror (a delta seen through a
+ *     delta) reaches x by no ray: it is lost, as a caustic in a gather is.
  *
  * Directions are stratified: the first s^2 rays of a point (s = floor(
  *     sqrt(n_rays))) take one cell each of an s x s grid over the unit
@@ -29,11 +35,12 @@
  *     the batch or the work-group size.
  *
  * final_gather_resolve  one work-item per point: out_i += (1 / N) sum_j
- *     weight_ij E(h_ij), j in order 0 .. N-1 (E the hits' resolved DETP
+ *     (weight_ij E(h_ij) + emitted_ij), j in order 0 .. N-1 (E the hits' resolved DETP
  *     irradiance, itself from 64-bit fixed-point sums). One work-item owns a
  *     point and adds its rays in a fixed order, so the result does not
  *     depend on the work-group size or the order the rays were traced in.
  */
+#include "background.h"
 #include "bsdf.h"
 #include "bvh.h"
 #include "rng.h"
@@ -44,10 +51,12 @@
 
 __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 *tri_normals,
                                 __global const int *tri_material, __global const Material *materials,
+                                __global const int *tri_emitter, __global const float4 *spread_info,
+                                __global const Background *bg, __global const float4 *bg_texels,
                                 __global const float4 *points, __global const float4 *point_normals,
                                 int n_points, int n_rays, uint seed_lo, uint seed_hi, uint gather_seed, float eps,
                                 __global float4 *positions, __global float4 *normals,
-                                __global float2 *barys, __global float4 *weights)
+                                __global float2 *barys, __global float4 *weights, __global float4 *emitted)
 {
     int g = get_global_id(0);
     if (g >= n_points * n_rays) return;
@@ -59,6 +68,7 @@ __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 
     normals[g] = (float4)(0.0f);
     barys[g] = (float2)(0.0f);
     weights[g] = (float4)(0.0f);
+    emitted[g] = (float4)(0.0f);
     if (!(len > 0.0f)) return;
     nx /= len;
     uint s_lo = GATHER_SEED_LO ^ seed_lo, s_hi = GATHER_SEED_HI ^ seed_hi;
@@ -77,11 +87,16 @@ __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 
     for (int depth = 0; depth < OCLGI_CAMERA_MAX_DEPTH; ++depth) {
         Hit h;
         scene_closest_hit(SCENE_PASS, o, d, INFINITY, &h);
-        if (h.tri < 0) return; /* left the scene: no sky is gathered (the host refuses skies) */
+        if (h.tri < 0) { /* left the scene: the sky, past a mirror or glass */
+            if (depth > 0) emitted[g] = (float4)(OCLGI_PI * weight * background_radiance(bg, bg_texels, d), 0.0f);
+            return;
+        }
         float3 p = o + h.t * d;
         __global const Material *m = &materials[tri_material[h.tri]];
         float3 n = tri_normals[h.tri].xyz;
         int front = dot(n, d) < 0.0f;
+        int k = tri_emitter[h.tri];
+        if (depth > 0 && front && k >= 0) emitted[g] = (float4)(OCLGI_PI * weight * spread_info[k].xyz, 0.0f);
         float3 ns = front ? n : -n;
         float4 r = rng_uniform4(s_lo, s_hi, (uint)i, (uint)(j * OCLGI_CAMERA_MAX_DEPTH + depth), 2u * gather_seed);
         int kind = m->kind;
@@ -110,13 +125,13 @@ __kernel void final_gather_rays(SCENE_ARGS, TEXTURE_ARGS, __global const float4 
 }
 
 __kernel void final_gather_resolve(__global const float4 *hit_irradiance, __global const float4 *weights,
-                                   int n_points, int n_rays, __global float4 *out)
+                                   __global const float4 *emitted, int n_points, int n_rays, __global float4 *out)
 {
     int i = get_global_id(0);
     if (i >= n_points) return;
     float3 sum = (float3)(0.0f);
     size_t base = (size_t)i * (size_t)n_rays;
     for (int j = 0; j < n_rays; ++j)
-        sum += weights[base + j].xyz * hit_irradiance[base + j].xyz;
+        sum += weights[base + j].xyz * hit_irradiance[base + j].xyz + emitted[base + j].xyz;
     out[i] += (float4)(sum * (1.0f / (float)n_rays), 0.0f);
 }

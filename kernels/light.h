@@ -9,6 +9,7 @@
  *                    environment map r1.y, r1.z too). ``table`` is the
  *                    emitter CDF's buffer, which holds the environment
  *                    maps' tables after the CDF itself.
+ *   light_envmap_pdf the density of an environment map's direction choice.
  *   light_pdf_dir    the density with which light_sample_le emits direction
  *                    d (and, for lights that sample a position, that
  *                    position): what multiple importance sampling of moving
@@ -143,6 +144,25 @@ inline float3 light_ies_dir(__global const Emitter *em, float z, float phi)
     return normalize(st * cos(phi) * c0 + st * sin(phi) * cross(c0, nadir) + z * nadir);
 }
 
+/* The solid-angle density with which an environment map's tables pick
+ * the direction w the light comes from (its texel's probability over the
+ * texel's solid angle). */
+inline float light_envmap_pdf(__global const Emitter *em, float3 w, __global const float *table)
+{
+    int W = (int)em->e2[0], H = (int)em->e2[1];
+    __global const float *rows = table + em->tri, *cols = rows + H;
+    float v = acos(clamp(w.y, -1.0f, 1.0f)) / OCLGI_PI;
+    float u = atan2(w.x, -w.z) / (2.0f * OCLGI_PI);
+    u -= floor(u);
+    int i = min((int)(v * (float)H), H - 1), j = min((int)(u * (float)W), W - 1);
+    float p_row = rows[i] - (i > 0 ? rows[i - 1] : 0.0f);
+    __global const float *c = cols + i * W;
+    float p_col = c[j] - (j > 0 ? c[j - 1] : 0.0f);
+    float ct = cos(OCLGI_PI * (float)i / (float)H), cb = cos(OCLGI_PI * (float)(i + 1) / (float)H);
+    float omega = 2.0f * OCLGI_PI / (float)W * (ct - cb); /* the texel's solid angle */
+    return p_row * p_col / omega;
+}
+
 inline LightSample light_sample_le(__global const Emitter *em, float4 r0, float4 r1, float eps,
                                    __global const float *table)
 {
@@ -236,21 +256,7 @@ inline float light_pdf_dir(__global const Emitter *em, float3 d, __global const 
     }
     float pdf_pos = 1.0f / (OCLGI_PI * em->a * em->a);
     if (kind == OCLGI_EMITTER_SUN) return pdf_pos;
-    if (kind == OCLGI_EMITTER_ENVMAP) {
-        int W = (int)em->e2[0], H = (int)em->e2[1];
-        __global const float *rows = table + em->tri, *cols = rows + H;
-        float3 w = -d;
-        float v = acos(clamp(w.y, -1.0f, 1.0f)) / OCLGI_PI;
-        float u = atan2(w.x, -w.z) / (2.0f * OCLGI_PI);
-        u -= floor(u);
-        int i = min((int)(v * (float)H), H - 1), j = min((int)(u * (float)W), W - 1);
-        float p_row = rows[i] - (i > 0 ? rows[i - 1] : 0.0f);
-        __global const float *c = cols + i * W;
-        float p_col = c[j] - (j > 0 ? c[j - 1] : 0.0f);
-        float ct = cos(OCLGI_PI * (float)i / (float)H), cb = cos(OCLGI_PI * (float)(i + 1) / (float)H);
-        float omega = 2.0f * OCLGI_PI / (float)W * (ct - cb); /* the texel's solid angle */
-        return pdf_pos * p_row * p_col / omega;
-    }
+    if (kind == OCLGI_EMITTER_ENVMAP) return pdf_pos * light_envmap_pdf(em, -d, table);
     if (em->b != 0.0f) return dot(d, vload3(0, em->e1)) <= 0.0f ? pdf_pos / (2.0f * OCLGI_PI) : 0.0f;
     return pdf_pos / (4.0f * OCLGI_PI);
 }

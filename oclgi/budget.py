@@ -66,7 +66,8 @@ PIXEL_BUFFERS = {"shaded positions": 16, "shaded normals": 16, "radiance": 16, "
 # the estimator's with its own sums, plus the hits' weights, direct light and
 # the host's copies while they are made: a 320x180 Sponza render at N = 64
 # (3.7 million hits) peaked 257 bytes a hit above the same render without.
-GATHER_HIT_DEVICE_BYTES = 64  # weight (16), direct light (16), ray state (32), beside the disc's point buffers
+# (+16 on the device since the rays carry the emission they see past mirrors and glass)
+GATHER_HIT_DEVICE_BYTES = 80  # weight, emission, direct light (16 each), ray state (32), beside the disc's points
 GATHER_HIT_HOST_BYTES = 160
 # The host's share of one stored estimate in a study (float64 RGB, and the
 # list it is stacked from).

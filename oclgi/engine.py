@@ -448,6 +448,8 @@ class Engine:
             return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius, seed=params.seed,
                                extension=params.extension, count_emitted=params.count_emitted,
                                local_size=self.local_size, count_work=flag(count_work, "count_work"), **options)
+        if cls.family == "detp":  # the exact direct light's random numbers are the run's
+            options = dict(options, seed=params.seed)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,
                    count_emitted=params.count_emitted, local_size=self.local_size,
                    count_work=flag(count_work, "count_work"), **options)

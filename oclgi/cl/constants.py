@@ -91,6 +91,9 @@ EMITTER_SUN = 3
 EMITTER_SKY = 4
 EMITTER_ENVMAP = 5
 EMITTER_IES = 6  # a point or spot light with an IES profile (oclgi/scene/ies.py)
+# The lights that emit from one point or along one direction: their direct
+# light is one shadow ray (kernels/detp_direct.cl); the others are sampled.
+DELTA_KINDS = (EMITTER_POINT, EMITTER_SPOT, EMITTER_SUN, EMITTER_IES)
 
 # Material.kind (oclgi/cl/layout.py Material; kernels/bsdf.h scatters by it,
 # oclgi/scene/materials.py names the kinds) and Material.flags.

@@ -131,8 +131,10 @@ class DetpEstimator(Estimator):
     the radius of each point given instead of computed (a session's first
     frame's, ``Session.estimator.radii``); ``direct``: "photons" (the
     direct light from the photons' first segments, as the indirect) or
-    "exact" (delta lights only: the first segments do not count and the
-    resolve adds the direct irradiance by shadow rays,
+    "exact" (the first segments do not count and the resolve adds the
+    direct irradiance by shadow rays: delta lights exactly, the others by
+    ``direct_samples`` light and BSDF samples per point combined by
+    ``direct_mis``, keyed by the run's ``seed``;
     oclgi/estimators/detp_direct.py); ``gather`` N > 0 with
     ``gather_seed``: final gathering, the discs at the hits of N cosine
     rays per point (oclgi/estimators/final_gather.py, made by
@@ -151,22 +153,23 @@ class DetpEstimator(Estimator):
     def __init__(self, queue, compiled, points, radius: float, extension: float = 0.0,
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
                  radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
-                 consistent_span: float = 1.0, direct: str = "photons", gather: int = 0, gather_seed: int = 0,
-                 **kw):
+                 consistent_span: float = 1.0, direct: str = "photons", direct_samples: int = detp_direct.DIRECT_SAMPLES,
+                 direct_mis: str = "power", gather: int = 0, gather_seed: int = 0, seed: int = 0, **kw):
         if gather_options.check(gather, gather_seed):
             # the points' discs give way to discs at the hits of their rays: a
             # different estimator over this variant (Engine.estimator makes it)
             raise OclgiError("gather > 0: build the estimator with Engine.estimator (final_gather.FinalGather "
                              f"over {self.name})")
         radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
-        exact_direct = detp_direct.check(direct)
+        exact_direct = detp_direct.check(direct, direct_samples, direct_mis)
         span = radius_options.consistent_span(consistent, consistent_span)
         if radius_mode == "adaptive" and self.radii_maker is None:
             raise OclgiError(f"radius_mode 'adaptive' is offered by detp and detp_disc_index, not {self.name}")
         given = radius_options.given_radii(radii, radius_mode, len(points))
         self.direct = None
         if exact_direct:  # the lights' own segments give way to the shadow rays
-            self.direct = detp_direct.DirectLight(queue, compiled, kw.get("count_emitted", True), kw.get("local_size"))
+            self.direct = detp_direct.DirectLight(queue, compiled, kw.get("count_emitted", True), kw.get("local_size"),
+                                                  direct_samples, direct_mis, seed)
             kw = dict(kw, count_emitted=False)
         super().__init__(queue, compiled, points, **kw)
         self.radius = float(radius)
@@ -249,7 +252,7 @@ class DetpEstimator(Estimator):
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2),
-        plus the delta lights' direct irradiance with ``direct = "exact"``."""
+        plus the lights' direct irradiance with ``direct = "exact"``."""
         if self.radius_mode != "fixed":  # each point's own d: E = acc * (1 / (scale pi)) * (1 / d^2)
             launch(self.queue, self.k_resolve_radii, self.n, self.acc, self.n, 1.0 / (scale * math.pi),
                    self.inv_radius2_buf, self.irr)

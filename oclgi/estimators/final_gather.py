@@ -21,11 +21,20 @@ x's corner or shadow edge, is gone.
 
 What. ``gather = N`` (1 to 65536 rays per point; 0, the default: no
 gathering) needs ``direct = "exact"``: the direct light of x and of each
-hit comes by shadow rays (oclgi/estimators/detp_direct.py), the discs at
-the hits carry the indirect light only, so nothing is counted twice
-(a gather ray never reaches a delta light). Emitted light is not
-gathered, so scenes with area lights or a sky are refused, as
-``direct = "exact"`` refuses them. The rays' random numbers are Philox
+hit comes by shadow rays and light samples, for every kind of light
+(oclgi/estimators/detp_direct.py), the discs at the hits carry the
+indirect light only (the photons' first segments do not count). Nothing
+is counted twice: light from an emitter straight to x is x's direct
+light, so a gather ray adds no emission at its first surface (an
+emitting triangle it meets is a hit like any other, whose reflected
+light its disc and direct light give); light from an emitter through a
+mirror or glass to x is what no light sample sees, so a gather ray adds
+the emission it meets past one (an emitting triangle's front, the sky it
+leaves to). Light that bounced k times before x reaches it through the
+hits' discs (k - 1 bounces before the hit, at most max_depth - 1), so a
+gathered estimate holds up to max_depth bounces where the variant's own
+holds max_depth - 1 (tests/test_final_gather.py checks both against the
+furnace's series). The rays' random numbers are Philox
 keyed by the run's seed, with ``gather_seed`` (default 0) in the counter: a
 pure function of (seeds, point, ray, surface), so runs of different seeds
 have independent rays (the study's variance is the gather's too). The discs at the hits are the variant's own (fixed or adaptive
@@ -44,8 +53,9 @@ lift of eps off x. Variance: the hemisphere's (how much rho E varies over
 what x sees) over N, plus the discs' noise averaged over N discs.
 
 Cost: N rays per point at setup, N discs per point (a disc index of N n_P
-discs: the segments' walk meets about N times more discs), and N shadow
-rays per point and light at each resolve.
+discs: the segments' walk meets about N times more discs), and at each
+resolve the direct light of N + 1 points per point (one shadow ray per
+delta light, 2 ``direct_samples`` rays for the others).
 
 Refused where it could not be exact: sessions and light animations (the
 hits depend on the geometry, and the discs are not the query points);
@@ -61,7 +71,7 @@ from .. import queries
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import Estimator
-from .detp_direct import DirectLight
+from .detp_direct import DIRECT_SAMPLES, DirectLight
 from .detp_direct import check as check_direct
 from .gather_options import check
 
@@ -77,21 +87,23 @@ def gather_rays(queue, compiled, pts: cl.Buffer, nrm: cl.Buffer, n_points: int, 
     """The hits of ``n_rays`` cosine rays from each of the ``n_points``
     points (device buffers of float4 positions and normals;
     kernels/final_gather.cl final_gather_rays) with Philox key ``key``
-    (gather_key): (QueryPoints of the hits, point-major, and their
-    (n * n_rays, 4) float32 weights)."""
+    (gather_key): (QueryPoints of the hits, point-major, their (n *
+    n_rays, 4) float32 weights, and the emission each ray saw past a
+    mirror or glass, times pi, on the device)."""
     ctx = queue.context
     n = n_points * n_rays
     mf = cl.mem_flags
-    pos, hn, bary, wt = (cl.Buffer(ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8, 16))
+    pos, hn, bary, wt, emitted = (cl.Buffer(ctx, mf.READ_WRITE, max(n, 1) * s) for s in (16, 16, 8, 16, 16))
     c = compiled
     k = programs(ctx).get("final_gather").final_gather_rays
     launch(queue, k, n, *c.scene_args, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
-           c.tri_normals, c.tri_material, c.materials, pts, nrm, int(n_points), int(n_rays), *key,
-           np.float32(c.eps), pos, hn, bary, wt, local_size=local_size)
+           c.tri_normals, c.tri_material, c.materials, c.tri_emitter, c.spread_info, c.background,
+           c.background_texels, pts, nrm, int(n_points), int(n_rays), *key, np.float32(c.eps), pos, hn, bary, wt,
+           emitted, local_size=local_size)
     host = tuple(np.empty((n, k_), np.float32) for k_ in (4, 4, 2, 4))
     for h, dev in zip(host, (pos, hn, bary, wt)):
         cl.enqueue_copy(queue, h, dev)
-    return queries.QueryPoints(*host[:3]), host[3]
+    return queries.QueryPoints(*host[:3]), host[3], emitted
 
 
 class FinalGather(Estimator):
@@ -102,9 +114,10 @@ class FinalGather(Estimator):
     incremental = False  # the hits move with the geometry (refused by sessions)
 
     def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
-                 direct: str = "photons", seed: int = 0, **kw):
+                 direct: str = "photons", direct_samples: int = DIRECT_SAMPLES, direct_mis: str = "power",
+                 seed: int = 0, **kw):
         n_rays = check(gather, gather_seed)
-        if not check_direct(direct):
+        if not check_direct(direct, direct_samples, direct_mis):
             raise OclgiError(f"gather (final gathering) needs direct = 'exact': the direct light of the points "
                              f"and of the hits by shadow rays, the discs the indirect light only (got direct = "
                              f"{direct!r})")
@@ -114,14 +127,18 @@ class FinalGather(Estimator):
         self.name = variant.name
         self.n_rays = n_rays
         self.gather_seed = int(gather_seed)  # checked integral by check()
-        # The direct light at the points themselves (refuses area lights and skies, as direct 'exact' does).
-        self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size)
+        # The direct light at the points themselves.
+        self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size, direct_samples, direct_mis,
+                                  seed)
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
-        self.hits, self.hit_weights = gather_rays(queue, compiled, self.positions, self.normals, self.n, n_rays,
-                                                  gather_key(int(seed), self.gather_seed), self.local_size)
+        self.hits, self.hit_weights, self.emitted = gather_rays(queue, compiled, self.positions, self.normals,
+                                                                self.n, n_rays,
+                                                                gather_key(int(seed), self.gather_seed),
+                                                                self.local_size)
         # The variant's own discs at the hits, with their own exact direct light.
-        self.inner = variant(queue, compiled, self.hits, radius, direct="exact", count_work=count_work, **kw)
+        self.inner = variant(queue, compiled, self.hits, radius, direct="exact", direct_samples=direct_samples,
+                             direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
         self.radius = self.inner.radius
         self.weights_buf = self.upload(self.hit_weights)
         self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
@@ -159,6 +176,6 @@ class FinalGather(Estimator):
         hit_irr = self.inner.resolve(scale)
         cl.enqueue_copy(self.queue, self.irr, np.zeros((self.n, 4), np.float32))
         self.direct.add(self.positions, self.normals, self.n, self.irr)
-        launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.n, self.n_rays, self.irr,
-               local_size=self.local_size)
+        launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.emitted, self.n, self.n_rays,
+               self.irr, local_size=self.local_size)
         return self.irr

@@ -18,7 +18,8 @@ import pyopencl as cl
 from ..accel.bvh_build import build_bvh, scene_tree
 from ..accel.bvh_leaf_blocks import leaf_blocks
 from ..accel.bvh_wide import WIDE_STACK, collapse
-from ..cl.constants import BVH_STACK_SIZE, EMITTER_ENVMAP, EMITTER_IES, FIXED_ONE
+from ..cl.constants import (BVH_STACK_SIZE, DELTA_KINDS, EMITTER_ENVMAP, EMITTER_IES, EMITTER_SKY,
+                            EMITTER_TRIANGLE, FIXED_ONE)
 from ..cl.layout import Emitter, Instance, Tri
 from ..errors import OclgiError
 from . import background, materials, shading_normals, textures
@@ -116,8 +117,6 @@ class CompiledScene:
         # so they are not part of the fingerprint (no photon path depends on them)
         self.shading_host = shading_normals.normal_maps(v, scene.tri_vertex_normals)
         self.tri_shading = _buffer(ctx, self.shading_host)
-        bg, bg_texels = background.record(scene)
-        self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
         self.tri_object = _buffer(ctx, scene.tri_object.astype(np.int32))
         self.texels_host, self.uvmap_host, self.colourmap_host = texels, uvmap, colourmap
         self.tri_areas = _buffer(ctx, self.areas)
@@ -174,6 +173,39 @@ class CompiledScene:
         bound = np.zeros((len(em), 4), np.float32)
         bound[:, :3] = rows.bound
         self.emitter_bound = _buffer(ctx, bound)
+        # what a camera ray leaving the scene sees, and what the sky's exact
+        # direct light reads (kernels/background.h): the lights' own
+        bg, bg_texels = background.record(scene)
+        self.background, self.background_texels = _buffer(ctx, bg), _buffer(ctx, bg_texels)
+        self._spread_tables(scene, rows, weight)
+
+    def _spread_tables(self, scene: Scene, rows, weight: np.ndarray) -> None:
+        """The tables of the exact direct light of the emitters that are not
+        deltas (area lights, the sky, an environment map; kernels/
+        detp_direct.cl samples them): their ids and the CDF of their power
+        (the photons' choice restricted to them), per emitter a float4 of
+        its radiance (area lights: the material's emission) and its
+        probability in that choice (0 for a delta light), the emitter of
+        each triangle (-1: none) and the sky's emitter (-1: none)."""
+        ctx = self.ctx
+        spread = np.nonzero(~np.isin(rows.kind, DELTA_KINDS))[0].astype(np.int32)
+        info = np.zeros((len(rows.kind), 4), np.float32)
+        cdf = np.zeros(0, np.float32)
+        if len(spread) and weight[spread].sum() > 0:
+            p = weight[spread] / weight[spread].sum()
+            info[spread, 3] = p
+            cdf = np.cumsum(p)
+            cdf = (cdf / cdf[-1]).astype(np.float32)
+        area = np.nonzero(rows.kind == EMITTER_TRIANGLE)[0]
+        emission = np.array([m.emission for m in scene.materials], np.float64).reshape(-1, 3)
+        info[area, :3] = emission[scene.tri_material[rows.tri[area]]]
+        tri_emitter = np.full(scene.n_triangles, -1, np.int32)
+        tri_emitter[rows.tri[area]] = area
+        sky = np.nonzero(np.isin(rows.kind, (EMITTER_SKY, EMITTER_ENVMAP)))[0]
+        self.spread_ids, self.n_spread = _buffer(ctx, spread), len(cdf)
+        self.spread_cdf, self.spread_info = _buffer(ctx, cdf), _buffer(ctx, info)
+        self.tri_emitter = _buffer(ctx, tri_emitter)
+        self.sky_emitter = int(sky[0]) if len(sky) else -1
 
     def with_scene(self, scene: Scene) -> "CompiledScene":
         """This compiled scene with the materials and lights of ``scene``
