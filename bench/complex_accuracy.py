@@ -77,8 +77,10 @@ SHADOW_FLOOR = 0.05  # of the scene's mean reference irradiance
 CORES = 2  # the time of a run is its CPU time over this many cores
 
 
-SCENES = ("foliage", "courtyard", "arcade")
-SHEETS = {"foliage": (2,)}  # materials that are open two-faced sheets (the leaves), not solids
+# The sun-lit scenes of issue 16, then the area-, sky- and ceiling-lit ones
+# of issue 31 (the Cornell box as shipped, scenes/cornell_box.toml).
+SCENES = ("foliage", "courtyard", "arcade", "foliage_area", "courtyard_sky", "cornell")
+SHEETS = {"foliage": (2,), "foliage_area": (2,)}  # materials that are open two-faced sheets (the leaves)
 
 
 def scene_setups(leaves: int, n_points: int, rng, names=SCENES):
@@ -86,18 +88,25 @@ def scene_setups(leaves: int, n_points: int, rng, names=SCENES):
     ``names``; each scene's points drawn from ``rng`` in SCENES' order,
     so a scene's points do not depend on which others are run."""
     k = n_points // 8
-    rooms = {"floor": (0, 3 * k, "up"), "walls": (1, 3 * k, "up"), "stone": (2, n_points - 6 * k, "up")}
+    rooms = {"floor": ((0,), 3 * k, "up"), "walls": ((1,), 3 * k, "up"), "stone": ((2,), n_points - 6 * k, "up")}
     result = []
     for name in SCENES:
-        if name == "foliage":
-            scene = complex_scenes.foliage(leaves)
-            groups = {"ground": (0, 3 * k, "up"), "wood": (1, k, "up"), "leaves": (2, n_points - 4 * k, "both")}
+        if name.startswith("foliage"):
+            scene = complex_scenes.foliage(leaves, light="area" if name == "foliage_area" else "sun")
+            groups = {"ground": ((0,), 3 * k, "up"), "wood": ((1,), k, "up"),
+                      "leaves": ((2,), n_points - 4 * k, "both")}
+        elif name == "cornell":  # materials: 1-5 the room's walls, 6-7 the boxes
+            scene = oclgi.load_file(ROOT / "scenes" / "cornell_box.toml")
+            groups = {"walls": ((1, 2, 3, 4, 5), 5 * k, "up"), "boxes": ((6, 7), n_points - 5 * k, "up")}
+        elif name == "courtyard_sky":
+            scene, groups = complex_scenes.courtyard(light="sky"), rooms
         else:
             scene, groups = getattr(complex_scenes, name)(), rooms
         parts, pts = [], []
-        for part, (mesh, count, side) in groups.items():
+        for part, (mats, count, side) in groups.items():
             # draw twice as many, keep the first that Mitsuba can measure
-            pts.append(complex_scenes.points(scene, {tuple(complex_scenes.part(scene, mesh)): (2 * count, side)}, rng))
+            ids = np.concatenate([complex_scenes.part(scene, m) for m in mats])
+            pts.append(complex_scenes.points(scene, {tuple(ids): (2 * count, side)}, rng))
             parts += [part] * (2 * count)
         if name in names:
             result.append((name, scene, concat(pts), np.array(parts), {p: g[1] for p, g in groups.items()}))

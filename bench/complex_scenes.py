@@ -6,6 +6,9 @@ DETP disc, and occluders near walls.
                        (side 0.06 to 0.12, against a default disc radius of
                        1% of the 23-unit diagonal, 0.23) in an ellipsoidal
                        crown; 46,000 leaves make 101,272 triangles.
+                       ``light="area"``: lit instead by a 6 x 6 square area
+                       light 9 above the ground, facing down (2 more
+                       triangles).
 ``arcade()``           a closed room (10 x 4 x 6) lit by a ceiling area
                        light: a row of columns with arches of thin tubes
                        (0.12 radius) and a lintel carrying a gallery's
@@ -18,6 +21,8 @@ DETP disc, and occluders near walls.
                        columns carrying arches of tubes (0.12 radius), the
                        first floor's slab with a parapet, the roof a ring
                        around the opening; about 110,000 triangles.
+                       ``light="sky"``: lit instead by a uniform sky above
+                       the horizon, through the opening.
 
 ``points(scene, kind, n, rng)`` draws query points on the scenes' parts
 (each with its triangle and the side its triangle faces, leaves on a random
@@ -136,8 +141,15 @@ def leaves(rng, n, centre, radii, side=(0.06, 0.12)):
     return verts, faces
 
 
-def foliage(n_leaves: int = 46_000, seed: int = 16) -> oclgi.Scene:
-    """The tree scene (see the module's docstring); parts named ground, wood, leaves."""
+# the lights of the scenes' variants (the module's docstring)
+SUN = {"sun": [{"direction": [0.35, -1.0, 0.25], "irradiance": [3.0, 3.0, 3.0]}]}
+AREA_LIGHT = grid([-3.0, 9.0, -3.0], [6.0, 0, 0], [0, 0, 6.0], 1, 1)  # normal -y: faces down
+SKY = {"sky": {"radiance": [1.0, 1.0, 1.0], "hemisphere": True}}
+
+
+def foliage(n_leaves: int = 46_000, seed: int = 16, light: str = "sun") -> oclgi.Scene:
+    """The tree scene (see the module's docstring); parts named ground,
+    wood, leaves (and light, under the area light)."""
     rng = np.random.default_rng(seed)
     ground = grid([-8, 0, 8], [16, 0, 0], [0, 0, -16], 64, 64)  # normal +y
     wood = [cylinder([0, 0, 0], [0, 2.6, 0], 0.15, 20, 8)]
@@ -146,9 +158,10 @@ def foliage(n_leaves: int = 46_000, seed: int = 16) -> oclgi.Scene:
         d = np.array([np.cos(ang), 0.7, np.sin(ang)])
         wood.append(cylinder([0, 2.2 + 0.07 * k, 0], 1.3 * d / np.linalg.norm(d), 0.05, 12, 4))
     crown = leaves(rng, n_leaves, [0, 3.5, 0], [1.7, 1.1, 1.7])
-    return scene(f"foliage{n_leaves}", [mesh("ground", ground, 0.35), mesh("wood", wood, 0.3),
-                                        mesh("leaves", crown, 0.5)],
-                 sun=[{"direction": [0.35, -1.0, 0.25], "irradiance": [3.0, 3.0, 3.0]}])
+    meshes = [mesh("ground", ground, 0.35), mesh("wood", wood, 0.3), mesh("leaves", crown, 0.5)]
+    if light == "area":
+        return scene(f"foliage{n_leaves}_area", meshes + [mesh("light", AREA_LIGHT, 0.0, emission=[7.0] * 3)])
+    return scene(f"foliage{n_leaves}", meshes, **SUN)
 
 
 def arcade() -> oclgi.Scene:
@@ -175,7 +188,7 @@ def arcade() -> oclgi.Scene:
                             mesh("light", light, 0.0, emission=[12.0, 12.0, 12.0])])
 
 
-def courtyard() -> oclgi.Scene:
+def courtyard(light: str = "sun") -> oclgi.Scene:
     """The two-storey courtyard (see the module's docstring); parts named
     floor (the ground floor), walls (outer walls and the roof's underside)
     and stone (columns, arches, the gallery slab and its parapet)."""
@@ -213,8 +226,10 @@ def courtyard() -> oclgi.Scene:
             major, minor = half - rc, 0.12
             centre = [0.5 * (ax + bx), y1 - major - minor, 0.5 * (az + bz)]
             stone.append(arch(centre, span / (2 * half), [0, 1, 0], major, minor, 32, 12))
-    return scene("courtyard", [mesh("floor", floor, 0.45), mesh("walls", walls, 0.6), mesh("stone", stone, 0.55)],
-                 sun=[{"direction": [0.45, -1.0, 0.3], "irradiance": [3.0, 3.0, 3.0]}])
+    meshes = [mesh("floor", floor, 0.45), mesh("walls", walls, 0.6), mesh("stone", stone, 0.55)]
+    if light == "sky":
+        return scene("courtyard_sky", meshes, **SKY)
+    return scene("courtyard", meshes, sun=[{"direction": [0.45, -1.0, 0.3], "irradiance": [3.0, 3.0, 3.0]}])
 
 
 def part(scene, k: int) -> np.ndarray:

@@ -442,6 +442,10 @@ class Engine:
         if getattr(cls, "radii_maker", None) is not None and options.get("radius_mode") == "adaptive" \
                 and options.get("radii") is None:
             options = dict(options, pilot=self.pilot_paths(options))
+        if cls.family == "detp" and options.get("direct") == "exact" and options.get("direct_samples") is None:
+            from .estimators.detp_direct import default_samples
+
+            options = dict(options, direct_samples=default_samples(params.photons))
         if cls.family == "detp" and options.get("gather", 0):
             from .estimators.final_gather import FinalGather
 

@@ -286,11 +286,23 @@ def test_an_environment_map_of_one_bright_texel(tmp_path):
 def test_the_cornell_box_direct_light_matches_its_photons(cornell):
     """The area light's exact direct light plus the discs' indirect light
     equals the photons' direct and indirect light on average over the
-    floor (the same light, told apart)."""
+    floor (the same light, told apart), on points whose discs lie wholly
+    on open floor (0.12 from the walls and the boxes' footprints: a disc
+    that reaches under a box or past a wall reads low, which the exact
+    direct light does not). Measured 0.3-1.0% apart over seeds: the photons'
+    noise, and the disc's mean under the light's peak, a little low."""
+    scene = cornell.scene
     rng = np.random.default_rng(2)
-    pts = np.column_stack([rng.uniform(-0.9, 0.9, 300), np.full(300, 1e-4), rng.uniform(-0.9, 0.9, 300),
-                           np.zeros(300), np.ones(300), np.zeros(300)])
+    xz = rng.uniform(-0.85, 0.85, (2000, 2))
+    keep = np.ones(len(xz), bool)
+    for k, m in enumerate(scene.materials):
+        if m.name.endswith("Box"):
+            v = scene.vertices[scene.faces[scene.tri_material == k]].reshape(-1, 3)
+            lo, hi = v[:, [0, 2]].min(0) - 0.12, v[:, [0, 2]].max(0) + 0.12
+            keep &= ~((xz > lo) & (xz < hi)).all(axis=1)
+    xz = xz[keep][:300]
+    pts = _ground_points(xz)
     kw = dict(method="detp_disc_index", photons=1_000_000, radius=0.1)
     photons = cornell.irradiance(pts, **kw).irradiance[:, 0].astype(np.float64)
     exact_direct = cornell.irradiance(pts, direct="exact", **kw).irradiance[:, 0].astype(np.float64)
-    assert abs(exact_direct.mean() / photons.mean() - 1) < 0.01
+    assert len(xz) == 300 and abs(exact_direct.mean() / photons.mean() - 1) < 0.015

@@ -23,7 +23,9 @@ What. With ``direct = "exact"``:
   I(d) cos(theta) / r^2 (I the photons' own intensity, profile included),
   E cos(theta) for the sun; for area lights, a uniform sky and an
   environment map by ``direct_samples`` pairs of a light sample and a
-  cosine (BSDF) sample, combined by multiple importance sampling
+  cosine (BSDF) sample (default: one per 2^15 photons of the run, from 16
+  to 1,024; with ``gather = N`` each hit takes max(1, direct_samples // N)),
+  combined by multiple importance sampling
   (``direct_mis``: "power", the default, or "balance" heuristic; "light"
   or "bsdf" alone, for studies). The light sample picks an emitter by its
   power (a binary search in a CDF: a scene with 10^4 emitting triangles
@@ -60,8 +62,25 @@ DIRECT_MODES = ("photons", "exact")
 # The multiple importance sampling of the lights that are not deltas; the
 # order is kernels/detp_direct.cl's ``mis`` argument.
 MIS_MODES = ("power", "balance", "light", "bsdf")
-DIRECT_SAMPLES = 16  # pairs of samples per point (bench/README.md, "Direct light")
+DIRECT_SAMPLES = 16  # pairs of samples per point of an estimator built without a run's photon count
 MAX_SAMPLES = 65536
+# The default with a run (Engine.estimator): one pair per 2^15 photons, from
+# 16 to 1,024 (bench/README.md, "Direct light"): the light samples' noise
+# falls with the photons' as the run grows, and their cost (2 rays a pair
+# per point) stays small beside the photons' (several segments each).
+PHOTONS_PER_SAMPLE = 1 << 15
+MIN_DEFAULT, MAX_DEFAULT = 16, 1024
+
+
+def default_samples(photons: int) -> int:
+    """The pairs of light and cosine samples per point a run of ``photons`` takes by default."""
+    return min(max(int(photons) // PHOTONS_PER_SAMPLE, MIN_DEFAULT), MAX_DEFAULT)
+
+
+def hit_samples(samples: int, n_rays: int) -> int:
+    """A gather hit's share of its point's samples (at least one pair): the
+    point's indirect light averages its N hits, and their noise with it."""
+    return max(1, int(samples) // int(n_rays))
 
 
 def check(direct, samples=DIRECT_SAMPLES, mis="power") -> bool:

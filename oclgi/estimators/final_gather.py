@@ -55,7 +55,9 @@ what x sees) over N, plus the discs' noise averaged over N discs.
 Cost: N rays per point at setup, N discs per point (a disc index of N n_P
 discs: the segments' walk meets about N times more discs), and at each
 resolve the direct light of N + 1 points per point (one shadow ray per
-delta light, 2 ``direct_samples`` rays for the others).
+delta light; for the others 2 ``direct_samples`` rays at the point and 2
+max(1, direct_samples // N) at each hit: the point's indirect light
+averages its hits' noise).
 
 Refused where it could not be exact: sessions and light animations (the
 hits depend on the geometry, and the discs are not the query points);
@@ -71,7 +73,7 @@ from .. import queries
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .base import Estimator
-from .detp_direct import DIRECT_SAMPLES, DirectLight
+from .detp_direct import DIRECT_SAMPLES, DirectLight, hit_samples
 from .detp_direct import check as check_direct
 from .gather_options import check
 
@@ -137,7 +139,8 @@ class FinalGather(Estimator):
                                                                 gather_key(int(seed), self.gather_seed),
                                                                 self.local_size)
         # The variant's own discs at the hits, with their own exact direct light.
-        self.inner = variant(queue, compiled, self.hits, radius, direct="exact", direct_samples=direct_samples,
+        self.inner = variant(queue, compiled, self.hits, radius, direct="exact",
+                             direct_samples=hit_samples(direct_samples, n_rays),
                              direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
         self.radius = self.inner.radius
         self.weights_buf = self.upload(self.hit_weights)
