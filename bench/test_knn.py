@@ -19,17 +19,17 @@ bunny in a closed box.
   (pixels that see nothing have no normal; the search skips them). The
   scene's camera on the Cornell box, one inside the box looking at the bunny.
 
-Each oclgi index ("bvh", the default, and "grid") is measured with
-``front_only`` on (what the estimator does: only impacts arriving on the
-normal's side count) and off (plain kNN, the same problem as cKDTree's).
-cKDTree always does plain kNN. Both take the queries in the same Morton
-order (``query_order``, computed once, as the estimator does): cKDTree is
-faster on it too (about 1.2x on the Cornell box) than in raster order.
+oclgi's index (a BVH over the impacts) is measured with ``front_only`` on
+(what the estimator does: only impacts arriving on the normal's side count)
+and off (plain kNN, the same problem as cKDTree's). cKDTree always does
+plain kNN. Both take the queries in the same Morton order (``query_order``,
+computed once, as the estimator does): cKDTree is faster on it too (about
+1.2x on the Cornell box) than in raster order.
 
 Besides the estimator's search, which keeps only the sums of powers and r_k
 on the device, ``oclgi_neighbours_kq_per_s`` times ``KnnIndex.neighbours``
 (median of 3, not by pytest-benchmark): numpy to numpy, the (n, k) ids and squared
-distances read back, as cKDTree returns them. Build times of the three
+distances read back, as cKDTree returns them. Build times of the two
 indexes are a separate test (oclgi's include the upload to the device;
 cKDTree with its default options).
 
@@ -122,7 +122,7 @@ class KnnData:
         if kind == "ckdtree":
             index = cKDTree(self.pos)
         else:
-            index = KnnIndex(self.queue, self.pos, self.dirs, index=kind)
+            index = KnnIndex(self.queue, self.pos, self.dirs)
             self.queue.finish()
         self.indexes[kind] = index
         return index
@@ -177,7 +177,7 @@ def distance_agreement(data, knn, front_only):
     return float(np.mean(ok.all(axis=1))), len(sample)
 
 
-@pytest.mark.parametrize("index", ["bvh", "grid", "ckdtree"])
+@pytest.mark.parametrize("index", ["bvh", "ckdtree"])
 @pytest.mark.parametrize("scene", SCENES)
 def test_knn_build(benchmark, knn_data, cores_used, scene, index):
     data = knn_data(scene)
@@ -191,18 +191,15 @@ def test_knn_build(benchmark, knn_data, cores_used, scene, index):
         assert built.n == len(data.pos)
     else:  # every impact in the index once
         assert np.array_equal(np.sort(built.order), np.arange(len(data.pos)))
-        if index == "grid":
-            info.update(grid_cells=built.grid["cells"], grid_cell_size=round(built.grid["h"], 6))
     if benchmark.stats:
         info["build_s"] = round(benchmark.stats.stats.median, 4)
 
 
 @pytest.mark.parametrize("front_only", [True, False], ids=["front", "all"])
-@pytest.mark.parametrize("index", ["bvh", "grid"])
 @pytest.mark.parametrize("scene", SCENES)
-def test_knn_search(benchmark, knn_data, cores_used, scene, index, front_only):
+def test_knn_search(benchmark, knn_data, cores_used, scene, front_only):
     data = knn_data(scene)
-    knn, tree = data.index(index), data.index("ckdtree")
+    knn, tree = data.index("bvh"), data.index("ckdtree")
     queue, n = data.queue, len(data.qp)
     ctx = queue.context
     mf = cl.mem_flags
@@ -234,7 +231,7 @@ def test_knn_search(benchmark, knn_data, cores_used, scene, index, front_only):
     cl.enqueue_copy(queue, rk2, r2)
     agree, sampled = distance_agreement(data, knn, front_only)
     info = benchmark.extra_info
-    info.update(scene=scene, index=index, front_only=front_only, k=K, impacts=len(data.pos),
+    info.update(scene=scene, index="bvh", front_only=front_only, k=K, impacts=len(data.pos),
                 queries=n, camera_pixels=data.camera_pixels,
                 scipy_version=scipy.__version__, ckdtree_workers=data.workers, median_rk=round(float(np.sqrt(np.median(rk2))), 5),
                 sampled=sampled, distance_agreement=round(agree, 5),

@@ -158,17 +158,15 @@ def circle(scene, f, base, path_r, frames, i):
     return scaled_pose(scene, "bunny", f, base, (path_r * (math.cos(a) - 1), 0.0, path_r * math.sin(a)))
 
 
-def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", segments=1e6, tree=None):
+def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", segments=1e6):
     """Updates per second: a camera session (10^5 pixels), 10^6 stored
-    segments, the bunny (f = 0.1) going round a circle; stages and memory.
-    ``tree``: the disc index's tree (``wide`` or ``binary``; None: its default)."""
+    segments, the bunny (f = 0.1) going round a circle; stages and memory."""
     side = 100 if quick else 316  # 10^5 query points
     engine, base, path_r = scene_engine(name, side)
     engine.move("bunny", circle(engine.scene, f, base, path_r, frames, 0))
     photons = photons_for(engine, segments / 10 if quick else segments)
-    options = {} if tree is None else {"tree": tree}
     session = oclgi.Session(engine, method=method, photons=photons, radius=0.03 if name == "cornell" else 0.3,
-                            dynamic=dynamic, **options)
+                            dynamic=dynamic)
     n_r = int(session.segments()[1].sum())
     rss, stats = [], []
     # the poses first, as a user interface hands them over: finding the
@@ -182,7 +180,7 @@ def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", s
     stages = {k: float(np.median([st.seconds[k] for st in stats if k in st.seconds]))
               for k in dict.fromkeys(k for st in stats for k in st.seconds)}
     return {"scene": name, "f": f, "dynamic": dynamic, "n_R": n_r, "photons": photons, "points": side * side,
-            "frames": frames, "tree": tree, "median_update_s": med, "updates_per_s": 1 / med,
+            "frames": frames, "median_update_s": med, "updates_per_s": 1 / med,
             "dynamic_points_median": float(np.median([st.points for st in stats])),
             "paths_median": float(np.median([st.paths for st in stats])), "stage_median_s": stages,
             "max_rss_mib_samples": rss, "setup_s": session.setup_seconds}
@@ -330,9 +328,7 @@ def main():
                      parts=("speedup,constants,dynamic,interactive,segments", "comma-separated: speedup, constants, "
                             "dynamic, interactive, segments (the others keep their last results)"),
                      frames=(100, "frames of the interactive benchmark"),
-                     scenes=("cornell,sponza", "scenes of the interactive benchmark"),
-                     disc_tree=dict(choices=("wide", "binary"), help="the disc index's tree in the interactive "
-                                    "benchmark (default: the estimator's, wide)"))
+                     scenes=("cornell,sponza", "scenes of the interactive benchmark"))
     parts = set(args.parts.split(","))
     rng = np.random.default_rng(7)
     path = RESULTS / "update_study.json"
@@ -351,7 +347,7 @@ def main():
         res["rate_vs_segments"] = [interactive("cornell", args.method, args.quick, 30, segments=n)
                                    for n in (1.25e5, 2.5e5, 5e5, 1e6, 2e6)]
     if "interactive" in parts:
-        res["interactive"] = [interactive(name, args.method, args.quick, args.frames, tree=args.disc_tree)
+        res["interactive"] = [interactive(name, args.method, args.quick, args.frames)
                               for name in args.scenes.split(",")]
     write("update_study.json", json.dumps(res, indent=1))
     write("update_study.md", md := markdown(res))

@@ -1,5 +1,5 @@
 /* box.h: the one slab test of a ray or segment against an axis-aligned box,
- * for the scene's BVH (bvh.h), the overlap trees (box_bvh.h) and the cell
+ * for the scene's BVH (bvh.h), the disc index's tree (box_wide.h) and the cell
  * masks of a session's paths (update.cl).
  */
 #ifndef OCLGI_BOX_H

@@ -1,4 +1,5 @@
-/* box_bvh.h: walking a BVH over boxes (discs, segments) for overlap queries.
+/* box_bvh.h: walking a BVH over boxes (segment pieces, impact balls) for
+ * overlap queries with a box.
  *
  * The trees come from oclgi/accel/bvh_build.py (BvhNode, oclgi_types.h):
  * inner nodes have their two children adjacent at first and first + 1,
@@ -11,7 +12,7 @@
  *     BoxBvhWalk walk;
  *     box_bvh_start(&walk);
  *     int leaf;
- *     while ((leaf = box_bvh_next_segment(&walk, nodes, o, inv, tmax)) >= 0) { ... }
+ *     while ((leaf = box_bvh_next_box(&walk, nodes, lo, hi)) >= 0) { ... }
  *     WORK_NODE(walk.visited);
  *
  * `visited` counts nodes whose box was tested (the root included).
@@ -19,9 +20,9 @@
  * pushes at most its two children, so depth + 1 entries suffice).
  *
  * Conservative tests: the boxes are padded on the host (see
- * oclgi/estimators/detp_disc_index.py) by far more than float32 rounding can
- * move a crossing point, and the tests below only ever err on the side of
- * "overlaps", so no segment that DETP_TEST (detp.h) accepts is culled.
+ * oclgi/estimators/detp_ray_map.py) by far more than float32 rounding can
+ * move a crossing point, and the box test below is exact, so no segment
+ * that DETP_TEST (detp.h) accepts is culled.
  */
 #ifndef OCLGI_BOX_BVH_H
 #define OCLGI_BOX_BVH_H
@@ -42,36 +43,12 @@ inline void box_bvh_start(BoxBvhWalk *walk)
     walk->visited = 0;
 }
 
-/* Does the segment o + t w, 0 <= t <= tmax, meet the node's box (box.h)?
- * inv = 1 / w; tmax may be INFINITY. */
-inline int box_meets_segment(__global const BvhNode *n, float3 o, float3 inv, float tmax)
-{
-    float enter;
-    return box_slab(vload3(0, n->lo), vload3(0, n->hi), o, inv, tmax, &enter);
-}
-
 /* Do two closed boxes overlap? Comparisons only: exact. */
 inline int box_meets_box(__global const BvhNode *n, float3 lo, float3 hi)
 {
     float3 nlo = vload3(0, n->lo), nhi = vload3(0, n->hi);
     return nlo.x <= hi.x && lo.x <= nhi.x && nlo.y <= hi.y && lo.y <= nhi.y && nlo.z <= hi.z &&
            lo.z <= nhi.z;
-}
-
-/* The next leaf (node index) whose box the segment meets, -1 when done. */
-inline int box_bvh_next_segment(BoxBvhWalk *walk, __global const BvhNode *nodes, float3 o, float3 inv,
-                                float tmax)
-{
-    while (walk->sp > 0) {
-        int i = walk->stack[--walk->sp];
-        __global const BvhNode *n = &nodes[i];
-        walk->visited++;
-        if (!box_meets_segment(n, o, inv, tmax)) continue;
-        if (n->count > 0) return i;
-        walk->stack[walk->sp++] = n->first + 1;
-        walk->stack[walk->sp++] = n->first;
-    }
-    return -1;
 }
 
 /* The next leaf (node index) whose box overlaps [lo, hi], -1 when done. */

@@ -1,7 +1,7 @@
 /* box_wide.h: walking an 8-wide BVH over boxes (the disc index's) for
  * overlap queries.
  *
- * The tree is a binary overlap tree (box_bvh.h) collapsed into BvhNode8
+ * The tree is a binary overlap tree (BvhNode) collapsed into BvhNode8
  * records (oclgi_types.h; oclgi/accel/box_wide.py): the 8 child boxes of a
  * node in SoA float8 fields, so one float8 slab test meets all 8 children.
  * A lane's child is the index of an inner child's node (> 0), a leaf's
@@ -19,14 +19,14 @@
  *     WORK_NODE(walk.visited);
  *
  * `visited` counts wide nodes whose 8 child boxes were tested (the root
- * included): one float8 slab test each, where box_bvh.h counts one box per
- * node.
+ * included): one float8 slab test each, where a binary walk counts one box
+ * per node.
  *
- * Conservative, like box_bvh.h: each lane runs box_slab's (box.h)
- * operations in the same order, so a lane accepts exactly what box_slab
- * accepts for that box, and a node's lanes are binary nodes' boxes bit for
- * bit. A leaf's wide ancestors are some of its binary ancestors, so every
- * leaf the binary walk reaches this one reaches too (and tests the same
+ * Conservative: each lane runs box_slab's (box.h) operations in the same
+ * order, so a lane accepts exactly what box_slab accepts for that box, and
+ * a node's lanes are binary nodes' boxes bit for bit. A leaf's wide
+ * ancestors are some of its binary ancestors, so every leaf a binary walk
+ * (box_slab per node) reaches this one reaches too (and tests the same
  * leaf box): nothing DETP_TEST accepts is culled.
  */
 #ifndef OCLGI_BOX_WIDE_H

@@ -12,7 +12,6 @@
     !defined(OCLGI_BOX_LEAF_BITS) || !defined(OCLGI_BOX_WIDE_STACK) ||                                 \
     !defined(OCLGI_POINT_BVH_STACK) || !defined(OCLGI_FIXED_BITS) || !defined(OCLGI_FRONT_COS_EPS) ||  \
     !defined(OCLGI_SC_MAX_LEVELS) || !defined(OCLGI_SC_MU) || !defined(OCLGI_RADIX_BITS) ||            \
-    !defined(OCLGI_GRID_KEY_BITS) || !defined(OCLGI_GRID_EMPTY) || !defined(OCLGI_GRID_HASH_MUL) ||    \
     !defined(OCLGI_CELL_OUTSIDE_BIT) || !defined(OCLGI_EMITTER_TRIANGLE) || !defined(OCLGI_EMITTER_POINT) ||   \
     !defined(OCLGI_EMITTER_SPOT) || !defined(OCLGI_EMITTER_SUN) || !defined(OCLGI_EMITTER_SKY) ||  \
     !defined(OCLGI_EMITTER_ENVMAP) || !defined(OCLGI_EMITTER_IES) || !defined(OCLGI_SAH_BINS)

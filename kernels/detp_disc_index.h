@@ -2,11 +2,10 @@
  * (detp_disc_index.cl has the layout; update.cl walks the same tree while it
  * scans a session's store, light_reweight.cl to list a tail's discs).
  *
- * The tree (oclgi/estimators/detp_disc_index.py ``tree``): 8-wide BvhNode8
- * nodes walked by box_wide.h, or, built with OCLGI_DISC_TREE_BINARY, the
- * binary BvhNode tree walked by box_bvh.h (kept to measure one against the
- * other). Both reach every leaf whose box the segment meets; a leaf is a
- * run of DiscBlocks [first, first + ceil(count / 8)) of `count` discs.
+ * The tree: 8-wide BvhNode8 nodes (oclgi/estimators/detp_disc_index.py)
+ * walked by box_wide.h, which reaches every leaf whose box the segment
+ * meets; a leaf is a run of DiscBlocks [first, first + ceil(count / 8)) of
+ * `count` discs.
  */
 #ifndef OCLGI_DETP_DISC_INDEX_H
 #define OCLGI_DETP_DISC_INDEX_H
@@ -15,31 +14,14 @@
 #include "segment.h"
 #include "detp.h"
 #include "lane_bits.h"
-
-#ifdef OCLGI_DISC_TREE_BINARY
-#include "box_bvh.h"
-typedef BvhNode DiscNode;
-typedef BoxBvhWalk DiscWalk;
-#define disc_walk_start box_bvh_start
-
-/* The next leaf the segment meets: 1 and its blocks' run, 0 when done.
- * tmin is not used: the whole segment (a superset) is walked. */
-inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmin,
-                          float tmax, int *first, int *count)
-{
-    (void)tmin;
-    int leaf = box_bvh_next_segment(walk, nodes, o, inv, tmax);
-    if (leaf < 0) return 0;
-    *first = nodes[leaf].first;
-    *count = nodes[leaf].count;
-    return 1;
-}
-#else
 #include "box_wide.h"
+
 typedef BvhNode8 DiscNode;
 typedef BoxWideWalk DiscWalk;
 #define disc_walk_start box_wide_start
 
+/* The next leaf the segment's part tmin <= t <= tmax meets: 1 and its
+ * blocks' run, 0 when done. */
 inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3 o, float3 inv, float tmin,
                           float tmax, int *first, int *count)
 {
@@ -49,7 +31,6 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
     *count = (leaf & ((1 << OCLGI_BOX_LEAF_BITS) - 1)) + 1;
     return 1;
 }
-#endif
 
 /* The discs one segment (o, w, tmax = t_end + ext) crosses: every leaf of
  * the tree it meets, 8 discs at a time, each disc with its own squared
@@ -65,7 +46,7 @@ inline int disc_walk_next(DiscWalk *walk, __global const DiscNode *nodes, float3
 
 /* The walk itself: BODY (the variadic arguments) runs once per DiscBlock
  * `b_` of every leaf the part tmin <= t <= tmax of the segment meets
- * (box_wide.h; the binary walk takes the whole segment, which holds it). */
+ * (box_wide.h). */
 #define DISC_INDEX_BLOCKS(nodes, discs, o, w, tmin, tmax, n_visited, n_tests, ...)                     \
     do {                                                                                        \
         float3 inv_ = 1.0f / (w);                                                               \

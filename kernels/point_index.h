@@ -5,13 +5,13 @@
  * float32 with contraction off (so numpy float32 reproduces it bit for bit),
  * id the impact's canonical index (its rank in (path, bounce) order over the
  * whole run). The neighbour set is the K smallest keys: equal distances are
- * broken by the smaller id, so the set does not depend on traversal order,
- * index type or work-group size, and a brute-force reference finds the same.
+ * broken by the smaller id, so the set does not depend on traversal order
+ * or work-group size, and a brute-force reference finds the same.
  *
  * The K best keys live in a bounded max-heap in private memory (arrays of K
  * floats and ints): an impact enters while the heap has room, then only if
  * its key is smaller than the top's, replacing it. The top is the K-th
- * nearest once the heap is full, and its d2 bounds the search: a box or cell
+ * nearest once the heap is full, and its d2 bounds the search: a box
  * whose (conservative) distance exceeds it cannot hold a better key; a box at
  * exactly that distance may hold an equal d2 with a smaller id, so it is
  * still visited.

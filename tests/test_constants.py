@@ -17,7 +17,7 @@ from oclgi.estimators.photon_map import DEFAULT_K
 
 SHARED = {f"OCLGI_{name.upper()}" for name in constants.DEFINES}
 # Defines a driver sets per program, and names that are no define of the host's.
-PER_PROGRAM = {"OCLGI_KNN_K", "OCLGI_COUNT_WORK", "OCLGI_BVH_COUNT", "OCLGI_CONSISTENT_SPAN", "OCLGI_DISC_TREE_BINARY",
+PER_PROGRAM = {"OCLGI_KNN_K", "OCLGI_COUNT_WORK", "OCLGI_BVH_COUNT", "OCLGI_CONSISTENT_SPAN",
                "OCLGI_SCENE_FLAT_INSTANCES"}
 PER_DEVICE = {"OCLGI_PREFETCH_AHEAD"}  # set by the program cache from the device (oclgi/cl/programs.py)
 KERNEL_ONLY = {"OCLGI_PI", "OCLGI_FIXED_ONE"}  # FIXED_ONE: derived from OCLGI_FIXED_BITS in constants.h
@@ -60,8 +60,7 @@ __kernel void constants_probe(__global ulong *u, __global float *f)
     int i = 0;
     u[i++] = OCLGI_LANES; u[i++] = OCLGI_BVH_STACK_SIZE; u[i++] = OCLGI_BOX_BVH_STACK;
     u[i++] = OCLGI_POINT_BVH_STACK; u[i++] = OCLGI_FIXED_BITS; u[i++] = OCLGI_SC_MAX_LEVELS;
-    u[i++] = OCLGI_RADIX_BITS; u[i++] = OCLGI_GRID_KEY_BITS; u[i++] = OCLGI_GRID_EMPTY;
-    u[i++] = OCLGI_GRID_HASH_MUL; u[i++] = OCLGI_CELL_OUTSIDE_BIT; u[i++] = OCLGI_EMITTER_TRIANGLE;
+    u[i++] = OCLGI_RADIX_BITS; u[i++] = OCLGI_CELL_OUTSIDE_BIT; u[i++] = OCLGI_EMITTER_TRIANGLE;
     u[i++] = OCLGI_EMITTER_POINT; u[i++] = OCLGI_EMITTER_SPOT; u[i++] = OCLGI_EMITTER_SUN;
     u[i++] = OCLGI_EMITTER_SKY; u[i++] = OCLGI_EMITTER_ENVMAP;
     u[i++] = OCLGI_BSDF_DIFFUSE; u[i++] = OCLGI_BSDF_PHONG; u[i++] = OCLGI_BSDF_MIRROR;
@@ -75,7 +74,7 @@ __kernel void constants_probe(__global ulong *u, __global float *f)
 }
 """
 INTEGERS = ("LANES", "BVH_STACK_SIZE", "BOX_BVH_STACK", "POINT_BVH_STACK", "FIXED_BITS", "SC_MAX_LEVELS",
-            "RADIX_BITS", "GRID_KEY_BITS", "GRID_EMPTY", "GRID_HASH_MUL", "CELL_OUTSIDE_BIT",
+            "RADIX_BITS", "CELL_OUTSIDE_BIT",
             "EMITTER_TRIANGLE", "EMITTER_POINT", "EMITTER_SPOT", "EMITTER_SUN", "EMITTER_SKY", "EMITTER_ENVMAP",
             "BSDF_DIFFUSE", "BSDF_PHONG", "BSDF_MIRROR", "BSDF_DIELECTRIC", "BSDF_CONDUCTOR", "BSDF_ROUGH_DIELECTRIC",
             "MATERIAL_TWOSIDED", "MATERIAL_DELTA", "CAMERA_MAX_DEPTH",

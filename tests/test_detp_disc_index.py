@@ -7,10 +7,9 @@ and work-group sizes, the fixed-point accumulators equal plain DETP's bit
 for bit. Adversarial segments (grazing, ending on a disc's plane, escaping,
 axis-aligned, on a rim) check that the box culling is conservative.
 
-The tree is 8-wide (kernels/box_wide.h) unless ``tree="binary"`` (the
-binary walk, kernels/box_bvh.h): both equal plain DETP, and the wide walk
-tests every disc the binary one tests (its leaf boxes are the same and its
-ancestors' boxes a subset) with fewer node visits.
+The tree is 8-wide (kernels/box_wide.h); tests/test_box_wide.py checks
+that it holds the binary tree's leaves and boxes, so it culls nothing the
+binary one keeps.
 
 Cost (García 2006): with discs spread through the volume and not
 overlapping much, counted segment-disc tests per segment grow like
@@ -45,15 +44,6 @@ def test_leaf_sizes(same_as_plain, points, scene, leaf_size):
 
 
 @pytest.mark.parametrize("scene", ["cornell", "bunny"])
-def test_wide_and_binary_trees(same_as_plain, scene):
-    work = {tree: same_as_plain(scene, FRAC, tree=tree, count_work=True).work for tree in ("binary", "wide")}
-    # every leaf the binary walk reaches, the wide one reaches (u counts the discs of the leaves reached)
-    assert work["wide"]["u"] >= work["binary"]["u"]
-    # one wide visit slabs 8 children, a binary one a single box
-    assert work["wide"]["nodes"] < work["binary"]["nodes"] / 2, work
-
-
-@pytest.mark.parametrize("scene", ["cornell", "bunny"])
 def test_sah_tree(same_as_plain, scene):
     """The SAH-built tree (a session's static points) sums what plain DETP
     sums, and with its 64-disc leaves visits fewer nodes than the default."""
@@ -77,9 +67,8 @@ def test_camera_points_with_misses(engines):
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_adversarial_segments(engines, count_emitted):
     check_adversarial(engines["cornell"], METHOD, 7, count_emitted, [
-        dict(leaf_size=leaf_size, tree=tree, builder=builder)
-        for leaf_size, tree, builder in ((1, "wide", "lbvh"), (8, "wide", "lbvh"), (1, "binary", "lbvh"),
-                                         (8, "binary", "lbvh"), (1, "wide", "sah"), (64, "wide", "sah"))])
+        dict(leaf_size=leaf_size, builder=builder)
+        for leaf_size, builder in ((1, "lbvh"), (8, "lbvh"), (1, "sah"), (64, "sah"))])
 
 
 def test_u_grows_like_cube_root_of_points(engines):
@@ -109,7 +98,7 @@ def test_u_grows_like_cube_root_of_points(engines):
 
 
 @pytest.mark.parametrize("bad", [{"leaf_size": 0}, {"leaf_size": 2.5}, {"leaf_size": True}, {"leaf_size": 257},
-                                 {"tree": "quad"}, {"builder": "octree"}, {"piece": 0.1}])
+                                 {"tree": "binary"}, {"builder": "octree"}, {"piece": 0.1}])
 def test_bad_options(engines, points, bad):
     with pytest.raises(OclgiError):
         engines["cornell"].irradiance(points["cornell"], method=METHOD, photons=100, **bad)

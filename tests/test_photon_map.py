@@ -1,10 +1,10 @@
 """Photon Maps (oclgi/estimators/photon_map.py): the neighbours, the bias, the bits.
 
 1. The k nearest front-side impacts equal a brute force over the same
-   float32 numbers, ties included (rank by (d2, id)), for both indices, on
-   random data (continuous and on a lattice, where distances tie) and on
-   real impacts of the Cornell box; and equal scipy's cKDTree up to the
-   order of float64 near-ties.
+   float32 numbers, ties included (rank by (d2, id)), on random data
+   (continuous and on a lattice, where distances tie) and on real impacts
+   of the Cornell box; and equal scipy's cKDTree up to the order of
+   float64 near-ties.
 2. Bias as theory says (point light over a black plane, all photons of
    equal power): the k estimator over the k-1 one is exactly k / (k-1) at
    every point; over many points the k-1 one is unbiased, the k one
@@ -14,7 +14,7 @@
    interior point. The furnace box too.
 3. Gathering: impacts are the segment ends in (path, bounce) order;
    count_emitted=False drops bounce 0; results do not depend on the batch
-   size, work-group size or index; bad options and too many impacts fail
+   size or work-group size; bad options and too many impacts fail
    with a clear error.
 """
 
@@ -72,8 +72,7 @@ def queue(cl_env):
     return cl_env[1]
 
 
-@pytest.mark.parametrize("index", ["bvh", "grid"])
-def test_neighbours_random(queue, index):
+def test_neighbours_random(queue):
     rng = np.random.default_rng(5)
     n, m, k = 20_000, 200, 24
     pos = rng.random((n, 3)).astype(np.float32)
@@ -81,7 +80,7 @@ def test_neighbours_random(queue, index):
     dirs = rng.normal(size=(n, 3)).astype(np.float32)
     qp = rng.random((m, 3)).astype(np.float32)
     qn = rng.normal(size=(m, 3)).astype(np.float32)
-    knn = KnnIndex(queue, pos, dirs, index=index)
+    knn = KnnIndex(queue, pos, dirs)
     for front in (True, False):
         ids, d2 = knn.neighbours(qp, qn, k, front_only=front)
         ref_ids, ref_d2 = brute_knn(pos, dirs, qp, qn, k, front)
@@ -89,8 +88,7 @@ def test_neighbours_random(queue, index):
     assert_same_as_kdtree(*knn.neighbours(qp, qn, k, front_only=False), pos, qp, k)
 
 
-@pytest.mark.parametrize("index", ["bvh", "grid"])
-def test_neighbours_ties_on_a_lattice(queue, index):
+def test_neighbours_ties_on_a_lattice(queue):
     """Points on an integer lattice, each repeated: distances tie everywhere,
     and the smaller ids must win."""
     rng = np.random.default_rng(8)
@@ -100,13 +98,12 @@ def test_neighbours_ties_on_a_lattice(queue, index):
     dirs = np.tile(np.float32([0, 0, -1]), (len(pos), 1))
     qp = (rng.integers(0, 24, (150, 3)) / 2.0).astype(np.float32)  # on points, edges and centres
     qn = np.tile(np.float32([0, 0, 1]), (len(qp), 1))
-    ids, d2 = KnnIndex(queue, pos, dirs, index=index).neighbours(qp, qn, 33)
+    ids, d2 = KnnIndex(queue, pos, dirs).neighbours(qp, qn, 33)
     ref_ids, ref_d2 = brute_knn(pos, dirs, qp, qn, 33)
     assert np.array_equal(ids, ref_ids) and np.array_equal(d2, ref_d2)
 
 
-@pytest.mark.parametrize("index", ["bvh", "grid"])
-def test_neighbours_far_queries_duplicates_and_back_sides(queue, index):
+def test_neighbours_far_queries_duplicates_and_back_sides(queue):
     """Queries far outside the impacts' box, all impacts at one point, and
     points that see no impact on their front side (ids -1, d2 inf)."""
     rng = np.random.default_rng(2)
@@ -118,7 +115,7 @@ def test_neighbours_far_queries_duplicates_and_back_sides(queue, index):
     qn[::3] = [0, 0, -1]  # these face away from every impact
     for p in (pos, np.full_like(pos[:300], 1.5)):
         d = dirs[: len(p)]
-        ids, d2 = KnnIndex(queue, p, d, index=index).neighbours(qp, qn, 20)
+        ids, d2 = KnnIndex(queue, p, d).neighbours(qp, qn, 20)
         ref_ids, ref_d2 = brute_knn(p, d, qp, qn, 20)
         assert np.array_equal(ids, ref_ids) and np.array_equal(d2, ref_d2)
         assert (ids[::3] == -1).all() and np.isinf(d2[::3]).all()
@@ -171,16 +168,15 @@ def _run_bits(engine, pts, **kw):
     return engine.irradiance(pts, method="photon_map", photons=30_000, k=30, **kw).accumulators
 
 
-def test_bits_do_not_depend_on_batches_groups_or_index(scenes_dir):
+def test_bits_do_not_depend_on_batches_or_groups(scenes_dir):
     scene = oclgi.load_file(scenes_dir / "cornell_box.toml")
     e = oclgi.Engine(scene)
     pts = e.camera_points(width=24, height=24)
     ref = _run_bits(e, pts)
     assert ref.any()
     small = oclgi.Engine(scene, batch_bytes=16 * 48 * 1000)  # 1,000 paths per batch
-    for engine, kw in [(e, {}), (e, {"index": "grid"}), (small, {}),
-                       *[(oclgi.Engine(scene, local_size=ls), {}) for ls in (1, 7, 128)]]:
-        assert np.array_equal(_run_bits(engine, pts, **kw), ref), kw
+    for engine in [e, small, *[oclgi.Engine(scene, local_size=ls) for ls in (1, 7, 128)]]:
+        assert np.array_equal(_run_bits(engine, pts), ref), engine.local_size
 
 
 def test_k_over_k_minus_1_on_the_plane(plane):
@@ -228,7 +224,7 @@ def test_furnace_box(rng):
 def test_options_and_errors(cornell, monkeypatch):
     pt = np.array([[0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
     for bad in ({"k": 0}, {"k": pm.MAX_K + 1}, {"k": 2.5}, {"k": 1}, {"estimator": "k+1"},
-                {"index": "octree"}, {"front_only": "yes"}, {"leaf_size": 0}):
+                {"index": "grid"}, {"front_only": "yes"}, {"leaf_size": 0}):
         with pytest.raises(OclgiError, match="photon_map"):
             cornell.irradiance(pt, method="photon_map", photons=1000, **bad)
     with pytest.raises(OclgiError, match="only .* impacts"):

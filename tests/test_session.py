@@ -180,20 +180,6 @@ def test_dynamic_points_by_every_variant(scenes_dir, rng, dynamic):
     np.testing.assert_array_equal(session.irradiance(), plain.irradiance)
 
 
-def test_binary_disc_tree_session(scenes_dir, rng):
-    """The disc index's binary tree (``tree="binary"``, for measuring the
-    wide one against it) in every walk of a camera session: the static
-    and dynamic estimators and the find pass that sums the dynamic points
-    (kernels/update.cl, built with the estimator's defines). Equal to plain
-    DETP after the moves."""
-    session = oclgi.Session(_camera_engine(scenes_dir), method="detp_disc_index", radius=0.05, photons=10_000,
-                            tree="binary")
-    assert session.estimator.tree == "binary"
-    dynamic_points = sum(session.move("bunny", m).points for m in _in_view(rng, 6))
-    assert dynamic_points > 20 and session.dyn_est is not None and session.dyn_est.tree == "binary"
-    assert np.array_equal(session.accumulators(), _plain_view(session).accumulators)
-
-
 @pytest.mark.parametrize("count_emitted", [True, False])
 def test_summed_changes_equal_subtract_then_add(scenes_dir, rng, count_emitted):
     """A move's suffixes summed in one pass after the re-trace, the common

@@ -12,8 +12,8 @@ upper levels that the largest-area order keeps tight. A lane's ``child`` is an i
 ``~(first << BOX_LEAF_BITS | count - 1)`` (``first`` its first block,
 ``count`` its primitives), or 0 for an unused lane (box lo = hi = +inf,
 masked by the walk). The boxes are the binary nodes' boxes bit for bit, so
-the wide walk tests no box the binary walk would not, and culls nothing it
-keeps (kernels/box_wide.h says why).
+the wide walk tests no box a walk of the binary tree would not, and culls
+nothing it keeps (kernels/box_wide.h says why).
 """
 
 from __future__ import annotations

@@ -1,41 +1,27 @@
 """The k nearest front-side impacts of query points, on the device
-(kernels/point_index.cl): a BVH over the impacts on 63-bit Morton codes, or
-a hashed uniform grid. The search of the Photon Map estimator and of its
-session; ``KnnIndex.neighbours`` serves tests and studies.
+(kernels/point_index.cl): a BVH over the impacts on 63-bit Morton codes. The
+search of the Photon Map estimator and of its session;
+``KnnIndex.neighbours`` serves tests and studies.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pyopencl as cl
 
-from ..cl.constants import (
-    GRID_EMPTY,
-    GRID_HASH_MUL,
-    GRID_KEY_BITS,
-    LANES,
-    POINT_BVH_STACK,
-)
+from ..cl.constants import LANES, POINT_BVH_STACK
 from ..cl.programs import launch, programs
 from ..errors import OclgiError
 from .bvh_build import build_from_codes
 
 DEFAULT_LOCAL = 64  # work-group size of the search when the engine sets none (measured)
-EMPTY = np.uint64(GRID_EMPTY)
-HASH_MUL = np.uint64(GRID_HASH_MUL)
-INDEX_KINDS = ("bvh", "grid")
 # PoCL keeps a work-group's private arrays on a thread's stack (8 MiB): k =
 # 2048 crashed at 1024 work-items per group. The search caps its group so
 # that heaps and stacks stay within this budget (results do not depend on it).
 PRIVATE_BUDGET = 2 << 20
 
 
-def check_index(index, leaf_size):
-    if index not in INDEX_KINDS:
-        raise OclgiError(f"photon_map: index must be one of {', '.join(map(repr, INDEX_KINDS))}, "
-                         f"got {index!r}")
+def check_leaf_size(leaf_size):
     if isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer)) or not 1 <= leaf_size <= 64:
         raise OclgiError(f"photon_map: leaf_size must be an integer in 1..64, got {leaf_size!r}")
 
@@ -46,44 +32,19 @@ def _float4(xyz) -> np.ndarray:
     return out
 
 
-def _grid_cell_size(pos: np.ndarray, target: float) -> float:
-    """Cell size whose occupied cells hold about ``target`` impacts each.
-
-    Occupancy grows like h^D (D = 2 on surfaces, 3 in volumes): measure it at
-    two sizes, fit D, solve, and correct once more at the solution.
-    """
-    lo, hi = pos.min(axis=0).astype(np.float64), pos.max(axis=0).astype(np.float64)
-    extent = max(float((hi - lo).max()), 1e-30)
-
-    def occupancy(h):
-        c = np.floor((pos - lo) / h).astype(np.int64)
-        key = c[:, 0] | (c[:, 1] << GRID_KEY_BITS) | (c[:, 2] << 2 * GRID_KEY_BITS)
-        return len(pos) / len(np.unique(key))
-
-    h1, h2 = extent / 32, extent / 64
-    o1, o2 = occupancy(h1), occupancy(h2)
-    d = float(np.clip(math.log2(o1 / o2) if o2 > 0 and o1 > o2 else 3.0, 1.0, 3.0))
-    h = h2 * (target / o2) ** (1.0 / d)
-    h = h * (target / occupancy(h)) ** (1.0 / d)
-    # keys hold GRID_KEY_BITS bits per axis
-    return float(max(h, extent / (2**GRID_KEY_BITS - 2), 1e-30))
-
-
 class KnnIndex:
     """k nearest front-side impacts of query points, on the device.
 
     ``positions``, ``directions``, ``powers``: (N, 3) float32 in canonical
-    order (an impact's row is its id). ``index``: "bvh" or "grid";
-    ``leaf_size`` (BVH) or ``grid_occupancy`` (impacts per occupied cell)
-    tune them. Built once, queried any number of times.
+    order (an impact's row is its id); ``leaf_size``: impacts per BVH leaf.
+    Built once, queried any number of times.
     """
 
-    def __init__(self, queue, positions, directions=None, powers=None, index: str = "bvh",
-                 leaf_size: int = 16, grid_occupancy: float = 16.0, count_work: bool = False):
-        check_index(index, leaf_size)
+    def __init__(self, queue, positions, directions=None, powers=None, leaf_size: int = 16,
+                 count_work: bool = False):
+        check_leaf_size(leaf_size)
         self.queue = queue
         self.ctx = queue.context
-        self.index = index
         self.count_work = bool(count_work)
         pos = np.ascontiguousarray(positions, np.float32)
         self.n = len(pos)
@@ -93,29 +54,11 @@ class KnnIndex:
             raise OclgiError(f"photon_map: {self.n:,} impacts; ids are 32-bit")
         dirs = np.zeros_like(pos) if directions is None else np.ascontiguousarray(directions, np.float32)
         pw = np.zeros_like(pos) if powers is None else np.ascontiguousarray(powers, np.float32)
-        if index == "bvh":
-            nodes, order, depth = _point_bvh(pos, int(leaf_size))
-            if depth > POINT_BVH_STACK:
-                raise OclgiError(f"photon_map: the impact BVH is {depth} levels deep; the search "
-                                 f"stack holds {POINT_BVH_STACK}")
-            self.nodes = self._upload(nodes)
-        else:
-            h = _grid_cell_size(pos, float(grid_occupancy))
-            lo = pos.min(axis=0).astype(np.float64)
-            c = np.floor((pos - lo) / h).astype(np.int64)
-            dims = c.max(axis=0) + 1
-            keys = (c[:, 0] | (c[:, 1] << GRID_KEY_BITS) | (c[:, 2] << 2 * GRID_KEY_BITS)).astype(np.uint64)
-            order = np.argsort(keys, kind="stable")  # canonical order within a cell
-            ukeys, starts, counts = np.unique(keys[order], return_index=True, return_counts=True)
-            bits = max(1, int(math.ceil(math.log2(2 * len(ukeys)))))
-            tkeys, tcells = _hash_table(ukeys, starts, counts, bits)
-            self.grid = dict(h=h, origin=lo, dims=dims, bits=bits, cells=len(ukeys))
-            self.keys = self._upload(tkeys)
-            self.cells = self._upload(tcells)
-            # A cell's box computed in float32 on the device may miss its
-            # impacts by a few ulps of the coordinates: pad every distance.
-            mag = float(np.abs(lo).max() + (dims.max() + 1) * h)
-            self.slack = np.float32(1e-5 * mag + 1e-4 * h)
+        nodes, order, depth = _point_bvh(pos, int(leaf_size))
+        if depth > POINT_BVH_STACK:
+            raise OclgiError(f"photon_map: the impact BVH is {depth} levels deep; the search "
+                             f"stack holds {POINT_BVH_STACK}")
+        self.nodes = self._upload(nodes)
         self.order = order
         # structure of arrays in index order, padded by LANES (point_index.h)
         self.stride = self.n + LANES
@@ -137,7 +80,7 @@ class KnnIndex:
         if self.count_work:
             defines["count_work"] = 1
         prog = programs(self.ctx).get("point_index", **defines)
-        return prog.pm_knn_bvh if self.index == "bvh" else prog.pm_knn_grid
+        return prog.pm_knn_bvh
 
     def search(self, qpos: cl.Buffer, qnrm: cl.Buffer, order: cl.Buffer, n_points: int, k: int,
                front_only: bool, include_kth: bool, acc: cl.Buffer, r2: cl.Buffer,
@@ -145,16 +88,9 @@ class KnnIndex:
         """Run the search: acc (n, 3) int64 sums, r2 (n,) float32; ids/d2 (n, k) when given."""
         write = ids is not None
         dummy = ids if write else acc
-        common = (self.soa, self.stride, self.ids, self.ipower, qpos, qnrm, order, n_points,
-                  int(bool(front_only)), int(bool(include_kth)), acc, r2,
-                  int(write), dummy, d2 if write else dummy, self.work_buf)
-        if self.index == "bvh":
-            args = (self.nodes, *common)
-        else:
-            g = self.grid
-            args = (self.keys, self.cells, g["bits"],
-                    np.array([*g["origin"], g["h"]], np.float32),
-                    np.array([*g["dims"], 0], np.int32), self.slack, *common)
+        args = (self.nodes, self.soa, self.stride, self.ids, self.ipower, qpos, qnrm, order, n_points,
+                int(bool(front_only)), int(bool(include_kth)), acc, r2,
+                int(write), dummy, d2 if write else dummy, self.work_buf)
         launch(self.queue, self.kernel(k), n_points, *args, local_size=knn_local_size(k, local_size))
 
     def neighbours(self, positions, normals, k: int, front_only: bool = True):
@@ -232,33 +168,6 @@ def knn_local_size(k: int, requested: int | None = None) -> int:
     capped so that the group's private heaps fit PRIVATE_BUDGET."""
     cap = max(1, PRIVATE_BUDGET // (8 * int(k) + 8 * POINT_BVH_STACK))
     return int(min(requested or DEFAULT_LOCAL, cap))
-
-
-def _hash_table(ukeys, starts, counts, bits):
-    """Open addressing with linear probing, filled in rounds: each round
-    every pending key claims its probe slot, the lowest key (they are sorted)
-    wins each free slot, the rest probe on. Deterministic."""
-    size = 1 << bits
-    mask = np.uint64(size - 1)
-    tkeys = np.full(size, EMPTY, np.uint64)
-    tcells = np.zeros((size, 2), np.int32)
-    with np.errstate(over="ignore"):
-        slot = (ukeys * HASH_MUL) >> np.uint64(64 - bits)
-    pending = np.arange(len(ukeys))
-    while len(pending):
-        s = slot[pending]
-        free = tkeys[s] == EMPTY
-        cand = pending[free]
-        won_slots, first = np.unique(s[free], return_index=True)
-        winners = cand[first]
-        tkeys[won_slots] = ukeys[winners]
-        tcells[won_slots, 0] = starts[winners]
-        tcells[won_slots, 1] = counts[winners]
-        won = np.zeros(len(ukeys), bool)
-        won[winners] = True
-        pending = pending[~won[pending]]
-        slot[pending] = (slot[pending] + np.uint64(1)) & mask
-    return tkeys, tcells
 
 
 def query_order(positions: np.ndarray) -> np.ndarray:

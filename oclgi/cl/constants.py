@@ -68,14 +68,6 @@ SC_MU = 1e-4
 # counters per block fit private memory, and 30-bit keys take 4 passes.
 RADIX_BITS = 8
 
-# The k-nearest search's hashed grid (kernels/point_index.cl): a cell (x, y,
-# z) has the 64-bit key x | y << 21 | z << 42, so fewer than 2^21 cells per
-# axis; the table's free slots hold GRID_EMPTY (no cell has that key);
-# slots are found by Fibonacci hashing (2^64 / golden ratio, odd).
-GRID_KEY_BITS = 21
-GRID_EMPTY = 0xFFFFFFFFFFFFFFFF
-GRID_HASH_MUL = 0x9E3779B97F4A7C15
-
 # A session's path masks (kernels/update.cl) are 128 bits: one per cell of
 # the grid over the scene, then six for "leaves the grid" through each face
 # (bit CELL_OUTSIDE_BIT + 2 axis + side, side 1 the high one), so grids
@@ -118,9 +110,9 @@ VIEW_SRGB = 0
 VIEW_AGX = 1
 VIEW_FILMIC = 2
 
-# name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. Integers above
-# 2^63 need the UL suffix; FRONT_COS_EPS is a float literal, SC_MU a double
-# the kernel rounds to float (as it always has).
+# name -> C literal, built as -DOCLGI_<NAME upper>=<literal>. FRONT_COS_EPS
+# is a float literal, SC_MU a double the kernel rounds to float (as it
+# always has).
 DEFINES = {
     "lanes": LANES,
     "bvh_stack_size": BVH_STACK_SIZE,
@@ -134,9 +126,6 @@ DEFINES = {
     "sc_max_levels": SC_MAX_LEVELS,
     "sc_mu": repr(SC_MU),
     "radix_bits": RADIX_BITS,
-    "grid_key_bits": GRID_KEY_BITS,
-    "grid_empty": f"{GRID_EMPTY:#x}UL",
-    "grid_hash_mul": f"{GRID_HASH_MUL:#x}UL",
     "cell_outside_bit": CELL_OUTSIDE_BIT,
     "emitter_triangle": EMITTER_TRIANGLE,
     "emitter_point": EMITTER_POINT,

@@ -47,9 +47,6 @@ Parameters:
 option          default    meaning
 ==============  =========  ====================================================
 ``leaf_size``   32         discs per BVH leaf (1 to 256), tested 8 per float8 block
-``tree``        ``wide``   ``wide`` (8 children per node) or ``binary`` (the
-                           tree as built, kernels/box_bvh.h; kept to measure
-                           one against the other)
 ``builder``     ``lbvh``   ``lbvh`` (Morton order, fast to build) or ``sah``
                            (binned SAH, oclgi/accel/bvh_sah.py: slower to build,
                            fewer nodes visited per segment)
@@ -130,21 +127,16 @@ class DetpDiscIndex(DetpEstimator):
     # points, which live as long as it; Session sets it)
     list_crossings = False
 
-    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, tree: str = "wide",
-                 builder: str = "lbvh", **kw):
+    def __init__(self, queue, compiled, points, radius: float, leaf_size: int = 32, builder: str = "lbvh", **kw):
         super().__init__(queue, compiled, points, radius, **kw)
         if (isinstance(leaf_size, bool) or not isinstance(leaf_size, (int, np.integer))
                 or not 1 <= leaf_size <= MAX_LEAF):
             raise OclgiError(f"leaf_size must be an integer from 1 to {MAX_LEAF}, got {leaf_size!r}")
-        if tree not in ("wide", "binary"):
-            raise OclgiError(f"tree must be 'wide' or 'binary', got {tree!r}")
         if builder not in BUILDERS:
             raise OclgiError(f"builder must be one of {', '.join(map(repr, BUILDERS))}, got {builder!r}")
         self.leaf_size = int(leaf_size)
         self._crossings, self._no_list = None, None
-        self.tree, self.builder = tree, builder
-        if tree == "binary":  # every program that walks these nodes (update.cl, light_reweight.cl) is built alike
-            self.defines = dict(self.defines, disc_tree_binary=1)
+        self.builder = builder
         prog = self.program("detp_disc_index")
         self.k_walk, self.k_change = prog.detp_disc_index, prog.detp_disc_index_change
         self.build_index()
@@ -172,10 +164,8 @@ class DetpDiscIndex(DetpEstimator):
             blocks["r2"][blk, lane] = self.radius2[ids[o]]
             blocks["id"][blk, lane] = ids[o]
             self.root_box = (nodes["lo"][0].astype(np.float64), nodes["hi"][0].astype(np.float64))
-            self.depth = bvh.depth
-            if self.tree == "wide":
-                wide = collapse_boxes(nodes, "discs")
-                nodes, self.depth = wide.nodes, wide.depth
+            wide = collapse_boxes(nodes, "discs")
+            nodes, self.depth = wide.nodes, wide.depth
             self.nodes = self.upload(nodes)
             self.blocks = self.upload(blocks)
             self.n_nodes = len(nodes)

@@ -27,13 +27,14 @@ Ties: neighbours are ranked by (squared float32 distance, id), so equal
 distances keep the smaller id; the set is reproducible and equals a brute
 force over the same floats. Sums are 64-bit fixed point (each power
 quantised once, like every estimator), so results are bit-reproducible
-across work-group sizes, batch splits and index types.
+across work-group sizes and batch splits.
 
-Index. Two were measured (k = 50, 10^6 impacts, 10^5 queries, front
-side on; throughput against scipy's cKDTree(workers=2) in the same run, on
-the 2-core machines): a BVH over the impacts, and a hashed uniform grid
+Index: a BVH over the impacts. Measured (k = 50, 10^6 impacts, 10^5
+queries, front side on; throughput against scipy's cKDTree(workers=2) in
+the same run, on the 2-core machines) against a hashed uniform grid
 searched shell by shell around the query's cell, its cells sized for a
-mean of 16 impacts per occupied cell (8, 16 and 32 tried).
+mean of 16 impacts per occupied cell (8, 16 and 32 tried; the grid has
+since been removed):
 
     data (queries)                           BVH, leaf 16   grid    cKDTree
     Cornell box (camera points, 317^2)       2.1x           1.8x    0.29 Mq/s
@@ -42,10 +43,10 @@ mean of 16 impacts per occupied cell (8, 16 and 32 tried).
     caustic (half the impacts in a disc      2.0x           0.4x    0.26 Mq/s
       1/100 of the unit square wide)
 
-The BVH is the default: close to the grid where the density is even, and
-it keeps its speed where the density is not (in the caustic the grid's
-cells held thousands of impacts: 12,339 tested per query, against 135). It
-builds faster too (0.33 s against 0.5 s for 10^6 impacts). It is a
+The BVH won: close to the grid where the density is even, and it keeps
+its speed where the density is not (in the caustic the grid's cells held
+thousands of impacts: 12,339 tested per query, against 135). It builds
+faster too (0.33 s against 0.5 s for 10^6 impacts). It is a
 Karras-style LBVH on 63-bit Morton codes with cubic cells (_point_bvh: the
 shared 30-bit builder and per-axis scaling cost 7x and 2x more tests on the
 caustic and the plane); queries run in Morton order (2-4x faster than
@@ -74,7 +75,6 @@ Parameters:
     k             50         neighbours per point, 1..4096 (2.. for "k-1"); a
                              build define (OCLGI_KNN_K): one program per k
     estimator     "k-1"      "k-1" (unbiased for a uniform density) or "k"
-    index         "bvh"      "bvh" (default) or "grid" (the measured alternative)
     front_only    True       count only impacts arriving on the normal's side
     leaf_size     16         impacts per BVH leaf (8, 16, 32 measured: 16)
     count_emitted (engine)   False: skip bounce-0 impacts (indirect light only)
@@ -92,7 +92,7 @@ import math
 import numpy as np
 import pyopencl as cl
 
-from ..accel.point_index import KnnIndex, check_index, query_order
+from ..accel.point_index import KnnIndex, check_leaf_size, query_order
 from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from .base import Estimator
@@ -198,7 +198,7 @@ class KnnMap(Estimator):
 
     def work(self) -> dict | None:
         """Work of the search (u: distance tests of impacts or segment
-        pieces, nodes: BVH nodes or grid cells visited)."""
+        pieces, nodes: BVH nodes visited)."""
         return super().work() if not self.count_work or self.knn is None else self.knn.work()
 
 
@@ -213,15 +213,15 @@ class PhotonMap(KnnMap):
     # impact changes other points' neighbour sets); see DESIGN.md section 4.
     incremental = False
 
-    def __init__(self, queue, compiled, points, k: int = DEFAULT_K, estimator: str = "k-1", index: str = "bvh",
+    def __init__(self, queue, compiled, points, k: int = DEFAULT_K, estimator: str = "k-1",
                  front_only: bool = True, leaf_size: int = 16, radius=None, extension=None, **kw):
         # radius and extension are DETP parameters; the k-th neighbour sets the radius here
         super().__init__(queue, compiled, points, **kw)
         check_k(k, estimator)
-        check_index(index, leaf_size)
+        check_leaf_size(leaf_size)
         if not isinstance(front_only, (bool, np.bool_)):
             raise OclgiError(f"photon_map: front_only must be true or false, got {front_only!r}")
-        self.k, self.estimator, self.index = int(k), estimator, index
+        self.k, self.estimator = int(k), estimator
         self.front_only, self.leaf_size = bool(front_only), leaf_size
         self.limit = max_impacts(queue.device)
         prog = programs(self.ctx).get("photon_map")  # compaction and resolve do not depend on k
@@ -280,8 +280,7 @@ class PhotonMap(KnnMap):
                 raise OclgiError(f"photon_map: only {self.n_impacts:,} impacts for k = {self.k}; "
                                  f"trace more photons or lower k")
             pos, dirs, pw = self.impacts()
-            self.knn = KnnIndex(self.queue, pos, dirs, pw, index=self.index, leaf_size=self.leaf_size,
-                                count_work=self.count_work)
+            self.knn = KnnIndex(self.queue, pos, dirs, pw, leaf_size=self.leaf_size, count_work=self.count_work)
         return self.knn
 
     def search(self, ids: np.ndarray | None = None):

@@ -117,21 +117,21 @@ class PhotonMapSession(SessionBase):
     oclgi/incremental/dynamic_view.py, and searched again); ``photons``,
     ``seed``, ``max_depth``, ``count_emitted`` as for
     :meth:`oclgi.Engine.irradiance` (the scene's by default); ``k``,
-    ``estimator``, ``index``, ``front_only``, ``leaf_size`` as for the
+    ``estimator``, ``front_only``, ``leaf_size`` as for the
     ``photon_map`` estimator; ``mode``: "practical" (the thesis' update,
     module docstring) or "exact" (equal to recomputation). The session has
     a pose of its own, as ``oclgi.Session`` has (``self.engine``).
     """
 
     def __init__(self, engine, points=None, photons=None, seed=None, max_depth=None, k=DEFAULT_K,
-                 estimator="k-1", count_emitted=None, mode="practical", index="bvh", front_only=True, leaf_size=16,
+                 estimator="k-1", count_emitted=None, mode="practical", front_only=True, leaf_size=16,
                  camera=None):
         if mode not in MODES:
             raise OclgiError(f"Photon Map session mode must be one of {', '.join(map(repr, MODES))}, got {mode!r}")
         self.engine = engine.posed(owner=self)
         self.queue, self.mode = engine.queue, mode
         self.params = self.engine.run_params("photon_map", photons, None, seed, max_depth, None, count_emitted)
-        self.options = dict(k=k, estimator=estimator, index=index, front_only=front_only, leaf_size=leaf_size)
+        self.options = dict(k=k, estimator=estimator, front_only=front_only, leaf_size=leaf_size)
         self.view = None
         if points is None:
             self._new_view(camera)
@@ -176,7 +176,7 @@ class PhotonMapSession(SessionBase):
 
     def set_estimator(self, method: str | None = None, **options) -> float:
         """Other Photon Map options from now on (``k``, ``estimator``,
-        ``index``, ``front_only``, ``leaf_size``; the others keep theirs):
+        ``front_only``, ``leaf_size``; the others keep theirs):
         the stored paths' impacts are searched again, nothing is re-traced;
         equal to a fresh session with these options at the session's pose.
         ``method`` must be "photon_map" (a DETP or Impact Count session is
