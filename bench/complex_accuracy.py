@@ -8,8 +8,8 @@ time on the generated scenes of bench/complex_scenes.py (a tree of small
 leaves under a sun; a two-storey courtyard with galleries, columns and
 arches under a sun through its opening; a closed room with columns,
 arches, a gallery and a pillar by a wall, under a ceiling light). A method
-a scene refuses (the exact direct light under an area light) is listed as
-refused.
+a scene refuses is listed as refused. The area-, sky- and ceiling-lit
+scenes of issue 31 (foliage_area, courtyard_sky, cornell) follow.
 
 For each scene: query points drawn on each part (ground / wood / leaves;
 floor / walls / stone twice), those with other geometry just above them along
@@ -285,7 +285,7 @@ def main():
             print(f"{name}: {label}", flush=True)
             try:
                 engine.estimator(pts, engine.run_params(method, 1000, None), **options)
-            except oclgi.OclgiError as exc:  # e.g. the exact direct light under an area light
+            except oclgi.OclgiError as exc:  # an option this scene cannot take
                 lines.append(f"| {label} | refused: {exc} |")
                 continue
             photons, seconds, e = equal_time(engine, pts, method, options, args.seconds, args.probe)

@@ -65,9 +65,10 @@ MIS_MODES = ("power", "balance", "light", "bsdf")
 DIRECT_SAMPLES = 16  # pairs of samples per point of an estimator built without a run's photon count
 MAX_SAMPLES = 65536
 # The default with a run (Engine.estimator): one pair per 2^15 photons, from
-# 16 to 1,024 (bench/README.md, "Direct light"): the light samples' noise
-# falls with the photons' as the run grows, and their cost (2 rays a pair
-# per point) stays small beside the photons' (several segments each).
+# 16 to 1,024 (bench/README.md, "Accuracy": at 16 the light samples' noise
+# outweighed the photons'): their noise falls with the photons' as the run
+# grows, and their cost (2 rays a pair per point) stays small beside the
+# photons' (several segments each).
 PHOTONS_PER_SAMPLE = 1 << 15
 MIN_DEFAULT, MAX_DEFAULT = 16, 1024
 

@@ -95,7 +95,8 @@ def gather_rays(queue, compiled, pts: cl.Buffer, nrm: cl.Buffer, n_points: int, 
     ctx = queue.context
     n = n_points * n_rays
     mf = cl.mem_flags
-    pos, hn, bary, wt, emitted = (cl.Buffer(ctx, mf.READ_WRITE, max(n, 1) * s) for s in (16, 16, 8, 16, 16))
+    pos, hn, bary, wt = (cl.Buffer(ctx, mf.WRITE_ONLY, max(n, 1) * s) for s in (16, 16, 8, 16))
+    emitted = cl.Buffer(ctx, mf.READ_WRITE, max(n, 1) * 16)  # the resolve reads it on the device
     c = compiled
     k = programs(ctx).get("final_gather").final_gather_rays
     launch(queue, k, n, *c.scene_args, c.tri_uvmap, c.tri_colourmap, c.tri_object, c.textures, c.texels,
