@@ -8,9 +8,12 @@ queued, sent at the next display frame, coalesced by the server), and
 records per update:
 
 - **sequential**: move, then wait until the frame of that move is drawn;
-  the time from the move to its draw is what the user waits (server update
-  + read-back + transfer + decode + upload + draw, in display frames), its
-  inverse the updates per second;
+  the time from the move to its draw finished (the page reads a pixel back
+  after drawing a new update's colours) is what the user waits (server
+  update + read-back + transfer + decode + the wait for the display frame
+  + upload + draw), its inverse the updates per second; the mesh drawn is
+  the page's own choice (a level of detail in motion when its exact frame
+  misses the budget, oclgi/viewer/static/viewer.js);
 - **continuous**: a new pose every display frame for some seconds, as a
   drag does; the frames drawn per second (the server coalesces the poses
   that arrive while it computes).
@@ -48,6 +51,7 @@ EDGE = {"cornell": 0.06, "sponza": 0.6}  # two disc radii between vertices
 SEQUENTIAL = """(async () => {
   const S = oclgiState, out = [], R = %(r)r, N = %(n)d;
   const next = () => new Promise(r => requestAnimationFrame(r));
+  S.timeDraws = true;
   for (let i = 1; i <= N; i++) {
     const a = 2 * Math.PI * i / N;
     const m = [1, 0, 0, R * (Math.cos(a) - 1), 0, 1, 0, 0, 0, 0, 1, R * Math.sin(a), 0, 0, 0, 1];
@@ -55,8 +59,9 @@ SEQUENTIAL = """(async () => {
     S.api.move("bunny", m);
     while (!(S.seq > seq && S.drawnSeq === S.seq)) await next();
     const u = S.lastUpdate;
-    out.push({ms: performance.now() - t0, frame_ms: S.frameAt - t0, s: u.seconds, paths: u.paths, points: u.points,
-              n_rec: u.segments_removed, n_r: u.segments, frame: S.frameStats});
+    out.push({ms: S.drawnDoneAt - t0, frame_ms: S.frameAt - t0, s: u.seconds, paths: u.paths, points: u.points,
+              n_rec: u.segments_removed, n_r: u.segments, frame: S.frameStats, level: S.drawnLevel,
+              motion: S.drawnMotion});
   }
   return out;
 })()"""
@@ -119,11 +124,15 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
                 tab = await browser.open(box["url"])
                 await tab.wait("window.oclgiState && oclgiState.ready && oclgiState.frames > 0", timeout=600)
                 hello = await tab.eval("oclgiState.hello")
+                frame_ms = await tab.eval("oclgiState.frameMs")
+                # the exact frame, then the motion frame of each mesh (the tessellation and its levels)
+                draw_ms = [await tab.eval("oclgiState.api.drawMs(5, 0, false)")] + [
+                    await tab.eval(f"oclgiState.api.drawMs(5, {k}, true)") for k in range(len(viewer.levels) + 1)]
                 await tab.eval(SEQUENTIAL % {"r": path_r, "n": 4})  # warm: kernels of the first moves
                 seq = await tab.eval(SEQUENTIAL % {"r": path_r, "n": moves})
                 cont = await tab.eval(CONTINUOUS % {"r": path_r, "t": drag_seconds})
-                return hello, seq, cont
-        hello, seq, cont = asyncio.run(drive())
+                return hello, seq, cont, frame_ms, draw_ms
+        hello, seq, cont, frame_ms, draw_ms = asyncio.run(drive())
     finally:
         box["loop"].call_soon_threadsafe(box["task"].cancel)
         thread.join(30)
@@ -137,6 +146,9 @@ def bench_scene(name: str, moves: int, segments: float, drag_seconds: float) -> 
         "scene": name, "photons": photons, "segments": hello["segments"], "vertices": len(tess.vertices),
         "dynamic_points": int(np.median([r["points"] for r in seq])), "edge": EDGE[name], "radius": RADIUS[name],
         "tessellate_s": tess_s, "setup_s": hello["setup_seconds"], "moves": moves,
+        "faces": len(tess.faces), "levels": [len(lv.faces) for lv in viewer.levels],
+        "levels_s": viewer.levels_seconds, "frame_ms_measured": frame_ms, "draw_ms": draw_ms,
+        "level_drawn": int(np.median([r["level"] for r in seq])),
         "paths_median": med(lambda r: r["paths"]), "n_rec_median": med(lambda r: r["n_rec"]),
         "user_ms_median": float(np.median(ms)), "user_ms_p90": float(np.percentile(ms, 90)),
         "updates_per_s": 1e3 / float(np.median(ms)),
@@ -198,6 +210,17 @@ def markdown(rows: list[dict], machine: str) -> str:
             + " | ".join(f"{r['stage_ms_median'].get(k, float('nan')):.1f}" for k in stages)
             + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | "
             f"**{r['updates_per_s']:.1f}** | {r['continuous_per_s']:.1f} |" for r in rows]
+    out += ["", "The meshes the page draws: the tessellation and its levels of detail (faces); the draw times "
+            "(`oclgiState.api.drawMs`: colours uploaded, drawn, a pixel read back) of the exact frame and of "
+            "each mesh's motion frame (half the resolution each way, sRGB per vertex); the mesh a drag draws "
+            "(0: the tessellation; the finest whose motion frame fits the page's budget) and the levels' "
+            "build time on the server:", "",
+            "| scene | faces: full / levels | draw ms: exact / motion full / levels | mesh drawn in a drag | "
+            "levels built (s) |",
+            "|---|---:|---:|---:|---:|"]
+    out += [f"| {r['scene']} + bunny | {r['faces']:,} / {' / '.join(f'{g:,}' for g in r['levels'])} | "
+            f"{' / '.join(f'{t:.1f}' for t in r['draw_ms'])} | {r['level_drawn']} | {r['levels_s']:.2f} |"
+            for r in rows]
     out += ["", "The colour frames (median per update): float16 runs and single indices against the float32 "
             "per-index format, the vertices they carry, the page's time to apply one:", "",
             "| scene | vertices in a frame | frame KB | float32 format KB | apply ms |", "|---|---:|---:|---:|---:|"]

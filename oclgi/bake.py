@@ -62,8 +62,6 @@ def bake(engine, edge: float | None = None, quantity: str = "irradiance", exposu
     """The solution at the vertices of the scene cut to ``edge`` (default:
     the disc radius), as a trimesh Scene (module doc); ``estimate``: the
     arguments of ``Engine.irradiance`` (method, photons, radius, ...)."""
-    import trimesh
-
     from .incremental.attached_points import AttachedPoints
     from .scene.tessellate import tessellate
 
@@ -77,10 +75,25 @@ def bake(engine, edge: float | None = None, quantity: str = "irradiance", exposu
     points = placed.points
     est = engine.irradiance(points, **estimate)
     values = vertex_values(engine, tess, est.irradiance, quantity)
+    out = baked_scene(engine.scene, tess, points.positions[:, :3], points.normals[:, :3], values, quantity,
+                      exposure)
+    out.metadata["oclgi"] = {"quantity": quantity, "exposure": float(exposure), "edge": float(tess.edge),
+                             "photons": int(est.stats.photons), "method": est.stats.method,
+                             "radius": float(est.stats.radius)}
+    out.metadata["stats"] = est.stats
+    return out
+
+
+def baked_scene(scene, tess, positions, normals, values, quantity: str, exposure: float) -> "trimesh.Scene":  # noqa: F821
+    """The glTF's scene (module doc) of the tessellation ``tess`` with its
+    vertices at ``positions`` (V, 3), ``normals`` and ``values`` (V, 3),
+    the irradiance or radiance there (also ``oclgi view``'s bake of the
+    current pose)."""
+    import trimesh
+
     shown = exposure * (values / np.pi if quantity == "irradiance" else values)
-    positions = points.positions[:, :3].astype(np.float64)
-    normals = points.normals[:, :3].astype(np.float64)
-    scene = engine.scene
+    positions = np.asarray(positions, np.float64)
+    normals = np.asarray(normals, np.float64)
     out = trimesh.Scene()
     for obj, (a, b) in enumerate(scene.object_ranges()):
         faces = tess.faces[(tess.face_source >= a) & (tess.face_source < b)]
@@ -93,19 +106,20 @@ def bake(engine, edge: float | None = None, quantity: str = "irradiance", exposu
         mesh.vertex_attributes[f"_{quantity.upper()}"] = values[used]
         mesh.vertex_attributes["_COLOR_SRGB"] = _bytes(_srgb(shown[used]))
         out.add_geometry(mesh, geom_name=scene.objects[obj].name, node_name=scene.objects[obj].name)
-    out.metadata["oclgi"] = {"quantity": quantity, "exposure": float(exposure), "edge": float(tess.edge),
-                             "photons": int(est.stats.photons), "method": est.stats.method,
-                             "radius": float(est.stats.radius)}
-    out.metadata["stats"] = est.stats
     return out
+
+
+def glb_bytes(scene) -> bytes:
+    """``scene`` as the bytes of one GLB file."""
+    import trimesh
+
+    return trimesh.exchange.gltf.export_glb(scene, include_normals=True)
 
 
 def write_glb(scene, path) -> None:
     """``scene`` as one GLB file at ``path``, whole or not at all."""
-    import trimesh
-
     from .io import atomic_path, write_bytes
 
-    data = trimesh.exchange.gltf.export_glb(scene, include_normals=True)
+    data = glb_bytes(scene)
     with atomic_path(path) as tmp:
         write_bytes(tmp, data)

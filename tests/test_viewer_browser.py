@@ -1,9 +1,12 @@
 """``oclgi view`` end to end in headless Chromium (Debian's chromium,
 tools/ensure-chromium.sh; driven over the DevTools protocol, tests/browser.py):
 the page loads, the bunny is dragged across the Cornell box floor with the
-mouse, the colours the page draws change where the light changed and equal
-the API's at that pose; orbiting redraws without a server update; a second
-tab has its own session and closing it frees that session; Ctrl-C stops the
+mouse, drawn at a level of detail while it moves (the page told its frames
+are slow), the colours the page draws at rest change where the light
+changed and equal the API's at that pose, and the level's the averaging of
+those; orbiting redraws without a server update; a page told its frames
+are fast never leaves the full mesh; a second tab has its own session and
+closing it frees that session; the bake downloads; Ctrl-C stops the
 server. Screenshots are kept in the test's tmp dir."""
 
 import asyncio
@@ -107,6 +110,10 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             shown, e0 = await colours(tab)
             assert np.array_equal(shown, as_shown(home, e0)), "the first frame is not the API's solution"
             await tab.screenshot(tmp_path / "loaded.png")
+            measured = await tab.eval("oclgiState.frameMs")
+            assert measured["full"] is not None and measured["full"] > 0, measured
+            assert await tab.eval("oclgiState.api.levels()") == len(viewer.levels) >= 1
+            assert await tab.eval("oclgiState.api.frameTimes(100, [100, 1])") == 1  # a slow browser: level 1
 
             # drag the bunny with the mouse, from its middle to the right across the floor
             box = await tab.eval("oclgiState.api.objectBox(0)")
@@ -117,7 +124,10 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             end = await tab.eval(f"oclgiState.api.project({json.dumps(goal)})")
             await drag(tab, start, end)
             synced = await tab.eval("oclgiState.api.sync()")
-            await tab.wait(f"oclgiState.drawnSeq === {synced['seq']}")
+            await tab.wait(f"oclgiState.fullSeq === {synced['seq']} && oclgiState.drawnLevel === 0 && "
+                           f"oclgiState.drawnSeq === {synced['seq']}")  # at rest: the tessellation again
+            assert (await tab.eval("oclgiState.drawsByLevel"))[1] > 0, "the drag did not draw the level of detail"
+            assert (await tab.eval("oclgiState.levelSeqs"))[1] >= 0, "no frame of the level came during the drag"
             pose = np.array(synced["poses"]["bunny"]).reshape(4, 4)
             assert pose[0, 3] > 0.5 and abs(pose[1, 3]) < 1e-6, f"the bunny did not slide along the floor: {pose}"
             moved, e = await colours(tab)
@@ -129,6 +139,14 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             assert np.array_equal(changed, light_changed)
             assert changed[static].sum() > 50, "the floor's light did not follow the bunny"
             await tab.screenshot(tmp_path / "dragged.png")
+            await tab.eval("oclgiState.api.orbit(0.001, 0)")  # in motion: the level, its colours at this pose
+            await tab.wait(f"oclgiState.levelSeqs[1] === {synced['seq']} && oclgiState.drawnLevel === 1")
+            level = await tab.eval("oclgiState.api.levelColours(1)")
+            lv = np.array(level["colours"], np.float32).reshape(-1, 3)
+            assert np.array_equal(lv.astype(np.float16).view(np.uint16),
+                                  as_shown(viewer.levels[0].colours(api), level["e"])), \
+                "the level's colours are not the averaging of the API's at the pose"
+            await tab.wait("oclgiState.drawnLevel === 0")  # rests again
 
             # orbit: the view changes, the server computes nothing
             updates = await tab.eval("oclgiState.updates")
@@ -176,6 +194,11 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             assert pm["poses"] == synced["poses"] and pm["k"] is not None
             assert await shows(tab, reference_colours(viewer, pm["poses"], method="photon_map", k=pm["k"]))
 
+            # a fast browser (a GPU's): the full mesh all along, no frame of a level asked for
+            assert await tab.eval("oclgiState.api.frameTimes(1)") == 0
+            level_draws = (await tab.eval("oclgiState.drawsByLevel"))[1]
+            level_seq = (await tab.eval("oclgiState.levelSeqs"))[1]
+
             # the gizmo: the square above the bunny raises it, the ring beside it turns it
             await tab.eval("oclgiState.api.select(1)")
             g = await tab.eval("oclgiState.api.gizmoPoints(0)")
@@ -195,6 +218,14 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             angle = np.arctan2(m[0, 2], m[0, 0]) - np.arctan2(after[0, 2], after[0, 0])
             assert abs(angle) > 0.3 and np.isclose(m[1, 3], after[1, 3], atol=1e-6), m
             assert turned["updates"] > raised["updates"] > pm["updates"]
+            assert (await tab.eval("oclgiState.drawsByLevel"))[1] == level_draws
+            assert (await tab.eval("oclgiState.levelSeqs"))[1] == level_seq
+
+            # "bake this pose": a glTF download of the mesh at the turned pose
+            baked = await tab.eval("oclgiState.api.bake().then(b => ({n: b.glb.length, seq: b.seq, "
+                                   "magic: String.fromCharCode(...b.glb.slice(0, 4))}))")
+            assert baked["magic"] == "glTF" and baked["n"] > 1000 and baked["seq"] == turned["seq"]
+            assert await tab.eval("document.querySelector('#bake-result a[download$=\".glb\"]') !== null")
             assert not await tab.eval("oclgiState.errors.length")
 
     asyncio.run(main())

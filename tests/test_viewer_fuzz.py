@@ -40,6 +40,8 @@ def _message(rng, viewer) -> str:
         {"type": "ack", "seq": int(rng.integers(0, 5))},
         {"type": "render", "id": 1, "width": 8, "height": 8,
          "camera": {"position": [0, 1, 3.9], "look_at": [0, 1, 0], "fov": 39.3}},
+        {"type": "level", "level": int(rng.integers(0, len(viewer.levels) + 1))},
+        {"type": "bake", "id": 2},
     ]
     if light is not None:
         valid.append({"type": "light", "light": light, "position": [float(x) for x in rng.uniform(-0.5, 0.5, 3)]})
@@ -61,10 +63,11 @@ def _message(rng, viewer) -> str:
 
 
 class FuzzedPage(PageModel):
-    """A page that also asked for renders: their images (OGVR) are not colour frames."""
+    """A page that also asked for renders and bakes: their images (OGVR) and glTF files (OGVB) are not
+    colour frames."""
 
     def apply(self, data: bytes) -> None:
-        if data[:4] != b"OGVR":
+        if data[:4] not in (b"OGVR", b"OGVB"):
             super().apply(data)
 
 
@@ -76,6 +79,7 @@ async def _case(client, viewer, rng, n_messages):
     if state["method"] == "photon_map":  # its practical update tends to recomputation, not equal to it:
         await ws.send_str(json.dumps({"type": "estimator", "method": "detp_disc_index"}))  # a DETP session now
     await ws.send_str(json.dumps({"type": "move", "object": "bunny", "matrix": _pose(rng)}))
+    await ws.send_str(json.dumps({"type": "level", "level": 0}))  # the tessellation's colours, whatever was drawn
     state = await sync(ws, page, 10_002)
     run = {"method": state["method"], "photons": state["photons"]}
     if state["method"] == "photon_map":
@@ -88,6 +92,10 @@ async def _case(client, viewer, rng, n_messages):
         run["lights"] = lights
     expected = reference_colours(viewer, state["poses"], **run)
     assert page.shows(expected), state
+    for k, level in enumerate(viewer.levels, 1):  # each level: the averaging of the exact colours
+        await ws.send_str(json.dumps({"type": "level", "level": k}))
+        await sync(ws, page, 10_002 + k)
+        assert page.shows_level(k, level.colours(expected)), k
     await ws.close()
 
 

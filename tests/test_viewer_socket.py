@@ -114,6 +114,12 @@ BAD = [
       "width": 10**6, "height": 8}, "whole number"),
     ({"type": "estimator", "k": 8}, "Photon Map"),
     ({"type": "estimator"}, "give"),
+    ({"type": "level", "level": 99}, "whole number"),
+    ({"type": "level", "level": -1}, "whole number"),
+    ({"type": "level", "level": 0.5}, "whole number"),
+    ({"type": "bake", "id": 1, "exposure": -1}, "exposure"),
+    ({"type": "bake", "id": 1, "exposure": float("inf")}, "finite"),
+    ({"type": "bake"}, "finite number"),
     ({"type": "teleport"}, "unknown message type"),
     ({"no": "type"}, "type"),
     ([1, 2, 3], "JSON object"),
@@ -215,39 +221,43 @@ def test_frame_encoder_sends_changed_runs_as_float16():
     enc, page = FrameEncoder(100), PageModel(100)
     c = rng.random((100, 3), dtype=np.float32) * 40
     first = enc.frame(c, 0)
-    assert len(first) == 20 + 6 * 100  # the first frame: every colour
+    assert len(first) == 24 + 6 * 100  # the first frame: every colour
     page.apply(first)
     assert page.e == 6 - 12 and page.shows(c)  # the largest colour (32 to 40) near 2^12 after scaling
     assert np.abs(page.colours - c).max() <= 2.0 ** -11 * c.max()
-    assert enc.frame(c, 1) is None
+    assert enc.frame(c, 0) is None  # nothing new
+    empty = enc.frame(c, 1)  # a new update that changed no half: a frame of no colour, carrying its seq
+    assert len(empty) == 28
+    page.apply(empty)
+    assert page.seq == 1 and page.shows(c)
     c[[3, 50, 99], 1] += 1  # alone: three indices
     f = enc.frame(c, 2)
-    assert len(f) == 24 + 4 * 3 + 6 * 3
+    assert len(f) == 28 + 4 * 3 + 6 * 3
     page.apply(f)
     assert page.shows(c)
     c[10:30] += 1  # a run, and two alone
     c[[40, 70], 0] += 1
     f = enc.frame(c, 3)
-    assert len(f) == 24 + 8 + 4 * 2 + 6 * 22
+    assert len(f) == 28 + 8 + 4 * 2 + 6 * 22
     page.apply(f)
     assert page.shows(c)
     c[:60] *= 1.5  # one long run
     f = enc.frame(c, 4)
-    assert len(f) == 24 + 8 + 6 * 60
+    assert len(f) == 28 + 8 + 6 * 60
     page.apply(f)
     c[np.arange(100) % 10 != 0] *= 1.5  # most changed, in ten runs: the whole array is smaller
     f = enc.frame(c, 5)
-    assert len(f) == 20 + 6 * 100
+    assert len(f) == 24 + 6 * 100
     page.apply(f)
     assert page.shows(c) and page.seq == 5
     # a change below float16's step at this scale is no change on the page
     tiny = c.copy()
     tiny[5, 0] = np.nextafter(tiny[5, 0], np.float32(np.inf))
-    assert enc.frame(tiny, 6) is None
+    assert len(enc.frame(tiny, 6)) == 28
     # a colour that would overflow float16 at this scale: a new scale, the whole array again
     c[7] = 3e6
     f = enc.frame(c, 7)
-    assert len(f) == 20 + 6 * 100
+    assert len(f) == 24 + 6 * 100
     page.apply(f)
     assert page.e == 22 - 12 and page.shows(c) and np.isfinite(page.colours).all()
     assert np.abs(page.colours[7] - 3e6).max() <= 2.0 ** -11 * 3e6

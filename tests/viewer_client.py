@@ -45,7 +45,7 @@ async def connect(client, viewer, page_type=None):
     """A page's socket: (ws, page, its hello, or the error that refused it);
     the first frame (every colour) applied."""
     ws = await client.ws_connect("/socket")
-    page = (page_type or PageModel)(len(viewer.tess.vertices))
+    page = (page_type or PageModel)(len(viewer.tess.vertices), [len(lv.positions) for lv in viewer.levels])
     hello = await receive_until(ws, page, lambda m: m["type"] in ("hello", "error"))
     if hello["type"] == "hello":
         page.apply(await ws.receive_bytes(timeout=120))
@@ -59,12 +59,15 @@ def as_shown(colours: np.ndarray, e: int) -> np.ndarray:
 
 
 class PageModel:
-    """What a page holds: float16 colours at a power-of-two scale, applied frame by frame."""
+    """What a page holds: float16 colours at a power-of-two scale, applied
+    frame by frame; of the tessellation (``half``, ``e``) and of each level
+    of detail (``levels[k - 1]``: [half, e, seq])."""
 
-    def __init__(self, n_vertices: int):
+    def __init__(self, n_vertices: int, level_sizes=()):
         self.half = np.zeros((n_vertices, 3), np.uint16)
         self.e = 0
-        self.seq, self.frames, self.messages, self.sizes = -1, 0, [], []
+        self.levels = [[np.zeros((n, 3), np.uint16), 0, -1] for n in level_sizes]
+        self.seq, self.frames, self.messages, self.sizes, self.frame_levels = -1, 0, [], [], []
 
     @property
     def colours(self) -> np.ndarray:
@@ -75,30 +78,41 @@ class PageModel:
         """The page holds ``colours`` (float32, the API's) rounded to float16 at its scale, bit for bit."""
         return np.array_equal(self.half, as_shown(colours, self.e))
 
+    def shows_level(self, k: int, colours: np.ndarray) -> bool:
+        """Level k's halves are ``colours`` (float32) rounded to float16 at its scale, bit for bit."""
+        half, e, _ = self.levels[k - 1]
+        return np.array_equal(half, as_shown(colours, e))
+
     def apply(self, data: bytes) -> None:
-        magic, seq, mode, e = struct.unpack_from("<4sIIi", data)
+        magic, seq, mode, e, level = struct.unpack_from("<4sIIiI", data)
         assert magic == b"OGVC"
-        n = len(self.half)
+        half = self.half if level == 0 else self.levels[level - 1][0]
+        n = len(half)
         if mode == 0:
-            (count,) = struct.unpack_from("<I", data, 16)
-            assert count == n and len(data) == 20 + 6 * n
-            self.half[:] = np.frombuffer(data, "<u2", offset=20).reshape(-1, 3)
+            (count,) = struct.unpack_from("<I", data, 20)
+            assert count == n and len(data) == 24 + 6 * n
+            half[:] = np.frombuffer(data, "<u2", offset=24).reshape(-1, 3)
         else:
             assert mode == 1
-            r, s = struct.unpack_from("<II", data, 16)
-            start = np.frombuffer(data, "<u4", r, offset=24)
-            length = np.frombuffer(data, "<u4", r, offset=24 + 4 * r)
-            single = np.frombuffer(data, "<u4", s, offset=24 + 8 * r)
-            values = np.frombuffer(data, "<u2", offset=24 + 8 * r + 4 * s).reshape(-1, 3)
+            r, s = struct.unpack_from("<II", data, 20)
+            start = np.frombuffer(data, "<u4", r, offset=28)
+            length = np.frombuffer(data, "<u4", r, offset=28 + 4 * r)
+            single = np.frombuffer(data, "<u4", s, offset=28 + 8 * r)
+            values = np.frombuffer(data, "<u2", offset=28 + 8 * r + 4 * s).reshape(-1, 3)
             assert len(values) == int(length.sum()) + s and (length >= 2).all()
             at = 0
             for a, k in zip(start.tolist(), length.tolist()):  # one obvious copy per run
-                self.half[a:a + k] = values[at:at + k]
+                half[a:a + k] = values[at:at + k]
                 at += k
             for i, v in zip(single.tolist(), range(at, at + s)):
-                self.half[i] = values[v]
-        self.e, self.seq, self.frames = e, seq, self.frames + 1
+                half[i] = values[v]
+        if level == 0:
+            self.e = e
+        else:
+            self.levels[level - 1][1:] = [e, seq]
+        self.seq, self.frames = seq, self.frames + 1
         self.sizes.append(len(data))
+        self.frame_levels.append(level)
 
 
 async def receive_until(ws, page: PageModel, predicate, ack: bool = True):

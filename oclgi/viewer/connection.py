@@ -15,6 +15,12 @@ on the server, and the server must never fall behind a drag:
   (oclgi/viewer/vertex_colours.py), so a frame can be skipped: while newer
   moves wait and the page has not yet applied two frames, the frame of a
   pose already overtaken is not sent; the last one always is;
+- the frames are of the mesh the page says it draws (a ``level`` message):
+  the tessellation, or while the view moves a level of detail
+  (oclgi/viewer/level_of_detail.py) whose colours the server averages from
+  the exact ones, so a drag sends the level's colours only and the
+  tessellation's follow, as one difference, when the page asks for them
+  again;
 - a light drag updates by a light session (oclgi/incremental/light_session.py)
   while every object is where it was loaded and the light has precomputed
   positions (its ``path``): reused there, recomputed elsewhere; otherwise
@@ -24,6 +30,8 @@ on the server, and the server must never fall behind a drag:
 - an estimator of the other family (Photon Maps against DETP and Impact
   Count) opens a session of the other kind at the current poses and
   lights, and closes the old one;
+- a bake is the tessellation at the session's poses with the colours the
+  page is shown, as a glTF file (oclgi/bake.py's layout, radiance);
 - a render is the engine's image at the session's poses and lights from
   the page's camera, batch by batch with progress messages between; a
   large one in a process of its own (oclgi/viewer/render_process.py), so
@@ -57,6 +65,8 @@ RENDER_MAGIC = b"OGVR"  # a render's binary message (Connection._send_render)
 # second on 2 cores), and a page that goes away stops its render there.
 RENDER_BATCH = 20_000
 RENDER_HEADER = struct.Struct("<4sIIII")
+BAKE_MAGIC = b"OGVB"  # a bake's binary message: magic, uint32 length, the GLB file
+BAKE_HEADER = struct.Struct("<4sI")
 
 
 class Connection:
@@ -69,7 +79,9 @@ class Connection:
         self.wake = asyncio.Event()
         self.seq = 0  # updates applied (the colour frames carry the latest)
         self.in_flight = 0
-        self.encoder = FrameEncoder(len(viewer.tess.vertices))
+        self.encoders = [FrameEncoder(len(viewer.tess.vertices))] + [
+            FrameEncoder(len(lv.positions), k) for k, lv in enumerate(viewer.levels, 1)]
+        self.level = 0  # the mesh the page draws: 0 the tessellation, k its k-th level of detail
         self.colours = None  # the current solution's colours (not necessarily sent yet)
         self.updates = 0  # moves of objects and lights computed
         self.coalesced = 0  # moves replaced by a newer one (of the same object or light) before they ran
@@ -345,7 +357,7 @@ class Connection:
             self.window_start, self.window_count, self.window_warned = now, 0, False
         try:
             v = self.viewer
-            req = parse(text, v.movable, v.methods, v.diagonal, tuple(v.lights), v.box)
+            req = parse(text, v.movable, v.methods, v.diagonal, tuple(v.lights), v.box, len(v.levels))
         except BadMessage as exc:
             return str(exc)
         if req.kind == "ack":
@@ -359,6 +371,10 @@ class Connection:
             self.window_warned = True
             return (f"too many requests: at most {MAX_MESSAGES_PER_SECOND} a second; the rest of this second's "
                     "are dropped")
+        if req.kind == "level":  # no device work: the next frame (now, or after the update running) is of it
+            self.level = req.fields["level"]
+            self.wake.set()
+            return None
         last = self.pending[-1] if self.pending else None
         if (req.kind in ("move", "light") and last is not None and last.kind == req.kind
                 and last.fields.get("object") == req.fields.get("object")
@@ -376,7 +392,9 @@ class Connection:
         """Send the colours the page lacks (unless an overtaken frame may be skipped)."""
         if not force and self.in_flight >= MAX_IN_FLIGHT:
             return False
-        frame = self.encoder.frame(self.colours, self.seq)
+        level = self.level
+        colours = self.colours if level == 0 else self.viewer.levels[level - 1].colours(self.colours)
+        frame = self.encoders[level].frame(colours, self.seq)
         if frame is not None and not self.ws.closed:
             self.in_flight += 1
             await self.ws.send_bytes(frame)
@@ -395,6 +413,9 @@ class Connection:
                     continue
                 if req.kind == "render":
                     await self._send_render(req)
+                    continue
+                if req.kind == "bake":
+                    await self._send_bake(req)
                     continue
                 t0 = time.perf_counter()
                 try:
@@ -443,6 +464,24 @@ class Connection:
         if not self.ws.closed:
             await self.ws.send_bytes(RENDER_HEADER.pack(RENDER_MAGIC, self.renders, w, h, len(png)) + png
                                      + np.ascontiguousarray(radiance, "<f4").tobytes())
+
+    def _bake(self, exposure: float) -> bytes:
+        """The GLB of the tessellation at the session's poses, coloured by the current solution's radiance."""
+        from ..bake import baked_scene, glb_bytes
+
+        v = self.viewer
+        poses = {name: self.session.engine.pose_matrix(name) for name in v.movable}
+        positions, normals = v.posed_vertices(poses)
+        return glb_bytes(baked_scene(v.engine.scene, v.tess, positions, normals, self.colours, "radiance",
+                                     exposure))
+
+    async def _send_bake(self, req: Request) -> None:
+        t0 = time.perf_counter()
+        glb = await self.viewer.device(self._bake, req.fields["exposure"])
+        await self.send_json({"type": "baked", "id": req.fields["id"], "bytes": len(glb), "seq": self.seq,
+                              "seconds": time.perf_counter() - t0})
+        if not self.ws.closed:
+            await self.ws.send_bytes(BAKE_HEADER.pack(BAKE_MAGIC, len(glb)) + glb)
 
     async def _progress(self, ident, traced: int, paths: int) -> None:
         await self.send_json({"type": "render_progress", "id": ident, "traced": traced, "paths": paths})

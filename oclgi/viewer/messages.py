@@ -20,6 +20,10 @@ Every message from the page is a JSON object with a ``type``:
 ``render``      ``id`` (any number), ``camera`` (``position``,         answered by the
                 ``look_at``, ``up``, ``fov`` in degrees, vertical),    image: progress,
                 ``width``, ``height`` (pixels)                         then ``rendered``
+``level``       ``level`` (0: the tessellation, k >= 1: its k-th       the colour frames
+                level of detail, oclgi/viewer/level_of_detail.py)      are of that mesh
+``bake``        ``id`` (any number), ``exposure`` (optional, > 0)      answered by a glTF
+                                                                       of the current pose
 ==============  =====================================================  ==================
 
 A move must keep the object rigid: its matrix is the object's loaded
@@ -44,6 +48,7 @@ MAX_MESSAGE_BYTES = 16_384  # a move is about 400 bytes; anything longer is refu
 MAX_PHOTONS = 4_000_000  # per tab: photons x max_depth x 48 bytes stay on the device
 MAX_K = 1000  # Photon Maps' neighbours
 MAX_RENDER_SIDE = 4096  # pixels: a render's camera points and image stay well inside the device's memory
+MAX_EXPOSURE = 2.0 ** 20  # a bake's scale on the radiance (the page's +-8 EV and far beyond)
 RIGID_TOLERANCE = 1e-4  # of the rotation's columns: orthonormal to float32-ish rounding of a page's matrix
 
 
@@ -53,7 +58,7 @@ class BadMessage(OclgiError):
 
 @dataclass(frozen=True)
 class Request:
-    kind: str  # "move", "estimator", "photons", "ack", "sync", "light", "render"
+    kind: str  # "move", "estimator", "photons", "ack", "sync", "light", "render", "level", "bake"
     fields: dict
 
 
@@ -140,13 +145,15 @@ def _camera(msg: dict, lo, hi) -> dict:
     return out
 
 
-def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = (), box=None) -> Request:
+def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = (), box=None,
+          levels: int = 0) -> Request:
     """The request in ``text`` (a str from the socket), or BadMessage.
     ``movable``: name -> Movable; ``methods``: the
     estimators this session can switch to; ``diagonal``: the scene's (the
     largest disc radius); ``lights``: the point and spot lights' names;
     ``box``: (lo, hi), where a light or a render's camera may be (the
-    scene's box grown by its diagonal)."""
+    scene's box grown by its diagonal); ``levels``: the levels of detail
+    the page may draw besides the tessellation."""
     if not isinstance(text, str):
         raise BadMessage("messages must be JSON text, not binary")
     if len(text.encode("utf-8", "surrogatepass")) > MAX_MESSAGE_BYTES:
@@ -186,6 +193,13 @@ def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = 
         return Request("ack", {"seq": _integer(msg, "seq", kind, 0, 2**32 - 1)})
     if kind == "sync":
         return Request("sync", {"id": _number(msg, "id", kind)})
+    if kind == "level":
+        return Request("level", {"level": _integer(msg, "level", kind, 0, levels)})
+    if kind == "bake":
+        exposure = _number(msg, "exposure", kind) if "exposure" in msg else 1.0
+        if not 0 < exposure <= MAX_EXPOSURE:
+            raise BadMessage(f"bake: 'exposure' must be in (0, {MAX_EXPOSURE:g}], got {exposure!r}")
+        return Request("bake", {"id": _number(msg, "id", kind), "exposure": float(exposure)})
     lo, hi = box if box is not None else (None, None)
     if kind == "light":
         name = msg.get("light")
@@ -195,4 +209,4 @@ def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = 
         return Request("light", {"light": name, "position": _point(msg, "position", kind, lo, hi)})
     if kind == "render":
         return Request("render", {"id": _number(msg, "id", kind), **_camera(msg, lo, hi)})
-    raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync, light, render)")
+    raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync, light, render, level, bake)")

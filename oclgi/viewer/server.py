@@ -9,7 +9,8 @@ coloured by the vertices' radiance, so orbiting costs the server nothing;
 a move sends the changed colours only.
 
 Routes: ``/`` the page, ``/static/...`` its files, ``/mesh.bin`` the mesh
-(oclgi/viewer/mesh_payload.py), ``/scene.json`` its description,
+(oclgi/viewer/mesh_payload.py), ``/levels.bin`` its levels of detail
+(oclgi/viewer/level_of_detail.py), ``/scene.json`` its description,
 ``/status.json`` the sessions open and closed and the device buffers the
 closed ones released, ``/socket`` the WebSocket (oclgi/viewer/messages.py).
 
@@ -26,6 +27,7 @@ import asyncio
 import concurrent.futures
 import functools
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -47,8 +49,10 @@ class Viewer:
 
     def __init__(self, engine, tess, method=None, photons=None, radius=None, all_vertices: bool = False,
                  allow_origins=(), token: str | None = None, memory: int | None = None,
-                 max_pages: int = DEFAULT_MAX_PAGES):
+                 max_pages: int = DEFAULT_MAX_PAGES, levels=None):
+        """``levels``: the levels of detail's face counts (None: level_of_detail's default, () none)."""
         from ..estimators import ESTIMATORS
+        from .level_of_detail import levels_bytes, levels_of
         from .mesh_payload import description, mesh_bytes, vertex_objects
         from .messages import Movable
         from .object_points import object_points
@@ -62,6 +66,7 @@ class Viewer:
                              f"{', '.join(self.methods)}")
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
+        self.vertex_objects = objects
         queried, self.value_of = object_points(tess, objects, np.asarray(scene.tri_material)[tess.vertex_tri],
                                                all_vertices)
         self.points = tess.points().subset(queried)  # each session's query points
@@ -75,7 +80,13 @@ class Viewer:
         self.lights = movable_lights(scene)
         self.box = (lo - scene.diagonal, hi + scene.diagonal)
         self.mesh = mesh_bytes(tess, objects)
+        t0 = time.perf_counter()
+        self.levels = levels_of(tess, objects, levels)
+        self.levels_seconds = time.perf_counter() - t0
+        self.levels_payload = levels_bytes(self.levels)
         self.description = dict(description(engine, tess, movable), points=len(self.points),
+                                levels=[{"vertices": len(lv.positions), "faces": len(lv.faces), "cell": lv.cell}
+                                        for lv in self.levels],
                                 lights=[{"name": name, "kind": light.kind, "position": list(light.position),
                                          "path": light.path} for name, light in self.lights.items()])
         self.diagonal = scene.diagonal
@@ -114,6 +125,17 @@ class Viewer:
         return open_session(self.lit_engine(lights), self.points, method=method, photons=photons or r.photons,
                             **options)
 
+    def posed_vertices(self, poses: dict) -> tuple[np.ndarray, np.ndarray]:
+        """The tessellation's vertices and normals (V, 3) float64 with each
+        movable object at ``poses`` (name -> 4x4 world-from-object)."""
+        positions, normals = np.array(self.tess.vertices, np.float64), np.array(self.tess.normals, np.float64)
+        for rank, (name, m) in enumerate(self.movable.items()):
+            rel = np.asarray(poses[name], np.float64) @ np.linalg.inv(m.loaded)
+            on = self.vertex_objects == rank + 1
+            positions[on] = positions[on] @ rel[:3, :3].T + rel[:3, 3]
+            normals[on] = normals[on] @ rel[:3, :3].T
+        return positions, normals
+
     def lit_engine(self, lights: dict | None):
         """The shared engine, or a view of it with the lights moved."""
         if not lights:
@@ -138,6 +160,7 @@ class Viewer:
         app = web.Application(middlewares=[self.guard.middleware()])
         app.router.add_get("/", self._page)
         app.router.add_get("/mesh.bin", self._mesh)
+        app.router.add_get("/levels.bin", self._levels)
         app.router.add_get("/scene.json", self._scene)
         app.router.add_get("/status.json", self._status)
         app.router.add_get("/socket", self._socket)
@@ -154,6 +177,11 @@ class Viewer:
         from aiohttp import web
 
         return web.Response(body=self.mesh, content_type="application/octet-stream")
+
+    async def _levels(self, request):
+        from aiohttp import web
+
+        return web.Response(body=self.levels_payload, content_type="application/octet-stream")
 
     async def _scene(self, request):
         from aiohttp import web

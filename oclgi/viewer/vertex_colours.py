@@ -21,10 +21,14 @@ display can show. The page holds ``half(colour * 2^-e)``, bit for bit.
 The vertices whose halves changed go as runs of consecutive indices (start,
 length; the page copies each with one typed-array set), a changed vertex
 alone as an index (a run would cost twice its bytes), or the whole array
-when that is smaller. Layout, little-endian:
+when that is smaller. A frame is of one mesh: the tessellation (level 0)
+or one of its levels of detail (oclgi/viewer/level_of_detail.py, level k
+>= 1, whose colours are a fixed averaging of the tessellation's); each
+level has an encoder of its own, so a page holds every level's halves as
+they were last sent. Layout, little-endian:
 
-    b"OGVC", uint32 seq, uint32 mode (FULL 0 | SPARSE 1), int32 e,
-    FULL:   uint32 V, float16 rgb[V][3]
+    b"OGVC", uint32 seq, uint32 mode (FULL 0 | SPARSE 1), int32 e, uint32 level,
+    FULL:   uint32 V, float16 rgb[V][3]   (V: the level's vertices)
     SPARSE: uint32 R, uint32 S, uint32 start[R], uint32 length[R], uint32 single[S],
             float16 rgb[sum(length) + S][3]   (the runs' vertices in order, then the singles')
 """
@@ -38,7 +42,7 @@ import numpy as np
 
 MAGIC = b"OGVC"
 FULL, SPARSE = 0, 1
-HEADER = struct.Struct("<4sIIi")
+HEADER = struct.Struct("<4sIIiI")
 HEADROOM = 12  # the largest colour near 2^12 after scaling
 HALF_MAX = 65504.0  # float16's largest: a colour above it at the current scale means a new scale
 
@@ -83,16 +87,21 @@ def runs(changed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 class FrameEncoder:
-    """The halves the page has, and the frame that brings it to new colours."""
+    """The halves the page has of one level, and the frame that brings it to new colours."""
 
-    def __init__(self, n_vertices: int):
+    def __init__(self, n_vertices: int, level: int = 0):
         self.sent = None  # the float16 bits the page has (None: nothing yet)
         self.e = 0  # the scale's exponent the page has
         self.n = n_vertices
+        self.level = level
+        self.seq = None  # the update the page's halves are of
 
     def frame(self, colours: np.ndarray, seq: int) -> bytes | None:
-        """The frame from the colours sent to ``colours`` (None when no half
-        changed); ``colours`` become the colours sent."""
+        """The frame from the colours sent to ``colours``; ``colours`` become
+        the colours sent. When no half changed: None if the page's halves
+        are of update ``seq`` already, else a frame of no colour (the page
+        learns they are current at ``seq``, which it needs to know which of
+        its levels is up to date)."""
         colours = np.ascontiguousarray(colours, np.float32)
         e = self.e
         if self.sent is None or colours.max(initial=0.0) * 2.0 ** -e > HALF_MAX:
@@ -103,16 +112,17 @@ class FrameEncoder:
         else:
             ne = half != self.sent
             changed = np.nonzero(ne[:, 0] | ne[:, 1] | ne[:, 2])[0]  # (numpy's any(axis=1) is ten times slower)
-            if not len(changed):
+            if not len(changed) and seq == self.seq:
                 return None
-        self.sent, self.e = half, e
+        self.sent, self.e, self.seq = half, e, seq
         start, length = runs(changed)
         alone = length == 1
         sparse = 4 * (2 + 2 * (~alone).sum() + alone.sum()) + 6 * len(changed)
         if sparse >= 4 + 6 * self.n:
-            return HEADER.pack(MAGIC, seq, FULL, e) + struct.pack("<I", self.n) + half.astype("<u2").tobytes()
+            return (HEADER.pack(MAGIC, seq, FULL, e, self.level) + struct.pack("<I", self.n)
+                    + half.astype("<u2").tobytes())
         long_, singles = ~alone, start[alone]
         order = np.concatenate([changed[~np.repeat(alone, length)], singles])
-        return (HEADER.pack(MAGIC, seq, SPARSE, e) + struct.pack("<II", long_.sum(), len(singles))
+        return (HEADER.pack(MAGIC, seq, SPARSE, e, self.level) + struct.pack("<II", long_.sum(), len(singles))
                 + start[long_].astype("<u4").tobytes() + length[long_].astype("<u4").tobytes()
                 + singles.astype("<u4").tobytes() + half[order].astype("<u2").tobytes())

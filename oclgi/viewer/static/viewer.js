@@ -11,11 +11,30 @@
 // moves a dragged object's vertices itself (a model matrix per movable
 // object), so orbiting and dragging run at display rate whatever the
 // server is doing, and the light follows when its update arrives.
+//
+// While the view moves (a drag, an orbit, the wheel, keys; until REST_MS
+// after the last), a page whose exact frame (the full mesh, sRGB per
+// fragment, every pixel) takes longer than FRAME_BUDGET_MS to draw draws
+// motion frames instead: a level of detail (oclgi/viewer/level_of_detail.py),
+// the finest whose motion frame fits the budget, at MOTION_SCALE of the
+// canvas's resolution each way, with sRGB per vertex; the draw times are
+// measured when the page loads (each frame drawn and finished). The page
+// tells the server which mesh it draws (a "level" message), so a drag's
+// frames carry that level's colours only; at rest it asks for the
+// tessellation again and draws the exact frame once the tessellation's
+// colours are as new as the level's. A mesh is drawn only with colours of
+// the latest update, or, until those arrive, the mesh that has the latest.
+// A page whose exact frame fits the budget (a GPU's) never leaves it.
 "use strict";
 
 const MAX_OBJECTS = 16; // model matrices in the shader: the static scene and up to 15 movable objects
 const PLOT_SECONDS = 10;
 const MAX_RANGE_UPLOADS = 64; // a frame's changed runs uploaded one by one up to this many, else the whole array
+// a moving view's draw: half a 60 Hz display frame, the other half for the page's other work and, on a
+// machine without a GPU, for the server's and the browser's other threads
+const FRAME_BUDGET_MS = 8;
+const REST_MS = 250; // the view rests this long after the last motion: the full mesh again
+const MOTION_SCALE = 0.5; // a motion frame's pixels per canvas pixel, each way
 
 function halfToFloat(h) { // an IEEE float16's bits -> its value
   const e = (h >> 10) & 31, m = h & 1023, s = h & 0x8000 ? -1 : 1;
@@ -77,7 +96,15 @@ const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a
 const normalize = a => scale(a, 1 / Math.hypot(a[0], a[1], a[2]));
 
 // -- shaders --------------------------------------------------------------
-const VERTEX = `#version 300 es
+// Two programs from one source: the exact one converts the interpolated
+// linear radiance to sRGB per fragment; the motion one (MOTION, for the
+// frames of a moving view only) converts per vertex and interpolates the
+// sRGB values, which halves a software rasterizer's fragment cost.
+const SRGB = `vec3 srgb(vec3 c) {
+  c = clamp(c, 0.0, 1.0);
+  return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}`;
+const VERTEX = motion => `#version 300 es
 layout(location = 0) in vec3 position;
 layout(location = 1) in vec3 radiance;
 layout(location = 2) in uint object;
@@ -86,25 +113,23 @@ uniform mat4 model[${MAX_OBJECTS}];
 uniform float exposure;
 out vec3 colour;
 flat out uint objectId;
+${motion ? SRGB : ""}
 void main() {
   gl_Position = viewProjection * model[min(object, ${MAX_OBJECTS - 1}u)] * vec4(position, 1.0);
-  colour = radiance * exposure;
+  colour = ${motion ? "srgb(radiance * exposure)" : "radiance * exposure"};
   objectId = object;
 }`;
-const FRAGMENT = `#version 300 es
+const FRAGMENT = motion => `#version 300 es
 precision highp float;
 in vec3 colour;
 flat in uint objectId;
 uniform int picking;
 uniform int selected;
 out vec4 fragment;
-vec3 srgb(vec3 c) {
-  c = clamp(c, 0.0, 1.0);
-  return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
-}
+${motion ? "" : SRGB}
 void main() {
   if (picking == 1) { fragment = vec4(float(objectId) / 255.0, 0.0, 0.0, 1.0); return; }
-  vec3 c = srgb(colour);
+  vec3 c = ${motion ? "colour" : "srgb(colour)"};
   if (selected > 0 && int(objectId) == selected) c = mix(c, vec3(1.0, 0.7, 0.2), 0.2);
   fragment = vec4(c, 1.0);
 }`;
@@ -132,7 +157,7 @@ function showError(text) {
 
 async function main() {
   const canvas = $("view");
-  const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: true});
+  const gl = canvas.getContext("webgl2", {antialias: false, preserveDrawingBuffer: false});
   if (!gl) { showError("this browser has no WebGL2"); return; }
   // the server's token (oclgi/viewer/guard.py), from the URL `oclgi view` printed
   const token = encodeURIComponent(new URLSearchParams(location.search).get("token") || "");
@@ -143,8 +168,19 @@ async function main() {
   const positions = new Float32Array(meshBuffer, 16, 3 * V);
   const objectOf = new Uint32Array(meshBuffer, 16 + 12 * V, V);
   const faces = new Uint32Array(meshBuffer, 16 + 16 * V, 3 * F);
-  const colours = state.colours = new Float32Array(3 * V); // float16 values (exact in float32), times 2^scaleExponent
-  state.scaleExponent = 0;
+  const levelBuffer = await (await fetch(`levels.bin?token=${token}`)).arrayBuffer();
+  const levelData = []; // per level of detail: positions, objects, faces
+  {
+    const h = new DataView(levelBuffer);
+    let at = 8;
+    for (let k = 0; k < h.getUint32(4, true); k++) {
+      const C = h.getUint32(at, true), G = h.getUint32(at + 4, true);
+      levelData.push({positions: new Float32Array(levelBuffer, at + 16, 3 * C),
+                      objects: new Uint32Array(levelBuffer, at + 16 + 12 * C, C),
+                      faces: new Uint32Array(levelBuffer, at + 16 + 16 * C, 3 * G)});
+      at += 16 + 16 * C + 12 * G;
+    }
+  }
   $("scene-name").textContent = scene.name;
   const objects = scene.objects; // movable: object i is id i + 1 in objectOf
   const loadedInverse = objects.map(o => inverseAffine(o.matrix));
@@ -153,37 +189,81 @@ async function main() {
   for (const l of lights) state.lights[l.name] = l.position.slice();
 
   // geometry
-  const program = gl.createProgram();
-  gl.attachShader(program, compile(gl, gl.VERTEX_SHADER, VERTEX));
-  gl.attachShader(program, compile(gl, gl.FRAGMENT_SHADER, FRAGMENT));
-  gl.linkProgram(program);
-  if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(program));
-  const u = name => gl.getUniformLocation(program, name);
-  const uniforms = {viewProjection: u("viewProjection"), model: u("model"), exposure: u("exposure"),
-                    picking: u("picking"), selected: u("selected")};
-  const vao = gl.createVertexArray();
-  gl.bindVertexArray(vao);
+  function link(motion) { // a program and its uniforms (the shaders above)
+    const program = gl.createProgram();
+    gl.attachShader(program, compile(gl, gl.VERTEX_SHADER, VERTEX(motion)));
+    gl.attachShader(program, compile(gl, gl.FRAGMENT_SHADER, FRAGMENT(motion)));
+    gl.linkProgram(program);
+    if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(program));
+    const u = name => gl.getUniformLocation(program, name);
+    return {program, viewProjection: u("viewProjection"), model: u("model"), exposure: u("exposure"),
+            picking: u("picking"), selected: u("selected")};
+  }
+  const programs = {exact: link(false), motion: link(true)};
   const buffer = (target, data, usage) => {
     const b = gl.createBuffer();
     gl.bindBuffer(target, b);
     gl.bufferData(target, data, usage);
     return b;
   };
-  buffer(gl.ARRAY_BUFFER, positions, gl.STATIC_DRAW);
-  gl.enableVertexAttribArray(0);
-  gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
-  const colourBuffer = buffer(gl.ARRAY_BUFFER, colours, gl.DYNAMIC_DRAW);
-  gl.enableVertexAttribArray(1);
-  gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 0, 0);
-  buffer(gl.ARRAY_BUFFER, objectOf, gl.STATIC_DRAW);
-  gl.enableVertexAttribArray(2);
-  gl.vertexAttribIPointer(2, 1, gl.UNSIGNED_INT, 0, 0);
-  buffer(gl.ELEMENT_ARRAY_BUFFER, faces, gl.STATIC_DRAW);
-  gl.bindVertexArray(null);
-  let colourDirty = true;
-  let dirtyRanges = null; // [first, count] in vertices changed since the last upload; null: the whole array
+  function makeMesh(pos, obj, tri) { // a mesh to draw: its buffers and the colours the server sent it
+    const n = pos.length / 3;
+    const mesh = {n, count: tri.length, colours: new Float32Array(3 * n), e: 0, seq: -1, dirty: true,
+                  ranges: null, // [first, count] in vertices changed since the last upload; null: the whole array
+                  vao: gl.createVertexArray()};
+    gl.bindVertexArray(mesh.vao);
+    buffer(gl.ARRAY_BUFFER, pos, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(0);
+    gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+    mesh.colourBuffer = buffer(gl.ARRAY_BUFFER, mesh.colours, gl.DYNAMIC_DRAW);
+    gl.enableVertexAttribArray(1);
+    gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 0, 0);
+    buffer(gl.ARRAY_BUFFER, obj, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(2);
+    gl.vertexAttribIPointer(2, 1, gl.UNSIGNED_INT, 0, 0);
+    buffer(gl.ELEMENT_ARRAY_BUFFER, tri, gl.STATIC_DRAW);
+    gl.bindVertexArray(null);
+    return mesh;
+  }
+  // meshes[0]: the tessellation; meshes[k]: its k-th level of detail
+  const meshes = [makeMesh(positions, objectOf, faces), ...levelData.map(l => makeMesh(l.positions, l.objects, l.faces))];
+  const colours = state.colours = meshes[0].colours; // float16 values (exact in float32), times 2^scaleExponent
+  state.scaleExponent = 0;
+  state.fullSeq = -1; // the update the tessellation's colours are of
+  state.drawnLevel = 0;
+  state.levelSeqs = meshes.map(() => -1);
+  // the measured draw times (ms): the exact frame of the full mesh, and the motion frame of each mesh
+  state.frameMs = {full: null, motion: meshes.map(() => null)};
+  state.drawsByLevel = meshes.map(() => 0);
+  let motionLevel = 0; // the mesh drawn while the view moves
+  let slow = false; // the exact frame misses the budget: a moving view draws motion frames
+  let shownMotion = false; // the frame drawn last was a motion frame
+  let serverLevel = 0; // the mesh the server sends the colours of
+  let lastMotion = -Infinity;
+  let shown = 0; // the mesh drawn last
   let redraw = true; // something shown changed: the next display frame draws (an idle page costs nothing)
   const changed = () => { redraw = true; };
+  const moved = () => { redraw = true; lastMotion = performance.now(); }; // the view or an object moves
+  function chooseLevel() { // the finest mesh whose motion frame fits the budget (the coarsest if none does)
+    const ms = state.frameMs;
+    slow = ms.full != null && ms.full > FRAME_BUDGET_MS;
+    motionLevel = 0;
+    if (slow) {
+      motionLevel = meshes.length - 1;
+      for (let k = 0; k < meshes.length; k++) if (ms.motion[k] != null && ms.motion[k] <= FRAME_BUDGET_MS) { motionLevel = k; break; }
+    }
+    state.motionLevel = motionLevel;
+    return motionLevel;
+  }
+  const moving = () => slow && (drag || performance.now() - lastMotion < REST_MS);
+  function wantedLevel() { return moving() ? motionLevel : 0; }
+  function levelToShow() { // the wanted mesh once its colours are of the latest update, else the newest one
+    const want = wantedLevel();
+    if (meshes[want].seq === state.seq) return want;
+    let best = 0;
+    for (let k = 1; k < meshes.length; k++) if (meshes[k].seq > meshes[best].seq) best = k;
+    return best;
+  }
 
   // camera: orbit about a target
   const [lo, hi] = scene.bounds;
@@ -347,24 +427,62 @@ async function main() {
   // drawing: at display rate, whatever the socket is doing
   const modelData = new Float32Array(16 * MAX_OBJECTS);
   let selected = 0;
-  function draw(picking) {
-    const w = canvas.clientWidth, h = canvas.clientHeight;
-    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+  function draw(picking, level = shown, motion = shownMotion) {
+    const mesh = meshes[level], p = motion ? programs.motion : programs.exact;
+    if (!picking) { // a motion frame: fewer pixels, which the browser scales up to the canvas
+      const f = motion ? MOTION_SCALE : 1;
+      const w = Math.max(1, Math.round(canvas.clientWidth * f)), h = Math.max(1, Math.round(canvas.clientHeight * f));
+      if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    }
     gl.viewport(0, 0, canvas.width, canvas.height);
     gl.enable(gl.DEPTH_TEST);
     gl.clearColor(0, 0, 0, 1);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
-    gl.useProgram(program);
+    gl.useProgram(p.program);
     modelData.set(columnMajor(translation(0, 0, 0)), 0);
     for (let i = 0; i < objects.length && i + 1 < MAX_OBJECTS; i++) modelData.set(columnMajor(relative(i)), 16 * (i + 1));
-    gl.uniformMatrix4fv(uniforms.model, false, modelData);
-    gl.uniformMatrix4fv(uniforms.viewProjection, false, columnMajor(viewProjection()));
-    gl.uniform1f(uniforms.exposure, exposure * Math.pow(2, state.scaleExponent));
-    gl.uniform1i(uniforms.picking, picking ? 1 : 0);
-    gl.uniform1i(uniforms.selected, selected);
-    gl.bindVertexArray(vao);
-    gl.drawElements(gl.TRIANGLES, 3 * F, gl.UNSIGNED_INT, 0);
+    gl.uniformMatrix4fv(p.model, false, modelData);
+    gl.uniformMatrix4fv(p.viewProjection, false, columnMajor(viewProjection()));
+    gl.uniform1f(p.exposure, exposure * Math.pow(2, mesh.e));
+    gl.uniform1i(p.picking, picking ? 1 : 0);
+    gl.uniform1i(p.selected, selected);
+    gl.bindVertexArray(mesh.vao);
+    gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
     gl.bindVertexArray(null);
+  }
+  function upload(mesh) {
+    if (!mesh.dirty) return;
+    gl.bindBuffer(gl.ARRAY_BUFFER, mesh.colourBuffer);
+    if (mesh.ranges === null) gl.bufferSubData(gl.ARRAY_BUFFER, 0, mesh.colours);
+    else for (const [first, n] of mesh.ranges) gl.bufferSubData(gl.ARRAY_BUFFER, 12 * first, mesh.colours, 3 * first, 3 * n);
+    mesh.dirty = false;
+    mesh.ranges = [];
+  }
+  const onePixel = new Uint8Array(4);
+  function finish() { // wait for the drawing to be done (a pixel read back: Chrome's finish() does not wait)
+    gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, onePixel);
+  }
+  function measure(level, motion, n = 3) { // ms to draw a frame, finished (the median of n, after one)
+    const t = [];
+    finish();
+    for (let i = 0; i <= n; i++) {
+      const t0 = performance.now();
+      draw(false, level, motion);
+      finish();
+      t.push(performance.now() - t0);
+    }
+    t.shift();
+    t.sort((a, b) => a - b);
+    return t[n >> 1];
+  }
+  function measureLevels() { // the exact frame's draw time; if it misses the budget, the motion frames'
+    state.frameMs.full = measure(0, false);
+    for (let k = 0; k < meshes.length && state.frameMs.full > FRAME_BUDGET_MS; k++) {
+      state.frameMs.motion[k] = measure(k, true);
+      if (state.frameMs.motion[k] <= FRAME_BUDGET_MS) break; // the finest that fits: coarser ones are not needed
+    }
+    chooseLevel();
+    redraw = true;
   }
   let pickTarget = null;
   function pick(x, y) { // the movable object under canvas pixel (x, y): 1 + its index, or 0
@@ -381,7 +499,7 @@ async function main() {
       pickTarget = {fb, w, h};
     }
     gl.bindFramebuffer(gl.FRAMEBUFFER, pickTarget.fb);
-    draw(true);
+    draw(true, motionLevel, false); // the mesh a drag would draw, at the canvas's size now
     const px = new Uint8Array(4);
     const sx = Math.floor(x * w / canvas.clientWidth), sy = Math.floor(h - 1 - y * h / canvas.clientHeight);
     gl.readPixels(sx, sy, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
@@ -404,21 +522,25 @@ async function main() {
   function applyFrame(buf) {
     const view = new DataView(buf);
     if (buf.byteLength >= 20 && view.getUint32(0, true) === 0x5256474f) { showRender(buf); return; } // "OGVR"
+    if (buf.byteLength >= 8 && view.getUint32(0, true) === 0x4256474f) { showBake(buf); return; } // "OGVB"
     if (buf.byteLength < 20 || view.getUint32(0, true) !== 0x4356474f) return; // "OGVC"
     const applyStart = performance.now();
-    let sentVertices = V;
     const seq = view.getUint32(4, true), mode = view.getUint32(8, true), e = view.getInt32(12, true);
-    if (e !== state.scaleExponent) { state.scaleExponent = e; redraw = true; }
+    const level = view.getUint32(16, true), mesh = meshes[level];
+    if (!mesh) return;
+    const colours = mesh.colours;
+    let sentVertices = mesh.n;
+    if (e !== mesh.e) { mesh.e = e; redraw = true; }
     if (mode === 0) {
-      colours.set(halves(buf, 20, 3 * V));
-      dirtyRanges = null;
+      colours.set(halves(buf, 24, 3 * mesh.n));
+      mesh.ranges = null;
     } else {
-      const R = view.getUint32(16, true), S = view.getUint32(20, true);
-      const start = new Uint32Array(buf, 24, R), length = new Uint32Array(buf, 24 + 4 * R, R);
-      const single = new Uint32Array(buf, 24 + 8 * R, S);
+      const R = view.getUint32(20, true), S = view.getUint32(24, true);
+      const start = new Uint32Array(buf, 28, R), length = new Uint32Array(buf, 28 + 4 * R, R);
+      const single = new Uint32Array(buf, 28 + 8 * R, S);
       let at = 0;
       for (let r = 0; r < R; r++) at += length[r];
-      const values = halves(buf, 24 + 8 * R + 4 * S, 3 * (at + S));
+      const values = halves(buf, 28 + 8 * R + 4 * S, 3 * (at + S));
       sentVertices = at + S;
       at = 0;
       for (let r = 0; r < R; r++) { // a run: one typed-array copy
@@ -429,23 +551,27 @@ async function main() {
         const v = 3 * single[i], w = 3 * (at + i);
         colours[v] = values[w]; colours[v + 1] = values[w + 1]; colours[v + 2] = values[w + 2];
       }
-      if (dirtyRanges !== null || !colourDirty) {
-        if (!colourDirty) dirtyRanges = [];
-        if (dirtyRanges.length + R + S > MAX_RANGE_UPLOADS) dirtyRanges = null;
+      if (mesh.ranges !== null || !mesh.dirty) {
+        if (!mesh.dirty) mesh.ranges = [];
+        if (mesh.ranges.length + R + S > MAX_RANGE_UPLOADS) mesh.ranges = null;
         else {
-          for (let r = 0; r < R; r++) dirtyRanges.push([start[r], length[r]]);
-          for (let i = 0; i < S; i++) dirtyRanges.push([single[i], 1]);
+          for (let r = 0; r < R; r++) mesh.ranges.push([start[r], length[r]]);
+          for (let i = 0; i < S; i++) mesh.ranges.push([single[i], 1]);
         }
       }
     }
+    mesh.seq = seq;
+    state.levelSeqs[level] = seq;
+    if (level === 0) { state.fullSeq = seq; state.scaleExponent = e; }
     state.seq = seq;
     state.frames++;
-    state.frameStats = {bytes: buf.byteLength, vertices: sentVertices, applyMs: performance.now() - applyStart};
+    state.frameStats = {bytes: buf.byteLength, vertices: sentVertices, level, applyMs: performance.now() - applyStart};
     state.frameAt = performance.now();
     state.moveToFrame = lastMoveSent ? state.frameAt - lastMoveSent : null;
-    colourDirty = true;
+    mesh.dirty = true;
+    redraw = true;
     send({type: "ack", seq});
-    if (state.frames === 1) autoExposure();
+    if (state.frames === 1) { autoExposure(); upload(meshes[0]); measureLevels(); }
   }
   function describe(msg) {
     for (const name in msg.lights || {}) {
@@ -543,6 +669,8 @@ async function main() {
         `paths, ${((performance.now() - renderStarted) / 1000).toFixed(1)} s`;
     } else if (msg.type === "rendered") {
       renderInfo = msg;
+    } else if (msg.type === "baked") {
+      bakeInfo = msg;
     } else if (msg.type === "error") {
       if (msg.request === "render") { $("render-progress").hidden = true; $("render-result").textContent = ""; }
       showError(msg.message);
@@ -599,6 +727,26 @@ async function main() {
     renderWaiting.delete(info.id);
     if (resolve) resolve(entry);
   }
+  // "bake this pose": the tessellation with the colours shown, as a glTF file
+  let bakes = 0, bakeInfo = null;
+  const bakeWaiting = new Map(); // bake id -> resolve
+  function requestBake() {
+    const id = ++bakes;
+    $("bake-result").textContent = "baking...";
+    send({type: "bake", id, exposure});
+    return new Promise(resolve => bakeWaiting.set(id, resolve));
+  }
+  function showBake(buf) {
+    const n = new DataView(buf).getUint32(4, true), glb = new Uint8Array(buf, 8, n), info = bakeInfo || {};
+    const url = URL.createObjectURL(new Blob([glb], {type: "model/gltf-binary"}));
+    $("bake-result").innerHTML = `${(n / 1024).toFixed(0)} KB: <a href="${url}" download="oclgi-bake-${info.id}.glb">` +
+      `oclgi-bake-${info.id}.glb</a>`;
+    const resolve = bakeWaiting.get(info.id);
+    bakeWaiting.delete(info.id);
+    if (resolve) resolve({id: info.id, glb, seq: info.seq});
+  }
+  $("bake").onclick = () => requestBake();
+
   $("render").onclick = () => {
     const w = Math.round(Number($("render-width").value));
     if (!(w >= 1 && w <= 4096)) { showError("render: the width must be 1 to 4096 pixels"); return; }
@@ -634,13 +782,13 @@ async function main() {
   function queueMove(name, matrix) {
     state.poses[name] = matrix;
     pendingMoves.set(name, matrix);
-    changed();
+    moved();
     flushMoves();
   }
   function queueLight(name, position) {
     state.lights[name] = position;
     pendingLights.set(name, position);
-    changed();
+    moved();
     flushMoves();
   }
   function planeHit(r, y) {
@@ -710,7 +858,7 @@ async function main() {
     }
     const dx = x - drag.x, dy = y - drag.y;
     drag.x = x; drag.y = y;
-    changed();
+    moved();
     if (drag.kind === "orbit") {
       camera.yaw -= dx * 0.008;
       camera.pitch = Math.max(-1.5, Math.min(1.5, camera.pitch + dy * 0.008));
@@ -719,11 +867,11 @@ async function main() {
       camera.target = add(camera.target, add(scale(f.rightUnit, -dx * s), scale(f.upUnit, dy * s)));
     }
   });
-  canvas.addEventListener("pointerup", () => { drag = null; changed(); });
+  canvas.addEventListener("pointerup", () => { drag = null; moved(); });
   canvas.addEventListener("wheel", e => {
     e.preventDefault();
     camera.distance *= Math.exp(e.deltaY * 0.001);
-    changed();
+    moved();
   }, {passive: false});
   window.addEventListener("keydown", e => {
     if (!selected || e.target.tagName === "INPUT") return;
@@ -741,21 +889,26 @@ async function main() {
   });
 
   function tick() {
-    if (colourDirty) {
-      redraw = true;
-      gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
-      if (dirtyRanges === null) gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
-      else for (const [first, n] of dirtyRanges) gl.bufferSubData(gl.ARRAY_BUFFER, 12 * first, colours, 3 * first, 3 * n);
-      colourDirty = false;
-      dirtyRanges = [];
-      if (state.drawnSeq !== state.seq) { drawnTimes.push(performance.now()); state.drawnSeq = state.seq; }
-    }
+    const want = wantedLevel();
+    if (want !== serverLevel && ws.readyState === WebSocket.OPEN) { send({type: "level", level: want}); serverLevel = want; }
+    const level = levelToShow(), motion = moving();
+    if (level !== shown || motion !== shownMotion) { shown = level; shownMotion = motion; redraw = true; }
+    upload(meshes[shown]); // a mesh not drawn keeps its changes until it is
     if (redraw) {
       draw(false);
       placeMarkers();
       redraw = false;
       state.draws++;
       state.drawnAt = performance.now();
+      state.drawnLevel = shown;
+      state.drawnMotion = shownMotion;
+      state.drawsByLevel[shown]++;
+      if (state.drawnSeq !== meshes[shown].seq) { // a new update's colours on screen
+        if (state.timeDraws) finish(); // (a benchmark's: when the frame is done, not just asked for)
+        state.drawnDoneAt = performance.now();
+        drawnTimes.push(state.drawnAt);
+        state.drawnSeq = meshes[shown].seq;
+      }
     }
     const now = performance.now();
     if (moveInFlight && now - lastMoveSent > 2000) moveInFlight = false; // an answer lost: never stall a drag
@@ -774,10 +927,11 @@ async function main() {
   state.api = {
     project, pick, objectBox, home, gizmoPoints, select(i) { selected = i; changed(); },
     camera: () => ({...camera}),
-    orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; changed(); },
+    orbit(dyaw, dpitch) { camera.yaw += dyaw; camera.pitch += dpitch; moved(); },
     move: queueMove,
     moveLight: queueLight,
     render: requestRender,
+    bake: requestBake,
     renderCamera,
     pickLight: (x, y) => { const l = pickLight(x, y); return l ? l.name : null; },
     sync() { // answered once the server has done everything sent before it
@@ -789,16 +943,18 @@ async function main() {
       return new Promise(resolve => { waiting.set(id, resolve); send({type: "sync", id}); });
     },
     send,
-    drawMs(n = 5) { // the page's cost of one frame: upload the colours and draw, finished
-      const t0 = performance.now();
-      for (let i = 0; i < n; i++) {
-        gl.bindBuffer(gl.ARRAY_BUFFER, colourBuffer);
-        gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
-        draw(false);
-        gl.finish();
-      }
-      return (performance.now() - t0) / n;
+    drawMs(n = 5, level = 0, motion = false) { // ms of one frame of mesh ``level``, drawn and finished (median)
+      upload(meshes[level]);
+      const ms = measure(level, motion, n);
+      redraw = true;
+      return ms;
     },
+    frameTimes(full, motion = []) { // the draw times as if measured (a test's fast or slow browser); the level chosen
+      state.frameMs = {full, motion: meshes.map((_, k) => motion[k] == null ? null : motion[k])};
+      return chooseLevel();
+    },
+    levels: () => meshes.length - 1,
+    levelColours: k => ({colours: Array.from(meshes[k].colours), e: meshes[k].e, seq: meshes[k].seq}),
   };
 }
 
