@@ -22,11 +22,16 @@ hold), per f:
 - the interactive rate on the Cornell box and on Sponza, each with the
   Stanford bunny (f = 0.1) going round: updates per second with the time
   split per stage, and the process' memory over the frames; and the rate
-  against the number of stored segments (``segments``).
+  against the number of stored segments (``segments``);
+- final gathering in a session (``gather``): the Cornell box + bunny going
+  round, sensor points on the floor and walls, exact direct light with
+  and without N gather rays: the update's stages (``gather``: the rays
+  traced again and the changed discs summed over the store) and the read
+  (resolve: the direct light of the points and of their hits).
 
 Writes ``bench/results/update_study.{json,md}`` and ``update_speedup.png``.
 Usage: ``.venv/bin/python bench/update_study.py [--parts speedup,constants,
-dynamic,interactive,segments] [--frames N] [--scenes cornell,sponza] [--quick]``.
+dynamic,interactive,segments,gather] [--frames N] [--scenes cornell,sponza] [--quick]``.
 """
 
 from __future__ import annotations
@@ -186,6 +191,45 @@ def interactive(name, method, quick, frames, f=0.1, dynamic="detp_disc_index", s
             "max_rss_mib_samples": rss, "setup_s": session.setup_seconds}
 
 
+def gather_session(quick, frames, n_points=1000, rays=(0, 16, 64), segments=1e6):
+    """A session over sensor points (floor and walls of the Cornell box) with
+    exact direct light and N gather rays, the bunny (f = 0.1) going round:
+    median ms per stage of a move, of the read (irradiance()), the rays a
+    move changed."""
+    engine, base, path_r = scene_engine("cornell", 8)
+    rng = np.random.default_rng(3)
+    n = n_points // 2
+    floor = np.column_stack([rng.uniform(-0.95, 0.95, n), np.zeros(n), rng.uniform(-0.95, 0.95, n),
+                             np.zeros(n), np.ones(n), np.zeros(n)])
+    wall = np.column_stack([rng.uniform(-0.95, 0.95, n), rng.uniform(0.05, 1.9, n), np.full(n, -1.0),
+                            np.zeros(n), np.zeros(n), np.ones(n)])
+    pts = np.concatenate([floor, wall])
+    engine.move("bunny", circle(engine.scene, 0.1, base, path_r, frames, 0))
+    photons = photons_for(engine, segments / 10 if quick else segments)
+    poses = [circle(engine.scene, 0.1, base, path_r, frames, i) for i in range(frames + 1)]
+    rows = []
+    for n_rays in rays:
+        kw = dict(method="detp_disc_index", photons=photons, radius=0.03, direct="exact")
+        if n_rays:
+            kw["gather"] = n_rays
+        with oclgi.Session(engine, pts, **kw) as s:
+            stats, reads = [], []
+            for i in range(1, frames + 1):
+                stats.append(s.move("bunny", poses[i]))
+                t0 = time.perf_counter()
+                s.irradiance()
+                reads.append(time.perf_counter() - t0)
+            stages = {k: float(np.median([st.seconds[k] for st in stats if k in st.seconds]))
+                      for k in dict.fromkeys(k for st in stats for k in st.seconds)}
+            total = float(np.median([st.seconds["total"] + r for st, r in zip(stats, reads)]))
+            rows.append({"gather": n_rays, "points": len(pts), "photons": photons, "setup_s": s.setup_seconds,
+                         "stage_median_s": stages, "read_median_s": float(np.median(reads)),
+                         "rays_changed_median": float(np.median([st.rays_changed for st in stats])),
+                         "updates_per_s": 1 / total})
+        print(f"gather {n_rays}: {rows[-1]['updates_per_s']:.1f} updates/s, {stages}", flush=True)
+    return rows
+
+
 def static_constants(quick, rng):
     """The static points' constants: counted work of an update per changed
     segment and per cbrt(n_S), disc indexing vs the sphere cache (model: 2
@@ -296,6 +340,14 @@ def markdown(res):
                      "pixels, 30 frames)", "stored segments | updates/s | " + " | ".join(f"{k} ms" for k in STAGES),
                      res["rate_vs_segments"], lambda r: f"{r['n_R']:,} | {r['updates_per_s']:.1f} | " + " | ".join(
                          f"{r['stage_median_s'].get(k, 0) * 1e3:.1f}" for k in STAGES))
+    if res.get("gather"):
+        keys = ("find", "subtract", "retrace", "add", "gather", "total")
+        md += _table("Final gathering in a session (Cornell box + bunny, f = 0.1; sensor points on the floor and "
+                     "walls, exact direct light)", "gather rays | points | photons | rays changed per move | "
+                     + " | ".join(f"{k} ms" for k in keys) + " | read ms | updates/s (move + read)", res["gather"],
+                     lambda r: f"{r['gather']} | {r['points']:,} | {r['photons']:,} | {r['rays_changed_median']:,.0f} | "
+                     + " | ".join(f"{r['stage_median_s'].get(k, 0) * 1e3:.1f}" for k in keys)
+                     + f" | {r['read_median_s'] * 1e3:.1f} | {r['updates_per_s']:.1f}")
     for inter in res.get("interactive", []):
         md += ["", f"## Interactive rate ({inter['scene']} + bunny, f = {inter['f']})", "",
                f"{inter['n_R']:,} stored segments, {inter['points']:,} query points, {inter['frames']} frames, "
@@ -346,6 +398,8 @@ def main():
     if "segments" in parts:  # the rate against the store's size, Cornell box
         res["rate_vs_segments"] = [interactive("cornell", args.method, args.quick, 30, segments=n)
                                    for n in (1.25e5, 2.5e5, 5e5, 1e6, 2e6)]
+    if "gather" in parts:
+        res["gather"] = gather_session(args.quick, min(args.frames, 30))
     if "interactive" in parts:
         res["interactive"] = [interactive(name, args.method, args.quick, args.frames)
                               for name in args.scenes.split(",")]

@@ -22,8 +22,9 @@ kernels/final_gather.cl).
   counted twice, none lost); an area light seen only through a mirror
   reaches the point by its gather rays (the quadrature of its image); the
   Cornell box (an area light) gathers to its photons' mean.
-- Refused with one error line: direct = "photons", bad values, sessions
-  and light animations, methods other than DETP.
+- Refused with one error line: direct = "photons", bad values, camera
+  sessions and light animations, methods other than DETP (sessions over
+  given points: tests/test_gather_session.py).
 """
 
 import numpy as np
@@ -152,8 +153,6 @@ def test_refused(shadow, cornell):
     with pytest.raises(OclgiError, match="takes no option"):
         engine.irradiance(pts, method="photon_map", photons=1000, gather=8)
     points = oclgi.query_points(pts[:, :3], pts[:, 3:])
-    with pytest.raises(OclgiError, match="sessions: gather"):
-        oclgi.Session(engine, points, method="detp_disc_index", photons=1000, direct="exact", gather=8)
     with pytest.raises(OclgiError, match="Engine.estimator"):
         DetpDiscIndex(engine.queue, engine.compiled, points, 0.1, gather=8)
 

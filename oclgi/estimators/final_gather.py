@@ -59,9 +59,17 @@ delta light; for the others 2 ``direct_samples`` rays at the point and 2
 max(1, direct_samples // N) at each hit: the point's indirect light
 averages its hits' noise).
 
-Refused where it could not be exact: sessions and light animations (the
-hits depend on the geometry, and the discs are not the query points);
-their errors say so.
+Sessions over given points (oclgi/incremental/session.py) keep it exact
+under moves: the hits' sums follow the changed photon paths as any query
+point's do, and after each move ``regather`` traces every ray again (the
+same pure function, at the new pose) and compares: a ray whose hit,
+weight or seen emission changed gets its new disc, whose sums are taken
+over the whole store, as a fresh run's would be. The rays are the same
+for any point subset only by point index: a session keys them by each
+point's index in its own static or dynamic set, so it equals a fresh
+session at the same pose bit for bit (and a plain run when no point is on
+a movable object). Refused where it could not be exact: camera sessions
+and light animations; their errors say so.
 """
 
 from __future__ import annotations
@@ -70,7 +78,7 @@ import numpy as np
 import pyopencl as cl
 
 from .. import queries
-from ..cl.programs import launch, programs
+from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
 from .base import Estimator
 from .detp_direct import DIRECT_SAMPLES, DirectLight, hit_samples
@@ -136,13 +144,14 @@ class FinalGather(Estimator):
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
         self.hits, self.hit_weights, self.emitted = gather_rays(queue, compiled, self.positions, self.normals,
-                                                                self.n, n_rays,
-                                                                gather_key(int(seed), self.gather_seed),
+                                                                self.n, n_rays, gather_key(int(seed), self.gather_seed),
                                                                 self.local_size)
         # The variant's own discs at the hits, with their own exact direct light.
-        self.inner = variant(queue, compiled, self.hits, radius, direct="exact",
-                             direct_samples=hit_samples(direct_samples, n_rays),
-                             direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
+        self.key = gather_key(int(seed), self.gather_seed)
+        self.make_inner = lambda hits: variant(queue, compiled, hits, radius, direct="exact",
+                                               direct_samples=hit_samples(direct_samples, n_rays),
+                                               direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
+        self.inner = self.make_inner(self.hits)
         self.radius = self.inner.radius
         self.weights_buf = self.upload(self.hit_weights)
         self.irr = self.zeros(self.n * 16)  # the points' irradiance, as every estimator's resolve leaves it
@@ -173,7 +182,41 @@ class FinalGather(Estimator):
         return self.inner.work()
 
     def replace_points(self, index, new) -> None:
-        raise OclgiError("gather (final gathering): the query points cannot be replaced (sessions refuse it)")
+        raise OclgiError("gather (final gathering): the query points cannot be replaced (camera sessions refuse it)")
+
+    def forget_store(self, store) -> None:
+        self.inner.forget_store(store)
+
+    def regather(self, batch) -> int:
+        """After a move: every ray traced again at the current pose; the
+        rays whose hit (position, triangle, normal, barycentrics), weight or
+        seen emission changed take their new disc, its sums over ``batch``
+        (the whole store, as it is now). The number of rays changed."""
+        hits, weights, emitted = gather_rays(self.queue, self.compiled, self.positions, self.normals, self.n,
+                                             self.n_rays, self.key, self.local_size)
+        n = self.n * self.n_rays
+        seen_old, seen_new = (read_buffer(self.queue, e, (n, 4), np.float32) for e in (self.emitted, emitted))
+        old = self.inner.points
+
+        def bits(*arrays):
+            return np.concatenate([np.ascontiguousarray(a, np.float32).reshape(n, -1).view(np.uint32)
+                                   for a in arrays], axis=1)
+        differ = bits(old.positions, old.normals, old.barys, self.hit_weights, seen_old) != bits(
+            hits.positions, hits.normals, hits.barys, weights, seen_new)
+        changed = np.nonzero(differ.any(axis=1))[0]
+        self.emitted = emitted
+        if not len(changed):
+            return 0
+        new = hits.subset(changed)
+        self.inner.replace_points(changed, new)
+        fresh = self.make_inner(new)  # the changed discs' sums over the whole store, as a fresh run's
+        fresh.accumulate(batch)
+        acc = self.inner.accumulators()
+        acc[changed] = fresh.accumulators()
+        cl.enqueue_copy(self.queue, self.inner.acc, acc)
+        self.hit_weights = weights
+        cl.enqueue_copy(self.queue, self.weights_buf, weights)
+        return len(changed)
 
     def resolve(self, scale: float) -> cl.Buffer:
         """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""

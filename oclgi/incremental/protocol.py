@@ -36,6 +36,7 @@ class UpdateStats:
     segments_removed: int  # old suffix segments taken away (n_Rec)
     segments_added: int  # new suffix segments added
     points: int = 0  # points recomputed (camera sessions' dynamic points; Photon Maps' searched points)
+    rays_changed: int = 0  # final gathering: the gather rays whose hit the move changed (FinalGather.regather)
     seconds: dict = field(default_factory=dict)
 
 

@@ -40,6 +40,10 @@ from .protocol import SessionBase, UpdateStats  # noqa: F401 (UpdateStats: the s
 from .segment_store import SegmentStore
 
 
+# the options of the light a DETP estimate takes (detp_direct.py, final_gather.py), whichever variant
+LIGHT_OPTIONS = ("direct", "direct_samples", "direct_mis", "gather", "gather_seed")
+
+
 def _add_work(total: dict | None, more: dict | None) -> dict | None:
     if total is None or more is None:
         return total or more
@@ -119,7 +123,8 @@ class Session(SessionBase):
         from ..estimators.gather_options import refuse_incremental
 
         cls = ESTIMATORS[method]
-        refuse_incremental(options, "sessions")
+        if camera:  # its pixels' points change with every move; given points keep a gather exact (regather)
+            refuse_incremental(options, "camera sessions")
         if not cls.incremental:
             raise OclgiError(f"method {method!r} has no exact incremental update; sessions take "
                              f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")
@@ -354,6 +359,11 @@ class Session(SessionBase):
             stats.segments_removed, stats.segments_added = int(removed), int(added)
             t5 = time.perf_counter()
             seconds.update(subtract=t3 - t2, retrace=t4 - t3, add=t5 - t4)
+        if hasattr(self.estimator, "regather"):  # final gathering: the rays the move changed, their new discs
+            t6 = time.perf_counter()
+            stats.rays_changed = self.estimator.regather(self.store.batch)
+            q.finish()
+            seconds["gather"] = time.perf_counter() - t6
         if deferred:  # nothing was re-traced
             t6 = time.perf_counter()
             self._new_dynamic()
@@ -380,6 +390,8 @@ class Session(SessionBase):
 
         if self.view is None or not self.estimator.sums_per_point:
             return None
+        if self.options.get("gather", 0):
+            return "store"  # a gathered point's discs sit at its rays' hits, not at the point
         return self.dynamic_pass if ESTIMATORS[self.dynamic].fuses_with_find else "store"
 
     def _refresh_view(self, build: bool = True) -> int:
@@ -417,7 +429,9 @@ class Session(SessionBase):
         from ..estimators import ESTIMATORS
 
         p = self.params
-        options = self.options if self.dynamic == p.method else {"count_work": self.options["count_work"]}
+        # another variant takes the method's light options only: the direct light's and the gather's
+        options = self.options if self.dynamic == p.method else {
+            k: v for k, v in self.options.items() if k == "count_work" or k in LIGHT_OPTIONS}
         # an index built on every move, walked once (DetpDiscIndex.dynamic_tree)
         options = {**getattr(ESTIMATORS[self.dynamic], "dynamic_tree", {}), **options}
         self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
