@@ -36,9 +36,10 @@ const FRAME_BUDGET_MS = 8;
 const REST_MS = 250; // the view rests this long after the last motion: the full mesh again
 const MOTION_SCALE = 0.5; // a motion frame's pixels per canvas pixel, each way
 // A software browser's compositor spends about 15 ms of CPU on every frame
-// shown, whatever is drawn (headless Chromium, SwiftShader, 2 cores): a
-// moving view without a GPU shows a new pose at most every MOTION_INTERVAL_MS,
-// so the server keeps its share of the CPU; new colours are shown at once.
+// shown, whatever is drawn (headless Chromium, SwiftShader, 2 cores): while
+// the server computes a move of this page, a moving view without a GPU
+// shows a new pose at most every MOTION_INTERVAL_MS, so the server keeps its
+// share of the CPU; new colours are shown at once, an orbit at display rate.
 const MOTION_INTERVAL_MS = 33;
 
 function halfToFloat(h) { // an IEEE float16's bits -> its value
@@ -900,7 +901,7 @@ async function main() {
     if (level !== shown || motion !== shownMotion) { shown = level; shownMotion = motion; redraw = true; }
     upload(meshes[shown]); // a mesh not drawn keeps its changes until it is
     const newColours = meshes[shown].seq !== state.drawnSeq;
-    if (redraw && shownMotion && !newColours && performance.now() - state.drawnAt < MOTION_INTERVAL_MS) {
+    if (redraw && shownMotion && !newColours && moveInFlight && performance.now() - state.drawnAt < MOTION_INTERVAL_MS) {
       // a new pose only, too soon after the last frame: at a later display frame (redraw stays set)
     } else if (redraw) {
       draw(false);
