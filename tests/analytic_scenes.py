@@ -36,6 +36,26 @@ def quad(y, half, albedo=0.5, **keys):
             "faces": [[0, 2, 1], [0, 3, 2]], "albedo": [albedo] * 3, **keys}
 
 
+def translation(x, y=0.0, z=0.0):
+    """The 4 x 4 pose moving an object by (x, y, z)."""
+    m = np.eye(4)
+    m[:3, 3] = [x, y, z]
+    return m
+
+
+def square(half, y=0.0):
+    """(vertices, faces): the square of half-side ``half`` in the plane y, normal +y."""
+    v = np.array([[-half, y, -half], [half, y, -half], [half, y, half], [-half, y, half]], float)
+    return v, np.array([[0, 3, 2], [0, 2, 1]])
+
+
+def on_plane(xz, y=0.0, ny=1.0):
+    """(n, 6) points of the plane y at ``xz`` (n, 2), facing +y (``ny`` -1: facing -y)."""
+    xz = np.asarray(xz, float)
+    n = len(xz)
+    return np.column_stack([xz[:, 0], np.full(n, y), xz[:, 1], np.zeros(n), np.full(n, float(ny)), np.zeros(n)])
+
+
 def plane_scene(n_cells, half, albedo=0.0):
     v, f = grid(n_cells, half)
     return oclgi.load_dict({

@@ -27,27 +27,29 @@ def in_process(monkeypatch, capsys, cwd, *args):
     return subprocess.CompletedProcess(args, rc, out, err)
 
 
-def files_under(d):
-    return {p.relative_to(d) for p in d.rglob("*") if p.is_file()}
+def entries_under(d):
+    """Every file and folder under ``d``."""
+    return {p.relative_to(d) for p in d.rglob("*")}
 
 
-def fails_cleanly(runner, cwd, *args, match=None):
+def fails_cleanly(runner, cwd, *args, match=None, alone=False):
     """``runner(cwd, *args)`` (``run``, or ``in_process`` with its fixtures
     bound) fails cleanly: exit status 2, stderr's last line ``oclgi: error:
-    ...`` (matching the regex ``match``, if given) after warning lines only,
-    no traceback, nothing on stdout, no file made or removed under ``cwd``.
-    Returns the error line."""
+    ...`` (matching the regex ``match``, if given) after warning lines only
+    (none with ``alone``), no traceback, nothing on stdout, no file or folder
+    made or removed under ``cwd``. Returns the error line."""
     import re
 
-    before = files_under(cwd)
+    before = entries_under(cwd)
     res = runner(cwd, *args)
     lines = res.stderr.splitlines()
     assert "Traceback" not in res.stderr, res.stderr
     assert res.returncode == 2, (res.returncode, res.stderr)
     assert lines and lines[-1].startswith("oclgi: error: "), res.stderr
     assert all(line.startswith("oclgi: warning: ") for line in lines[:-1]), res.stderr
+    assert not alone or len(lines) == 1, res.stderr
     assert res.stdout == "", res.stdout
-    assert files_under(cwd) == before, "files were left behind"
+    assert entries_under(cwd) == before, "files were left behind"
     if match is not None:
         assert re.search(match, lines[-1]), lines[-1]
     return lines[-1]

@@ -90,6 +90,19 @@ def scenes_dir():
     return SCENES
 
 
+@pytest.fixture
+def cli_fails(monkeypatch, capsys):
+    """``cli_fails(cwd, *args, match=None, alone=False, sub=False)``: ``oclgi
+    ARGS`` in ``cwd``, in-process (``sub``: in a subprocess), fails cleanly
+    (cli_run.fails_cleanly); returns the error line."""
+    from cli_run import fails_cleanly, in_process, run
+
+    def inproc(cwd, *args):
+        return in_process(monkeypatch, capsys, cwd, *args)
+
+    return lambda cwd, *args, sub=False, **kw: fails_cleanly(run if sub else inproc, cwd, *args, **kw)
+
+
 @pytest.fixture(scope="session")
 def plane():
     """The point light over a 16 x 16 cell black plane (analytic_scenes.py)."""

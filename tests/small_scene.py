@@ -27,7 +27,7 @@ height = 8
 
 [photons]
 count = {count}
-
+{photon_keys}
 [estimator]
 radius = {radius}
 """
@@ -35,11 +35,14 @@ POINTS = "x,y,z,nx,ny,nz\n0,0.01,0,0,1,0\n0.5,0.01,0.5,0,1,0\n"
 
 
 def write_scene(d, obj=BOX_OBJ, mtl=BOX_MTL, mesh="box.obj", mesh_keys="", count="2000", radius="0.1", extra="",
-                name="s.toml"):
-    """The scene file ``name`` in folder ``d`` (made if need be), with box.obj,
-    box.mtl (None: left out) and the points file p.csv beside it."""
+                name="s.toml", photon_keys="", scene=None):
+    """The scene file ``name`` in folder ``d`` (made if need be): ``scene``, or
+    SCENE with these values and ``extra``; with box.obj, box.mtl (None: left
+    out) and the points file p.csv beside it."""
     d.mkdir(parents=True, exist_ok=True)
-    scene = SCENE.format(mesh=mesh, mesh_keys=mesh_keys, count=count, radius=radius) + extra
+    if scene is None:
+        scene = SCENE.format(mesh=mesh, mesh_keys=mesh_keys, count=count, photon_keys=photon_keys,
+                             radius=radius) + extra
     for file, text in (("box.obj", obj), ("box.mtl", mtl), ("p.csv", POINTS), (name, scene)):
         if text is not None:
             (d / file).write_text(text)

@@ -19,7 +19,7 @@ import zipfile
 
 import numpy as np
 import pytest
-from cli_run import fails_cleanly as _fails_cleanly, in_process, run
+from cli_run import run
 from small_scene import BOX_MTL, BOX_OBJ, POINTS, write_scene
 
 from oclgi import io
@@ -28,14 +28,6 @@ from oclgi.errors import OclgiError
 SUB = True  # run this case in a subprocess
 INP = False  # run it in-process
 RENDER = ("render", "s.toml", "-o", "out/x.exr")
-
-
-@pytest.fixture
-def fails_cleanly(monkeypatch, capsys):
-    """Run ``oclgi *args`` in tmp_path (``sub``: in a subprocess), check the clean failure, return the error line."""
-    inproc = lambda cwd, *args: in_process(monkeypatch, capsys, cwd, *args)  # noqa: E731
-    return lambda tmp_path, *args, match=None, sub=SUB: _fails_cleanly(run if sub else inproc, tmp_path, *args,
-                                                                        match=match)
 
 
 @pytest.fixture
@@ -50,9 +42,9 @@ def scene(tmp_path):
     (INP, lambda d: (d / "d.toml").mkdir(), "d.toml", "scene file not found"),  # a folder
     (INP, lambda d: (d / "s.toml").write_bytes(b"\xff\xfe\x00garbage"), "s.toml", "not a text"),  # binary
 ])
-def test_unreadable_scene_file(fails_cleanly, tmp_path, sub, make, name, match):
+def test_unreadable_scene_file(cli_fails, tmp_path, sub, make, name, match):
     make(tmp_path)
-    fails_cleanly(tmp_path, "render", name, "-o", "out/x.exr", match=match, sub=sub)
+    cli_fails(tmp_path, "render", name, "-o", "out/x.exr", match=match, sub=sub)
 
 
 MESH = "[[mesh]]\npath = 'box.obj'\n"
@@ -85,21 +77,21 @@ TRIANGLE = "[[mesh]]\nvertices = [[0, 0, 0], {}]\nfaces = [[0, 1, {}]]\nemission
     (INP, MESH + "[estimator]\nmethod = 'photonmap'\n", r"unknown method 'photonmap'"),
     (INP, MESH + "[[point_light]]\nposition = [0, 1, 0]\n", r"point_light\[0\]\.intensity"),
 ])
-def test_malformed_scene_structure(fails_cleanly, sub, tmp_path, toml, match):
+def test_malformed_scene_structure(cli_fails, sub, tmp_path, toml, match):
     write_scene(tmp_path)
     (tmp_path / "s.toml").write_text(toml)
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 # -- mesh files -----------------------------------------------------------------
 
 @pytest.mark.parametrize("sub, mesh, match", [(SUB, "nowhere.obj", r"mesh file not found: .*nowhere\.obj"),
                                              (INP, "box.fbx", r"unsupported mesh type '\.fbx'")])
-def test_mesh_file_missing_or_of_no_known_type(fails_cleanly, tmp_path, sub, mesh, match):
+def test_mesh_file_missing_or_of_no_known_type(cli_fails, tmp_path, sub, mesh, match):
     write_scene(tmp_path, mesh=mesh)
     if mesh.endswith(".fbx"):
         (tmp_path / mesh).write_text("whatever")
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("sub, old, new, match", [
@@ -117,10 +109,10 @@ def test_mesh_file_missing_or_of_no_known_type(fails_cleanly, tmp_path, sub, mes
     (INP, "v 1 0 -1\n", "v 1_0 0 -1\n", r"box\.obj:3: malformed number in '1_0 0 -1'"),
     (INP, "v 1 0 -1\n", "v \u0661 0 -1\n", r"box\.obj:3: malformed number"),  # an Arabic-Indic 1
 ])
-def test_malformed_obj(fails_cleanly, sub, tmp_path, old, new, match):
+def test_malformed_obj(cli_fails, sub, tmp_path, old, new, match):
     assert old in BOX_OBJ
     write_scene(tmp_path, obj=BOX_OBJ.replace(old, new, 1))
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("sub, ke, match", [
@@ -128,9 +120,9 @@ def test_malformed_obj(fails_cleanly, sub, tmp_path, old, new, match):
     (INP, "Ke 5 -5 5", r"emission must be 3 numbers >= 0"),
     (SUB, "Ke 0 0 0", "the scene has no emitter"),
 ])
-def test_bad_emission_in_mtl(fails_cleanly, sub, tmp_path, ke, match):
+def test_bad_emission_in_mtl(cli_fails, sub, tmp_path, ke, match):
     write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", ke))
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
@@ -147,10 +139,10 @@ PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty
     (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 7\n").encode(), r"m\.ply: face indices out of range"),
     (INP, (PLY_HEAD + "0 0 0\n1 1 0\n0 1 0\n3 0 1 -1\n").encode(), r"m\.ply: face indices out of range"),
 ])
-def test_malformed_ply(fails_cleanly, sub, tmp_path, data, match):
+def test_malformed_ply(cli_fails, sub, tmp_path, data, match):
     write_scene(tmp_path, mesh="m.ply", mesh_keys="emission = [1, 1, 1]\n")
     (tmp_path / "m.ply").write_bytes(data)
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("members, match", [
@@ -158,7 +150,7 @@ def test_malformed_ply(fails_cleanly, sub, tmp_path, data, match):
     ({"a.obj": BOX_OBJ, "b.obj": BOX_OBJ}, "expected exactly one mesh file inside, found 2"),
     ({"inner.obj": BOX_OBJ.replace("v 1 0 -1\n", "v 1 0 q\n")}, r"m\.zip.inner\.obj:3: malformed number"),
 ])
-def test_malformed_zip(fails_cleanly, tmp_path, members, match):
+def test_malformed_zip(cli_fails, tmp_path, members, match):
     write_scene(tmp_path, mesh="m.zip")
     if members is None:
         (tmp_path / "m.zip").write_bytes(b"PK\x03\x04 not really a zip")
@@ -166,15 +158,15 @@ def test_malformed_zip(fails_cleanly, tmp_path, members, match):
         with zipfile.ZipFile(tmp_path / "m.zip", "w") as z:
             for name, text in members.items():
                 z.writestr(name, text)
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=INP)
+    cli_fails(tmp_path, *RENDER, match=match, sub=INP)
 
 
 # -- emitters, degenerate triangles ---------------------------------------------------
 
-def test_no_emitter_point_light_of_zero_intensity(fails_cleanly, tmp_path):
+def test_no_emitter_point_light_of_zero_intensity(cli_fails, tmp_path):
     write_scene(tmp_path, mtl=BOX_MTL.replace("Ke 5 5 5", ""),
                 extra="\n[[point_light]]\nposition = [0, 1, 0]\nintensity = [0, 0, 0]\n")
-    fails_cleanly(tmp_path, *RENDER, match="the scene has no emitter", sub=INP)
+    cli_fails(tmp_path, *RENDER, match="the scene has no emitter", sub=INP)
 
 
 def test_missing_mtl_warns_then_no_emitter(tmp_path):
@@ -188,10 +180,10 @@ def test_missing_mtl_warns_then_no_emitter(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def test_all_triangles_degenerate(fails_cleanly, tmp_path):
+def test_all_triangles_degenerate(cli_fails, tmp_path):
     obj = "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 1 1 2\n"
     write_scene(tmp_path, obj=obj, mtl=None, mesh_keys="emission = [1, 1, 1]\n")
-    assert "dropped" not in fails_cleanly(tmp_path, *RENDER, match="every triangle is degenerate")
+    assert "dropped" not in cli_fails(tmp_path, *RENDER, match="every triangle is degenerate", sub=SUB)
 
 
 def test_degenerate_triangles_dropped_with_warning(tmp_path):
@@ -221,61 +213,52 @@ RADIUS = r"estimator\.radius: expected a number from 1e-18 to 1e18"
     *[(INP, "radius", v, RADIUS) for v in ("-0.5", "inf", "nan")],
     (INP, "radius", "'big'", r"estimator\.radius: expected a number"),
 ])
-def test_bad_count_or_radius_in_toml(fails_cleanly, sub, tmp_path, key, value, match):
+def test_bad_count_or_radius_in_toml(cli_fails, sub, tmp_path, key, value, match):
     write_scene(tmp_path, **{key: value})
-    fails_cleanly(tmp_path, *RENDER, match=match, sub=sub)
+    cli_fails(tmp_path, *RENDER, match=match, sub=sub)
 
 
 @pytest.mark.parametrize("sub, args, match", [
     (SUB, ["--photons", "0"], r"argument --photons: expected a positive integer up to 2\^31, got 0 "),
-    (INP, ["--photons", "-5"], r"argument --photons"),
-    (INP, ["--photons", "2.5"], r"argument --photons"),
     (INP, ["--photons", "2.5e0"], r"argument --photons"),  # was silently truncated to 2
     (INP, ["--photons", "1e400"], r"argument --photons"),  # was a traceback
-    (INP, ["--photons", "many"], r"argument --photons"),
     (INP, ["--photons", "99999999999"], r"up to 2\^31"),
     (SUB, ["--radius", "-1"], r"argument --radius: expected a number from 1e-18 to 1e18 .*, got -1 "),
-    (INP, ["--radius", "0"], r"argument --radius"),
-    (INP, ["--radius", "nan"], r"argument --radius"),
-    (INP, ["--radius", "inf"], r"argument --radius"),
     (INP, ["--radius", "1e400"], r"argument --radius"),
-    (INP, ["--max-depth", "0"], r"argument --max-depth"),
     (INP, ["--max-depth", "1000"], r"argument --max-depth: expected an integer in 1\.\.256"),  # was accepted
-    (INP, ["--seed", "-1"], r"argument --seed"),
     (INP, ["--seed", str(2**64)], r"argument --seed"),  # was a traceback
     (INP, ["--width", "0"], r"argument --width"),
     (INP, ["--width", "100000"], r"argument --width: expected an integer in 1\.\.16384"),
-    (INP, ["--exposure", "0"], r"argument --exposure"),
     (INP, ["--method", "photonmap"], r"argument --method: unknown method 'photonmap'"),
     (INP, ["--device", "no-such-device-anywhere"], r"no OpenCL device matches"),
     (INP, ["--bogus"], r"unrecognized arguments: --bogus"),
     (INP, ["--local-size", "1000000"], r"--local-size 1000000 is larger than"),
 ])
-def test_bad_cli_numbers(fails_cleanly, sub, scene, tmp_path, args, match):
-    fails_cleanly(tmp_path, *RENDER, *args, match=match, sub=sub)
+def test_bad_cli_numbers(cli_fails, sub, scene, tmp_path, args, match):
+    cli_fails(tmp_path, *RENDER, *args, match=match, sub=sub)
 
 
-def test_no_command(fails_cleanly, tmp_path):
-    fails_cleanly(tmp_path, match=r"required: command")
+def test_no_command(cli_fails, tmp_path):
+    cli_fails(tmp_path, match=r"required: command", sub=SUB)
 
 
 # -- outputs --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("out, match", [("out/x.jpg", r"must end in \.exr or \.png"),
                                         ("out/x", r"must end in \.exr or \.png")])
-def test_bad_render_output_name(fails_cleanly, scene, tmp_path, out, match):
-    fails_cleanly(tmp_path, "render", "s.toml", "-o", out, match=match, sub=INP)
+def test_bad_render_output_name(cli_fails, scene, tmp_path, out, match):
+    cli_fails(tmp_path, "render", "s.toml", "-o", out, match=match, sub=INP)
 
 
-def test_render_output_is_a_folder(fails_cleanly, scene, tmp_path):
+def test_render_output_is_a_folder(cli_fails, scene, tmp_path):
     (tmp_path / "out" / "x.png").mkdir(parents=True)  # the PNG cannot be written: no EXR either
-    fails_cleanly(tmp_path, *RENDER, match=r"x\.png: it is a folder")
+    cli_fails(tmp_path, *RENDER, match=r"x\.png: it is a folder", sub=SUB)
     assert os.listdir(tmp_path / "out") == ["x.png"]
 
 
-def test_render_output_parent_is_a_file(fails_cleanly, scene, tmp_path):
+def test_render_output_parent_is_a_file(cli_fails, scene, tmp_path):
     (tmp_path / "out").write_text("")
-    fails_cleanly(tmp_path, *RENDER, match="is not a folder", sub=INP)
+    cli_fails(tmp_path, *RENDER, match="is not a folder", sub=INP)
 
 
 # -- points files and outputs of `oclgi irradiance` ------------------------------------------
@@ -287,9 +270,9 @@ def test_render_output_parent_is_a_file(fails_cleanly, scene, tmp_path):
     (lambda d: (d / "p.txt").write_text(POINTS), "p.txt", "e.npy", r"points must be a \.npy or \.csv file"),
     (lambda d: (d / "p.csv").write_bytes(b"\xff\xfe\x00\x01"), "p.csv", "e.npy", "not a text"),
 ])
-def test_bad_irradiance_files(fails_cleanly, scene, tmp_path, make, points, out, match):
+def test_bad_irradiance_files(cli_fails, scene, tmp_path, make, points, out, match):
     make(tmp_path)
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", points, "-o", out, match=match, sub=INP)
+    cli_fails(tmp_path, "irradiance", "s.toml", "--points", points, "-o", out, match=match, sub=INP)
 
 
 @pytest.mark.parametrize("sub, text, match", [
@@ -305,9 +288,9 @@ def test_bad_irradiance_files(fails_cleanly, scene, tmp_path, make, points, out,
     (INP, "x,y,z,nx,ny,nz\n", r"p\.csv: no points"),
     (INP, "", r"p\.csv: no points"),
 ])
-def test_bad_points_csv(fails_cleanly, sub, scene, tmp_path, text, match):
+def test_bad_points_csv(cli_fails, sub, scene, tmp_path, text, match):
     (tmp_path / "p.csv").write_text(text)
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv", match=match, sub=sub)
+    cli_fails(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv", match=match, sub=sub)
 
 
 def _npy(tmp_path, array, **kw):
@@ -325,9 +308,9 @@ def _npy(tmp_path, array, **kw):
      r"p\.npy: expected points as numbers, got an array of object"),
     (INP, lambda d: (d / "p.npy").write_bytes(bytes(range(200))), r"p\.npy: not a \.npy file"),
 ])
-def test_bad_points_npy(fails_cleanly, sub, scene, tmp_path, make, match):
+def test_bad_points_npy(cli_fails, sub, scene, tmp_path, make, match):
     make(tmp_path)
-    fails_cleanly(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", match=match, sub=sub)
+    cli_fails(tmp_path, "irradiance", "s.toml", "--points", "p.npy", "-o", "e.npy", match=match, sub=sub)
 
 
 # -- the writers themselves: all or nothing, no temporary files, normal permissions ----------

@@ -10,8 +10,6 @@ runs in-process, which writes the same bytes.
 import io
 import json
 import signal
-import subprocess
-import sys
 import time
 import zipfile
 
@@ -19,6 +17,7 @@ import numpy as np
 import pytest
 from cli_run import in_process, run
 from conftest import ROOT
+from test_signals import _start
 
 import oclgi
 from oclgi.checkpoint import load
@@ -47,15 +46,6 @@ def _same_sums(a, b):
     assert sa.next_path == sb.next_path and sa.segments == sb.segments and sa.sums.keys() == sb.sums.keys()
     for k in sa.sums:
         assert sa.sums[k].tobytes() == sb.sums[k].tobytes(), k
-
-
-def _start(cwd, *args):
-    def pre():
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-        signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-    return subprocess.Popen([sys.executable, "-m", "oclgi", *map(str, args)], cwd=cwd, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, preexec_fn=pre)
 
 
 def _wait_for(path, proc, timeout=120.0):

@@ -11,35 +11,14 @@ from importlib.metadata import entry_points
 import numpy as np
 import pytest
 from cli_run import run
-from small_scene import BOX_OBJ
+from small_scene import write_scene
 
 from oclgi.io import read_image
 
 # A floor quad and a small quad light above it facing down; the light's
 # emission comes from the TOML (materials.light), the floor's albedo from Kd.
 BOX_MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\n"
-SCENE = """[[mesh]]
-path = "box.obj"
-[mesh.materials.light]
-emission = [5, 5, 5]
-
-[[point_light]]
-position = [0.5, 0.8, 0.5]
-intensity = [0.2, 0.1, 0.05]
-
-[camera]
-position = [0, 0.5, 3]
-look_at = [0, 0.3, 0]
-width = 8
-height = 8
-
-[photons]
-count = 2000
-seed = 7
-
-[estimator]
-radius = 0.1
-"""
+LAMP = "[[point_light]]\nposition = [0.5, 0.8, 0.5]\nintensity = [0.2, 0.1, 0.05]\n"
 POINTS = [[0, 0.01, 0, 0, 1, 0], [0.5, 0.01, 0.5, 0, 1, 0], [-0.7, 0.01, 0.3, 0, 2, 0], [0, 0.5, 0, 1, 0, 0]]
 
 
@@ -51,10 +30,9 @@ def ok(res):
 
 @pytest.fixture
 def scene(tmp_path):
-    (tmp_path / "box.obj").write_text(BOX_OBJ)
-    (tmp_path / "box.mtl").write_text(BOX_MTL)
-    (tmp_path / "s.toml").write_text(SCENE)
-    return tmp_path / "s.toml"
+    """small_scene's scene (8 x 8, 2,000 photons, radius 0.1), seed 7, the light's emission and LAMP."""
+    return write_scene(tmp_path, mtl=BOX_MTL, mesh_keys="[mesh.materials.light]\nemission = [5, 5, 5]\n",
+                       photon_keys="seed = 7\n", extra=LAMP)
 
 
 def _check_image_pair(exr, png, w, h):
@@ -147,6 +125,9 @@ def test_help(tmp_path):
     res = ok(run(tmp_path, "render", "--help"))
     for flag in ("--photons", "--radius", "--method", "-o"):
         assert flag in res.stdout
+    text = " ".join(res.stdout.split())  # and it names the sibling image (tests/test_outputs.py)
+    assert "-o x.exr writes x.exr and x.png" in text
+    assert "--no-png" in text and "--no-exr" in text and "--force" in text
 
 
 def test_console_script_installed():

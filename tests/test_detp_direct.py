@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 import oclgi
-from analytic_scenes import exact, plane_scene, quad
+from analytic_scenes import exact, on_plane, plane_scene, quad
 from test_instances import _rigid
 
 VARIANTS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache"]
@@ -48,9 +48,7 @@ def _shadow_scene(movable=False):
 
 
 def _ground_points(xz):
-    xz = np.asarray(xz, float)
-    return np.column_stack([xz[:, 0], np.full(len(xz), 1e-6), xz[:, 1], np.zeros(len(xz)), np.ones(len(xz)),
-                            np.zeros(len(xz))])
+    return on_plane(xz, 1e-6)
 
 
 @pytest.fixture(scope="module")

@@ -6,22 +6,19 @@ POCL_CACHE_DIR, and kernels under OCLGI_KERNEL_DIR that do not build
 Commands run in subprocesses with the variable set, as a user would.
 """
 
-import os
 import shutil
 
 import pytest
 from cli_run import run
 from conftest import ROOT
+from test_signals import _env
 
 BOX = ROOT / "scenes" / "cornell_box.toml"
 RENDER = ("render", BOX, "--photons", 2000, "--width", 8, "--height", 8, "--quiet")
 
 
 def _run(cwd, *args, **env):
-    full = dict(os.environ)
-    full["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), full.get("PYTHONPATH")) if p)
-    full.update({k: str(v) for k, v in env.items()})
-    return run(cwd, *args, env=full)
+    return run(cwd, *args, env=_env(**{k: str(v) for k, v in env.items()}))
 
 
 def _one_line(res, status):

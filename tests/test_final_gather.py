@@ -32,7 +32,7 @@ import pyopencl as cl
 import pytest
 
 import oclgi
-from analytic_scenes import H, INTENSITY, plane_scene, quad
+from analytic_scenes import H, INTENSITY, on_plane, plane_scene, quad
 from oclgi.errors import OclgiError
 from oclgi.estimators.detp_disc_index import DetpDiscIndex
 from oclgi.study import Config, run_study
@@ -57,22 +57,16 @@ def plane():
     return oclgi.Engine(plane_scene(8, HALF, albedo=RHO))
 
 
-def _down(xz, h):
-    xz = np.asarray(xz, float)
-    return np.column_stack([xz[:, 0], np.full(len(xz), h), xz[:, 1], np.zeros(len(xz)), -np.ones(len(xz)),
-                            np.zeros(len(xz))])
-
-
 def test_point_light_over_a_plane(plane):
     xz = [[0.0, 0.0], [1.0, 0.5], [-1.5, 2.0]]
     h = 0.4
-    got = plane.irradiance(_down(xz, h), method="detp_disc_index", photons=20_000, direct="exact", gather=4096)
+    got = plane.irradiance(on_plane(xz, h, -1), method="detp_disc_index", photons=20_000, direct="exact", gather=4096)
     want = np.array([_gathered_exact(x, z, h) for x, z in xz])
     assert want.min() > 0.02
     np.testing.assert_allclose(got.irradiance[:, 0], want, rtol=5e-3)
     # without gathering the same points read their own discs: no direct light, and the
     # plane's reflected light that crosses them (a different, noisy estimate)
-    plain = plane.irradiance(_down(xz, h), method="detp_disc_index", photons=20_000, direct="exact")
+    plain = plane.irradiance(on_plane(xz, h, -1), method="detp_disc_index", photons=20_000, direct="exact")
     assert not np.allclose(plain.irradiance[:, 0], got.irradiance[:, 0], rtol=5e-3)
 
 
@@ -88,8 +82,7 @@ def _shadow_engine():
 def shadow():
     engine = _shadow_engine()
     xz = np.random.default_rng(5).uniform(-1.5, 1.5, (24, 2))
-    up = np.column_stack([xz[:, 0], np.full(24, 1e-4), xz[:, 1], np.zeros(24), np.ones(24), np.zeros(24)])
-    under = up.copy()
+    under = on_plane(xz, 1e-4)
     under[:8, 1], under[:8, 4] = 0.5 - 1e-4, -1.0  # the roof's underside
     return engine, under
 
@@ -198,7 +191,7 @@ def test_an_area_light_seen_in_a_mirror():
     engine = oclgi.Engine(oclgi.load_dict({"mesh": [mirror, light],
                                            "photons": {"count": 1000, "seed": 1, "max_depth": 3}}))
     xz = np.array([[0.0, 0.0], [0.4, -0.2], [1.2, 0.5]])
-    pts = _down(xz, h)
+    pts = on_plane(xz, h, -1)
     got = engine.irradiance(pts, photons=2000, radius=0.1, direct="exact", gather=4096).irradiance[:, 0]
     n = 400  # the image: the square at y = -y_light, facing up, seen from (px, h, pz) facing down
     c = (np.arange(n) + 0.5) / n * 2 * half - half

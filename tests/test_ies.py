@@ -16,17 +16,14 @@ import math
 import warnings
 
 import numpy as np
-import pyopencl as cl
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from reference import ies_candela
-from analytic_scenes import disc_mean
-from test_lights import PDF_PROBE, _both, _points, _quad, _scene_file, refused_in_one_line
+from analytic_scenes import disc_mean, on_plane, square
+from test_lights import _both, _scene_file, light_samples, refused_in_one_line
 
 import oclgi
-from oclgi.cl.layout import Emitter
-from oclgi.cl.programs import ProgramCache
 from oclgi.errors import OclgiError, OclgiWarning
 from oclgi.photometry import LUMENS_PER_WATT
 from oclgi.scene import ies, lights
@@ -60,7 +57,7 @@ def _file(tmp_path, text, name="lamp.ies"):
 
 
 def _scene(tmp_path, light: dict, table="point_light", photons=2_000_000, seed=3):
-    v, f = _quad(2.0)
+    v, f = square(2.0)
     return oclgi.load_dict({"mesh": [{"vertices": v, "faces": f, "albedo": [0, 0, 0]}],
                             table: [{"position": [0, H, 0], **light}],
                             "photons": {"count": photons, "seed": seed, "max_depth": 1}}, base_dir=tmp_path)
@@ -103,7 +100,7 @@ def test_irradiance_under_an_ies_light_is_the_files_table(tmp_path, frame):
         w = H * t * (math.cos(math.radians(c)) * c0 + math.sin(math.radians(c)) * c90)
         xz.append((w[0], w[2]))
     d = 0.06
-    e = _both(engine, _points(xz), d)
+    e = _both(engine, on_plane(xz), d)
     ref = _expected(lambda g, c: ies_candela(VERT, HORIZ, TABLE, g, c), nadir, c0, xz, d)
     dark = ref == 0
     assert dark.sum() == 1 and e[dark][0] == 0  # the dark bin gets no photon at all
@@ -165,7 +162,7 @@ def test_an_ies_spot_is_the_profile_times_the_cone(tmp_path):
     assert units.max() <= 1 + 1e-6 and (units[:, 0] < 0.5).mean() > 0.02  # the band's photons carry less
     xz = [(0.0, 0.0), (math.tan(math.radians(20)), 0.0), (0.0, math.tan(math.radians(20))), (1.2, 0.0)]
     d = 0.06
-    e = _both(engine, _points(xz), d)
+    e = _both(engine, on_plane(xz), d)
     ref = _expected(lambda g, c: ies_candela(VERT, HORIZ, TABLE, g, c) * spot.profile(np.cos(np.radians(g))),
                     [0, -1, 0], [1, 0, 0], xz, d)
     assert e[3] == 0 and ref[3] == 0  # past the cone
@@ -200,7 +197,7 @@ def test_symmetric_files_expand_to_their_whole_table(tmp_path, last):
         assert np.array_equal(sym.horizontal, whole.horizontal) and np.array_equal(sym.candela, whole.candela)
         _file(tmp_path, ies_text(vert, horiz, table), "sym.ies")
         _file(tmp_path, ies_text(vert, full_h, full), "whole.ies")
-        pts = _points([(0.3, 0.2), (-0.4, 0.1), (0.1, -0.5)])
+        pts = on_plane([(0.3, 0.2), (-0.4, 0.1), (0.1, -0.5)])
         sums = [oclgi.Engine(_scene(tmp_path, {"ies": name}, photons=50_000)).irradiance(pts, radius=0.2)
                 .accumulators for name in ("sym.ies", "whole.ies")]
         assert sums[0].sum() > 0 and np.array_equal(sums[0], sums[1])
@@ -211,23 +208,10 @@ def test_light_pdf_dir_of_an_ies_light_is_its_sampling_density(cl_env):
     """The mean of 1 / pdf over the kind's samples is the solid angle it
     emits into (the lower hemisphere here, 2 pi), and the pdf is that of
     the bins' candela x solid angle."""
-    ctx, queue = cl_env
-    probe = cl.Program(ctx, PDF_PROBE).build(options=ProgramCache(ctx).options(())).pdf_probe
     profile = ies.parse(ies_text(VERT, HORIZ, TABLE + 1.0).encode())  # no dark bin
     light = lights.IesLight((0.0, 0.0, 0.0), profile, direction=(0.0, -1.0, 0.0), c0=(0.0, 0.0, 1.0))
     rec = light.record(None)
-    em = np.zeros(1, Emitter)
-    em["kind"], em["p"], em["e1"], em["e2"], em["a"], em["b"], em["power"] = (
-        rec["kind"], rec["p"], rec["e1"], rec["e2"], rec["a"], rec["b"], 1.0)
-    n = 200_000
-    u = (np.floor(np.random.default_rng(7).random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
-    mf = cl.mem_flags
-    bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a)
-            for a in (em, rec["table"].astype(np.float32), u)]
-    out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 8 * 4 * n)
-    probe(queue, (n,), None, *bufs, np.int32(n), out_buf)
-    out = np.empty((n, 8), np.float32)
-    cl.enqueue_copy(queue, out, out_buf)
+    out = light_samples(cl_env, [rec[key] for key in ("kind", "p", "e1", "e2", "a", "b")], rec["table"], seed=7)
     d, pdf = out[:, 3:6].astype(np.float64), out[:, 7].astype(np.float64)
     assert (pdf > 0).all() and (d[:, 1] <= 1e-6).all()  # all downwards
     assert abs(np.mean(1 / pdf) / (2 * math.pi) - 1) < 0.01
@@ -339,11 +323,11 @@ LAMP = PL + 'ies = "lamp.ies"\n'
      r"no light of the IES profile falls within the spot's cone"),
     (PL + 'ies = 5\n', r"point_light\[0\]\.ies: expected an IES file name"),
 ])
-def test_bad_ies_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, table, match):
+def test_bad_ies_light_tables_fail_in_one_line(cli_fails, tmp_path, table, match):
     _file(tmp_path, GOOD)
     _file(tmp_path, ies_text([90, 135, 180], [0], [100, 80, 0]), "up.ies")  # light above the horizontal only
     _scene_file(tmp_path, table)
-    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
+    refused_in_one_line(cli_fails, tmp_path, match)
 
 
 @settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])

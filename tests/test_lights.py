@@ -30,8 +30,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pyopencl as cl
 import pytest
-from analytic_scenes import disc_mean
-from cli_run import fails_cleanly, in_process
+from analytic_scenes import disc_mean, on_plane, square
 
 import oclgi
 from oclgi.cl.layout import Emitter
@@ -45,23 +44,11 @@ H = 1.0
 UP = (0.0, 1.0, 0.0)
 
 
-def _quad(half, y=0.0, centre=(0.0, 0.0)):
-    """A square in the plane y (normal +y) of half-side ``half``."""
-    x, z = centre
-    v = np.array([[x - half, y, z - half], [x + half, y, z - half], [x + half, y, z + half], [x - half, y, z + half]])
-    return v, np.array([[0, 3, 2], [0, 2, 1]])
-
-
 def _scene(light_tables, half=1.0, extra_meshes=(), photons=1_000_000, seed=3, max_depth=1):
-    v, f = _quad(half)
+    v, f = square(half)
     meshes = [{"vertices": v, "faces": f, "albedo": [0, 0, 0]}, *extra_meshes]
     return oclgi.load_dict({"mesh": meshes, **light_tables,
                             "photons": {"count": photons, "seed": seed, "max_depth": max_depth}})
-
-
-def _points(xz):
-    xz = np.asarray(xz, float)
-    return np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1], np.tile(UP, (len(xz), 1))])
 
 
 def _both(engine, pts, radius):
@@ -109,7 +96,7 @@ def test_spot_light_plane(spot):
 
     xs = np.array([0.0, 0.1, 0.2, 0.28, 0.42, 0.48])
     pts = [(x, 0.0) for x in xs] + [(0.0, x) for x in xs[1:]] + [(0.75, 0.0), (0.0, -0.8)]
-    e = _both(spot, _points(pts), 0.06)
+    e = _both(spot, on_plane(pts), 0.06)
     ref = np.array([disc_mean(x, z, 0.06, 160, exact) for x, z in pts])
     inside = ref > 0
     assert inside.sum() == len(pts) - 2 and np.abs(e[inside] / ref[inside] - 1).max() < 0.04
@@ -136,17 +123,17 @@ def test_sun_plane_and_shadow():
     """E cos alpha on the open plane (radius 0.2: some 2 10^4 segments a
     disc, 0.7% noise: within 3%, mean within 1%); in the shadow of a black
     square 0.5 above the plane (shifted 0.5 tan alpha along x) exactly 0."""
-    occ_v, occ_f = _quad(0.2, y=0.5)
+    occ_v, occ_f = square(0.2, y=0.5)
     occluder = {"vertices": occ_v, "faces": occ_f[:, ::-1], "albedo": [0, 0, 0]}  # facing down, at the sun's photons
     eng = oclgi.Engine(_scene({"sun": [{"direction": SUN_DIR, "irradiance": [2.0, 2.0, 2.0]}]},
                               extra_meshes=[occluder]))
     lit = [(-0.6, 0.0), (-0.5, 0.5), (0.6, -0.6), (0.0, 0.6), (-0.6, -0.6)]
-    e = _both(eng, _points(lit), 0.2)
+    e = _both(eng, on_plane(lit), 0.2)
     assert np.abs(e / (2.0 * math.cos(ALPHA)) - 1).max() < 0.03
     assert abs(np.mean(e) / (2.0 * math.cos(ALPHA)) - 1) < 0.01
     shift = 0.5 * math.tan(ALPHA)
     shadow = [(shift, 0.0), (shift + 0.1, 0.1), (shift - 0.1, -0.1)]
-    assert np.all(_both(eng, _points(shadow), 0.05) == 0)
+    assert np.all(_both(eng, on_plane(shadow), 0.05) == 0)
 
 
 def test_sun_power_covers_the_bounding_sphere():
@@ -167,7 +154,7 @@ def test_uniform_sky_plane(hemisphere):
     hemisphere or the whole sphere (the plane's lower side takes the rest).
     Radius 0.2: about 10^4 segments a disc, 1% noise: within 4%, mean within 1.5%."""
     eng = oclgi.Engine(_scene({"sky": {"radiance": [1.0, 0.5, 0.25], "hemisphere": hemisphere}}))
-    e = _both(eng, _points([(0.0, 0.0), (0.5, 0.0), (-0.5, 0.3), (0.3, -0.6), (-0.6, -0.6), (0.6, 0.6)]), 0.2)
+    e = _both(eng, on_plane([(0.0, 0.0), (0.5, 0.0), (-0.5, 0.3), (0.3, -0.6), (-0.6, -0.6), (0.6, 0.6)]), 0.2)
     assert np.abs(e / math.pi - 1).max() < 0.04 and abs(np.mean(e) / math.pi - 1) < 0.015
     _, r = lights.bounding_sphere(eng.scene)
     omega = 2 * math.pi if hemisphere else 4 * math.pi
@@ -181,12 +168,12 @@ def test_every_detp_variant_sums_the_same_under_sun_and_sky():
     """Photons that start outside the scene's bounding sphere (sun, sky) go
     through the accelerated DETP variants' segment structures as well: each
     gives the plain oracle's sums bit for bit."""
-    occ_v, occ_f = _quad(0.3, y=0.4)
+    occ_v, occ_f = square(0.3, y=0.4)
     sc = _scene({"sun": [{"direction": SUN_DIR, "irradiance": [1, 1, 1]}], "sky": {"radiance": [0.2, 0.2, 0.2]}},
                 extra_meshes=[{"vertices": occ_v, "faces": occ_f, "albedo": [0.5, 0.5, 0.5]}], photons=50_000,
                 max_depth=4)
     eng = oclgi.Engine(sc)
-    pts = _points(np.random.default_rng(1).uniform(-0.9, 0.9, (64, 2)))
+    pts = on_plane(np.random.default_rng(1).uniform(-0.9, 0.9, (64, 2)))
     ref = eng.irradiance(pts, method="detp", radius=0.1).accumulators
     for method in ("detp_disc_index", "detp_ray_map", "detp_sphere_cache"):
         assert np.array_equal(eng.irradiance(pts, method=method, radius=0.1).accumulators, ref), method
@@ -199,7 +186,7 @@ def test_point_light_plane():
     radius 0.15, about 10^4 segments a disc near the axis: within 4%."""
     eng = oclgi.Engine(_scene({"point_light": [{"position": [0, H, 0], "intensity": [1, 1, 1]}]}, half=2.0))
     pts = [(0.0, 0.0), (0.3, 0.2), (-0.5, 0.4), (0.8, -0.6)]
-    e = _both(eng, _points(pts), 0.15)
+    e = _both(eng, on_plane(pts), 0.15)
     ref = np.array([disc_mean(x, z, 0.15, 160, lambda x, z: H / (x * x + z * z + H * H) ** 1.5) for x, z in pts])
     assert np.abs(e / ref - 1).max() < 0.04
 
@@ -216,7 +203,7 @@ def test_all_kinds_share_one_run_under_phi_max():
     """An area light, a point, a spot, a sun and a sky in one scene: each is
     chosen in proportion to its power (the segments leaving each kind are
     counted), and no photon carries more than phi_max."""
-    lv, lf = _quad(0.1, y=0.8)
+    lv, lf = square(0.1, y=0.8)
     area = {"vertices": lv, "faces": lf[:, ::-1], "albedo": [0, 0, 0], "emission": [3, 3, 3]}
     sc = _scene({"point_light": [{"position": [0.5, 0.5, 0], "intensity": [0.2, 0.2, 0.2]}],
                  "spot_light": [SPOT], "sun": [{"direction": SUN_DIR, "irradiance": [0.3, 0.3, 0.3]}],
@@ -259,6 +246,27 @@ __kernel void pdf_probe(__global const Emitter *em, __global const float *table,
 """
 
 
+def light_samples(cl_env, emitter, table, seed, n=200_000):
+    """n samples of light_sample_le from seeded uniforms for the emitter
+    ``emitter`` ((kind, p, e1, e2, a, b), power 1, its tables at the start of
+    ``table``): (n, 8) float32 rows of origin, direction, power and
+    light_pdf_dir (PDF_PROBE)."""
+    ctx, queue = cl_env
+    probe = cl.Program(ctx, PDF_PROBE).build(options=ProgramCache(ctx).options(())).pdf_probe
+    u = (np.floor(np.random.default_rng(seed).random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
+    em = np.zeros(1, Emitter)
+    em["kind"], em["p"], em["e1"], em["e2"], em["a"], em["b"] = emitter
+    em["power"] = 1.0
+    em["tri"] = 0  # the environment map's tables start the table buffer
+    mf = cl.mem_flags
+    bufs = [cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a) for a in (em, np.asarray(table, np.float32), u)]
+    out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 8 * 4 * n)
+    probe(queue, (n,), None, *bufs, np.int32(n), out_buf)
+    out = np.empty((n, 8), np.float32)
+    cl.enqueue_copy(queue, out, out_buf)
+    return out
+
+
 def test_light_pdf_dir_is_the_sampling_density(cl_env):
     """For samples of each kind, the mean of 1 / light_pdf_dir is the measure
     of what the kind samples over: 4 pi (point), the cone's solid angle
@@ -267,10 +275,6 @@ def test_light_pdf_dir_is_the_sampling_density(cl_env):
     pi R^2 x 4 pi for an environment map with no black texel, which samples
     by luminance: there 1 / pdf varies from texel to texel.
     An unbiased estimate when the pdf is the density: 2 10^5 samples, within 1%."""
-    ctx, queue = cl_env
-    probe = cl.Program(ctx, PDF_PROBE).build(options=ProgramCache(ctx).options(())).pdf_probe
-    n = 200_000
-    u = (np.floor(np.random.default_rng(5).random((2 * n, 4)) * 2**24) / 2**24).astype(np.float32)
     e1, e2 = np.array([1.0, 0, 0]), np.array([0, 0, 2.0])
     R = 1.5
     cases = [
@@ -283,22 +287,12 @@ def test_light_pdf_dir_is_the_sampling_density(cl_env):
         ((lights.EMITTER_SKY, (0, 0, 0), (0, 1, 0), (0, 0, 0), R, 1), math.pi * R * R * 2 * math.pi),
         ((lights.EMITTER_ENVMAP, (0, 0, 0), (0, 0, 0), (16.0, 8.0, 0), R, 0), math.pi * R * R * 4 * math.pi),
     ]
-    table = lights.EnvMapLight(_two_tone_map(8, 16)).record(((0, 0, 0), R))["table"].astype(np.float32)
-    mf = cl.mem_flags
-    r_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=u)
-    out_buf = cl.Buffer(ctx, mf.WRITE_ONLY, 8 * 4 * n)
-    table_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=table)
-    for (kind, p, a1, a2, a, b), measure in cases:
-        em = np.zeros(1, Emitter)
-        em["kind"], em["p"], em["e1"], em["e2"], em["a"], em["b"], em["power"] = kind, p, a1, a2, a, b, 1.0
-        em["tri"] = 0  # the environment map's tables start the table buffer
-        em_buf = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=em)
-        probe(queue, (n,), None, em_buf, table_buf, r_buf, np.int32(n), out_buf)
-        out = np.empty((n, 8), np.float32)
-        cl.enqueue_copy(queue, out, out_buf)
+    table = lights.EnvMapLight(_two_tone_map(8, 16)).record(((0, 0, 0), R))["table"]
+    for emitter, measure in cases:
+        out = light_samples(cl_env, emitter, table, seed=5)
         pdf = out[:, 7].astype(np.float64)
-        assert (pdf > 0).all(), kind  # every sampled direction is one the light emits
-        assert abs(np.mean(1 / pdf) / measure - 1) < 0.01, kind
+        assert (pdf > 0).all(), emitter[0]  # every sampled direction is one the light emits
+        assert abs(np.mean(1 / pdf) / measure - 1) < 0.01, emitter[0]
         np.testing.assert_allclose(np.linalg.norm(out[:, 3:6].astype(np.float64), axis=1), 1, atol=1e-5)
 
 
@@ -340,7 +334,7 @@ def test_environment_map_plane(envmap_file):
     pi R^2 times the map's integral, 2 pi (UPPER + LOWER), and no photon
     exceeds phi_max though their powers differ with the texels' colours."""
     eng = oclgi.Engine(_scene({"sky": {"map": str(envmap_file), "scale": 2.0}}))
-    pts = _points([(0.0, 0.0), (0.4, -0.3), (-0.5, 0.4)])
+    pts = on_plane([(0.0, 0.0), (0.4, -0.3), (-0.5, 0.4)])
     down = pts.copy()
     down[:, 3:] = -down[:, 3:]
     up_e = eng.irradiance(pts, method="detp", radius=0.2).irradiance.astype(np.float64)
@@ -380,19 +374,6 @@ def test_environment_map_orientation_is_mitsubas(tmp_path):
         return
     e = mitsuba_reference.irradiance(sc, p[:1], [[1.0, 0, 0]], spp=4096, max_depth=1)
     assert np.abs(e[0] / (math.pi * UPPER) - 1).max() < 0.02
-
-
-@pytest.mark.parametrize("table, match", [
-    ("[sky]\nmap = 'nowhere.exr'\n", r"sky\.map: image file not found: .*nowhere\.exr"),
-    ("[sky]\nmap = 'p.csv'\n", r"sky\.map: cannot read"),
-    ("[sky]\nmap = 'two_tone.exr'\nradiance = [1, 1, 1]\n", r"sky: map takes no radiance"),
-    ("[sky]\nmap = 'two_tone.exr'\nscale = -1\n", r"sky\.scale: expected a number > 0"),
-    ("[sky]\nradiance = [1, 1, 1]\nscale = 2\n", r"sky\.scale goes with map"),
-])
-def test_bad_environment_maps_fail_in_one_line(monkeypatch, capsys, tmp_path, envmap_file, table, match):
-    _scene_file(tmp_path, table)
-    shutil.copy(envmap_file, tmp_path / "two_tone.exr")
-    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
 
 
 def test_environment_map_with_nan_is_refused():
@@ -449,17 +430,23 @@ SPOT_TABLE = "[[spot_light]]\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\ninte
     ("[[sky]]\nradiance = [1, 1, 1]\n", r"sky: expected one \[sky\] table"),
     ("[sky]\nradiance = [1e39, 1, 1]\n", r"sky\.radiance: expected 3 numbers, each 0 or from 1\.2e-38"),
     ("[sky]\nradiance = [0, 0, 0]\n", r"the scene has no emitter"),
+    ("[sky]\nmap = 'nowhere.exr'\n", r"sky\.map: image file not found: .*nowhere\.exr"),
+    ("[sky]\nmap = 'p.csv'\n", r"sky\.map: cannot read"),
+    ("[sky]\nmap = 'two_tone.exr'\nradiance = [1, 1, 1]\n", r"sky: map takes no radiance"),
+    ("[sky]\nmap = 'two_tone.exr'\nscale = -1\n", r"sky\.scale: expected a number > 0"),
+    ("[sky]\nradiance = [1, 1, 1]\nscale = 2\n", r"sky\.scale goes with map"),
 ])
-def test_bad_light_tables_fail_in_one_line(monkeypatch, capsys, tmp_path, tables, match):
+def test_bad_light_tables_fail_in_one_line(cli_fails, tmp_path, envmap_file, tables, match):
+    """Spot, sun, sky and environment-map tables (two_tone.exr beside the scene) refused in one line."""
     _scene_file(tmp_path, tables)
-    refused_in_one_line(monkeypatch, capsys, tmp_path, match)
+    shutil.copy(envmap_file, tmp_path / "two_tone.exr")
+    refused_in_one_line(cli_fails, tmp_path, match)
 
 
-def refused_in_one_line(monkeypatch, capsys, tmp_path, match):
+def refused_in_one_line(cli_fails, tmp_path, match):
     """``oclgi irradiance`` of _scene_file's scene fails cleanly
     (cli_run.fails_cleanly), its error line matching ``match``."""
-    fails_cleanly(lambda d, *a: in_process(monkeypatch, capsys, d, *a), tmp_path, "irradiance", "s.toml", "--points",
-                  "p.csv", "-o", "e.csv", match=match)
+    cli_fails(tmp_path, "irradiance", "s.toml", "--points", "p.csv", "-o", "e.csv", match=match)
 
 
 def test_bad_lights_made_in_python():
@@ -476,7 +463,7 @@ def test_bad_lights_made_in_python():
 
 @pytest.mark.parametrize("facing_down", [True, False])
 def test_area_light_emitting_away_from_every_surface_warns(facing_down):
-    lv, lf = _quad(0.2, y=1.0)
+    lv, lf = square(0.2, y=1.0)
     light = {"vertices": lv, "faces": lf[:, ::-1] if facing_down else lf, "albedo": [0, 0, 0], "emission": [1, 1, 1]}
     sc = _scene({}, extra_meshes=[light], photons=1000)
     with warnings.catch_warnings(record=True) as caught:
@@ -579,7 +566,7 @@ def test_gltf_punctual_lights(tmp_path):
     np.testing.assert_allclose(sun.direction, [0, -1, 0], atol=1e-12)
     np.testing.assert_allclose(sun.irradiance, 1.0)
     # and they light the floor: the sun alone gives 1 W/m^2, the point and spot more
-    e = oclgi.Engine(sc).irradiance(_points([(0.0, 0.0)]) + [0, 0.5, 0, 0, 0, 0], radius=0.3, photons=200_000)
+    e = oclgi.Engine(sc).irradiance(on_plane([(0.0, 0.0)]) + [0, 0.5, 0, 0, 0, 0], radius=0.3, photons=200_000)
     assert e.irradiance[0, 0] > 1.0
 
 

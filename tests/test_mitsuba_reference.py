@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 import pytest
-from analytic_scenes import box_mesh
+from analytic_scenes import box_mesh, square, translation
 
 import oclgi
 from oclgi.study import image as study_image, image_compare, mitsuba as mitsuba_reference
@@ -27,12 +27,6 @@ from oclgi.queries import QueryPoints
 from oclgi.study.image import FILES, compare_with_mitsuba
 
 LUM = image_compare.LUMINANCE
-
-
-def _quad(half, y=0.0):
-    """A square in the plane y, normal +y."""
-    v = np.array([[-half, y, -half], [half, y, -half], [half, y, half], [-half, y, half]], float)
-    return v, np.array([[0, 3, 2], [0, 2, 1]])
 
 
 # -- Mitsuba against closed forms ------------------------------------------------------------------
@@ -45,7 +39,7 @@ def plane_scene():
     """A point light of 2 W/sr at height 1 over a 3 x 3 plane of albedo 0.5,
     direct light only (one segment per photon path), seen at an angle by a
     3:2 camera, so that the image's rows, columns and vertical fov matter."""
-    v, f = _quad(1.5)
+    v, f = square(1.5)
     return oclgi.load_dict({
         "mesh": [{"vertices": v, "faces": f, "albedo": [RHO] * 3}],
         "point_light": [{"position": [0, H, 0], "intensity": [INTENSITY, INTENSITY / 2, INTENSITY / 4]}],
@@ -226,8 +220,8 @@ def test_moved_object_is_where_the_engine_put_it(scenes_dir):
     a point under the moved box's old footprint gets light back."""
     scene = oclgi.load_dict({
         "mesh": [
-            {"vertices": _quad(2.0)[0], "faces": _quad(2.0)[1], "albedo": [0.5] * 3},
-            {"vertices": _quad(0.3, 0.5)[0], "faces": _quad(0.3, 0.5)[1], "albedo": [0.5] * 3,
+            {"vertices": square(2.0)[0], "faces": square(2.0)[1], "albedo": [0.5] * 3},
+            {"vertices": square(0.3, 0.5)[0], "faces": square(0.3, 0.5)[1], "albedo": [0.5] * 3,
              "movable": True, "name": "lid"},
         ],
         "point_light": [{"position": [0, 1.5, 0], "intensity": [1, 1, 1]}],
@@ -236,9 +230,7 @@ def test_moved_object_is_where_the_engine_put_it(scenes_dir):
     engine = oclgi.Engine(scene)
     p, n = np.array([[0.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])
     assert mitsuba_reference.irradiance(engine, p, n, spp=4)[0, 0] == 0  # in the lid's shadow
-    m = np.eye(4)
-    m[0, 3] = 1.2
-    engine.move("lid", m)
+    engine.move("lid", translation(1.2))
     np.testing.assert_allclose(mitsuba_reference.world_triangles(engine)[2:, :, 0],
                                scene.vertices[scene.faces[2:]][:, :, 0] + 1.2)
     np.testing.assert_allclose(mitsuba_reference.irradiance(engine, p, n, spp=4)[0], 1 / 1.5**2, rtol=2e-3)
@@ -294,7 +286,7 @@ def test_edge_mask_marks_discontinuities_only():
 def test_edge_mask_material_seams_with_scene():
     """With the scene, a change of material on one plane is an edge too (an
     emitter flush with a ceiling); without it, only geometry counts."""
-    v1, f = _quad(1.0)
+    v1, f = square(1.0)
     v2 = v1 + [2.0, 0, 0]
     scene = oclgi.load_dict({
         "mesh": [{"vertices": v1, "faces": f, "albedo": [0.2] * 3},

@@ -19,7 +19,6 @@ import re
 import subprocess
 import sys
 
-import pytest
 from conftest import ROOT
 
 BLOCK = re.compile(r"^```python\n(.*?)^```", re.M | re.S)

@@ -10,40 +10,31 @@ ended in a pyopencl INVALID_BUFFER_SIZE traceback, ``study --seeds 1e9`` and
 word of the time they would take.
 """
 
+import functools
 import re
 import warnings
 
 import numpy as np
 import pytest
-from cli_run import in_process
-from small_scene import BOX_OBJ
+from small_scene import write_scene
 
 import oclgi
 from oclgi import budget
 from oclgi.errors import OclgiError
 
 GIB = 1 << 30
-MTL = "newmtl floor\nKd 0.5 0.5 0.5\nnewmtl light\nKd 0 0 0\nKe 5 5 5\n"
-SCENE = ('[[mesh]]\npath = "box.obj"\n[camera]\nposition = [0, 0.5, 3]\nlook_at = [0, 0.3, 0]\nwidth = 8\n'
-         'height = 8\n[photons]\ncount = 2000\n[estimator]\nradius = 0.2\n')
 XYZN = np.array([[0.1, 0.0, 0.2, 0, 1, 0], [-0.3, 0.0, 0.1, 0, 1, 0]], float)
 
 
 @pytest.fixture
 def scene(tmp_path):
-    (tmp_path / "box.obj").write_text(BOX_OBJ)
-    (tmp_path / "box.mtl").write_text(MTL)
-    (tmp_path / "s.toml").write_text(SCENE)
-    return tmp_path / "s.toml"
+    return write_scene(tmp_path, radius="0.2")
 
 
 @pytest.fixture(scope="module")
 def engine(tmp_path_factory):
-    d = tmp_path_factory.mktemp("resources")
-    (d / "box.obj").write_text(BOX_OBJ)
-    (d / "box.mtl").write_text(MTL)
-    (d / "s.toml").write_text(SCENE)
-    return oclgi.Engine(oclgi.load_file(d / "s.toml"), progress=False)
+    return oclgi.Engine(oclgi.load_file(write_scene(tmp_path_factory.mktemp("resources"), radius="0.2")),
+                        progress=False)
 
 
 @pytest.fixture
@@ -68,24 +59,10 @@ def host(monkeypatch):
     return limit
 
 
-def files_under(d):
-    return {p.relative_to(d) for p in d.rglob("*")}
-
-
 @pytest.fixture
-def cli(monkeypatch, capsys):
+def cli(cli_fails):
     """``oclgi.cli.main`` in the scene's folder: exit 2, one error line, no file; returns the line."""
-    def fail(cwd, *args):
-        before = files_under(cwd)
-        done = in_process(monkeypatch, capsys, cwd, *args)
-        rc, out, err = done.returncode, done.stdout, done.stderr
-        assert rc == 2, err
-        lines = err.splitlines()
-        assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), err
-        assert out == "" and files_under(cwd) == before
-        return lines[0]
-
-    return fail
+    return functools.partial(cli_fails, alone=True)
 
 
 # -- the device ------------------------------------------------------------------------------

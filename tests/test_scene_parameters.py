@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import oclgi
+from analytic_scenes import translation
 from test_session import _points, _scene
 
 PHOTONS = 8_000
@@ -29,12 +30,6 @@ def _room(scenes_dir, left=None, light=None):
 @pytest.fixture()
 def engine(scenes_dir):
     return oclgi.Engine(_room(scenes_dir))
-
-
-def _shift(x):
-    m = np.eye(4)
-    m[:3, 3] = [x, 0.0, 0.1]
-    return m
 
 
 def test_engine_update_equals_an_engine_loaded_with_the_values(scenes_dir, engine):
@@ -85,7 +80,7 @@ CASES = {
 def test_session_update_recomputes_only_what_depends_on_it(engine, case):
     changes, expect = CASES[case]
     s = oclgi.Session(engine, None, photons=PHOTONS, radius=0.05)
-    s.move("bunny", _shift(0.2))
+    s.move("bunny", translation(0.2, 0.0, 0.1))
     store = s.store
     launches = store.tracer.launches
     params = s.parameters()
@@ -108,7 +103,7 @@ def test_session_update_recomputes_only_what_depends_on_it(engine, case):
     assert np.array_equal(s.accumulators(), fresh.accumulators())
     assert np.array_equal(s.render()[0], fresh.render()[0])
     # and it goes on: a move after the update stays exact
-    s.move("bunny", _shift(-0.1))
+    s.move("bunny", translation(-0.1, 0.0, 0.1))
     fresh.close()
     fresh = _fresh(s)
     assert np.array_equal(s.accumulators(), fresh.accumulators())
@@ -118,13 +113,13 @@ def test_session_update_recomputes_only_what_depends_on_it(engine, case):
 
 def test_a_material_update_equals_a_scene_loaded_with_it(scenes_dir, engine):
     s = oclgi.Session(engine, None, photons=PHOTONS, radius=0.05)
-    s.move("bunny", _shift(0.2))
+    s.move("bunny", translation(0.2, 0.0, 0.1))
     params = s.parameters()
     params[LEFT] = (0.2, 0.6, 0.2)
     params["light.lamp.intensity"] = (3.0, 3.0, 3.0)
     params.update()
     loaded = oclgi.Engine(_room(scenes_dir, left=(0.2, 0.6, 0.2), light=(3.0, 3.0, 3.0)))
-    loaded.move("bunny", _shift(0.2))
+    loaded.move("bunny", translation(0.2, 0.0, 0.1))
     other = oclgi.Session(loaded, None, photons=PHOTONS, radius=0.05)
     assert np.array_equal(s.accumulators(), other.accumulators())
     assert np.array_equal(s.render()[0], other.render()[0])
@@ -132,7 +127,7 @@ def test_a_material_update_equals_a_scene_loaded_with_it(scenes_dir, engine):
 
 def test_photon_map_session_updates(engine, rng):
     s = oclgi.PhotonMapSession(engine, _points(engine, rng, 60), photons=PHOTONS, k=20, mode="exact")
-    s.move("bunny", _shift(0.2))
+    s.move("bunny", translation(0.2, 0.0, 0.1))
     params = s.parameters()
     params["photons"] = PHOTONS + 2_000
     assert params.update().paths_traced == 2_000

@@ -16,7 +16,7 @@ import pytest
 import oclgi
 import oclgi.estimators
 import oclgi.estimators.detp_disc_index as ddi
-from analytic_scenes import quad
+from analytic_scenes import quad, translation
 from oclgi.cl.constants import CELL_OUTSIDE_BIT
 from oclgi.incremental.dynamic_view import DynamicView
 from oclgi.incremental.segment_store import MAX_CELLS, SegmentStore, grid_dims
@@ -124,8 +124,7 @@ def test_move_statistics(engine, rng):
     pts = _points(engine, rng, 50)
     engine.move("bunny", np.eye(4))
     session = oclgi.Session(engine, pts, radius=0.05)
-    far = np.eye(4)
-    far[:3, 3] = [0, 0, 30.0]
+    far = translation(0, 0, 30.0)
     segs, _ = session.segments()
     a, b = engine.scene.object_ranges()[1]
     on_bunny = ((segs["tri"] >= a) & (segs["tri"] < b)).reshape(session.params.photons, -1).any(axis=1)
@@ -222,8 +221,7 @@ def test_listed_crossings_equal_walks(engine, rng, monkeypatch):
         assert listed.estimator.list_crossings
         counts = []
         for i in range(10):
-            m = np.eye(4)
-            m[:3, 3] = [0.03 * i - 0.1, 0.0, 0.02 * i]
+            m = translation(0.03 * i - 0.1, 0.0, 0.02 * i)
             plain = i == 5  # one move by the plain passes: its new segments get no lists
             listed.sum_changes = walked.sum_changes = not plain
             a, b = listed.move("bunny", m), walked.move("bunny", m)
@@ -271,14 +269,11 @@ def test_dynamic_passes_agree(scenes_dir, rng):
     assert work["listed"]["nodes"] < work["store"]["nodes"], work
 
 
-def test_dynamic_must_be_a_detp_variant(engine):
-    with pytest.raises(oclgi.OclgiError, match="dynamic points are recomputed by a DETP variant"):
-        oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), dynamic="impact", photons=1000)
-
-
-def test_photon_maps_have_no_exact_session(engine):
-    with pytest.raises(oclgi.OclgiError, match="no exact incremental update"):
-        oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), method="photon_map", photons=1000)
+@pytest.mark.parametrize("kwargs, match", [(dict(dynamic="impact"), "dynamic points are recomputed by a DETP variant"),
+                                           (dict(method="photon_map"), "no exact incremental update")])
+def test_sessions_refuse_what_they_cannot_update_exactly(engine, kwargs, match):
+    with pytest.raises(oclgi.OclgiError, match=match):
+        oclgi.Session(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), photons=1000, **kwargs)
 
 
 def test_view_rectangle_holds_every_pixel_on_the_object(scenes_dir, rng):
@@ -354,9 +349,7 @@ def test_a_box_past_one_face_lists_only_the_paths_leaving_through_it(engine):
             escaping = (seg["t_end"] == np.inf) & (np.abs(seg["dir"]).sum(axis=2) > 0)
             down = (escaping & (seg["dir"][:, :, 1] < 0)).any(axis=1).sum()
             assert down > 2000  # leave by the front, going down
-        m = np.eye(4)
-        m[:3, 3] = shift
-        engine.move("bunny", m)
+        engine.move("bunny", translation(*shift))
         a, b = masked.find(obj), full.find(obj)
         assert np.array_equal(a.paths, b.paths) and np.array_equal(a.starts, b.starts)
         assert masked.examined <= n_old + 20, (shift, masked.examined, n_old)

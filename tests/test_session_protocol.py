@@ -17,7 +17,8 @@ import pytest
 
 import oclgi
 import oclgi.estimators
-from test_session import _moves, _points, _scene
+from analytic_scenes import translation
+from test_session import _camera_engine, _moves, _points, _scene
 
 INCREMENTAL = [m for m, c in oclgi.estimators.ESTIMATORS.items() if c.incremental]
 PHOTONS = 10_000
@@ -25,15 +26,7 @@ PHOTONS = 10_000
 
 @pytest.fixture(scope="module")
 def engine(scenes_dir):
-    scene = _scene(scenes_dir)
-    scene.camera = oclgi.Camera(position=(0, 1, 3.94), look_at=(0, 1, 0), fov=39.3, width=24, height=24)
-    return oclgi.Engine(scene)
-
-
-def _shift(x, z=0.0):
-    m = np.eye(4)
-    m[:3, 3] = [x, 0.0, z]
-    return m
+    return _camera_engine(scenes_dir)
 
 
 def test_sessions_over_one_engine_are_independent(engine, rng):
@@ -47,12 +40,12 @@ def test_sessions_over_one_engine_are_independent(engine, rng):
     # b never moved: still the first frame; a equals a fresh session at its pose
     assert np.array_equal(b.accumulators(), start)
     assert np.array_equal(a.accumulators(), oclgi.Session(a.engine, pts, radius=0.05, photons=PHOTONS).accumulators())
-    b.move("bunny", _shift(0.2))
+    b.move("bunny", translation(0.2))
     assert np.array_equal(b.accumulators(),
                           oclgi.Session(b.engine, pts, radius=0.05, photons=PHOTONS).accumulators())
     # the engine's own pose is neither's
     assert np.array_equal(engine.pose_matrix("bunny"), np.eye(4))
-    assert np.array_equal(b.engine.pose_matrix("bunny"), _shift(0.2).astype(np.float32))  # the records are float32
+    assert np.array_equal(b.engine.pose_matrix("bunny"), translation(0.2).astype(np.float32))  # the records are float32
     a.close()
     b.close()
 
@@ -61,13 +54,13 @@ def test_engine_moves_do_not_reach_open_sessions(engine, rng):
     pts = _points(engine, rng, 100)
     s = oclgi.Session(engine, pts, radius=0.05, photons=PHOTONS)
     first = s.accumulators()
-    engine.move("bunny", _shift(-0.3))
+    engine.move("bunny", translation(-0.3))
     try:
         assert np.array_equal(s.accumulators(), first)
         s.move("bunny", np.eye(4))  # the session's pose was the identity all along: nothing changes
         assert np.array_equal(s.accumulators(), first)
         opened_later = oclgi.Session(engine, pts, radius=0.05, photons=PHOTONS)  # starts at the engine's pose
-        assert np.array_equal(opened_later.engine.pose_matrix("bunny"), _shift(-0.3).astype(np.float32))
+        assert np.array_equal(opened_later.engine.pose_matrix("bunny"), translation(-0.3).astype(np.float32))
         with pytest.raises(oclgi.OclgiError, match=r"session's move\(\)"):
             s.engine.move("bunny", np.eye(4))
     finally:
@@ -94,7 +87,7 @@ def test_set_estimator_equals_fresh_without_retrace(engine, rng, camera):
     assert s.store.batch.segments is segments and s.segments()[0].tobytes() == stored
     assert s.store.tracer.launches == traces, "set_estimator traced photons"
     # still a working session: moves keep it exact under the new estimator
-    s.move("bunny", _shift(0.25, -0.1))
+    s.move("bunny", translation(0.25, 0.0, -0.1))
     assert np.array_equal(s.accumulators(), oclgi.Session(s.engine, pts, method="detp_disc_index", radius=0.04,
                                                           photons=PHOTONS).accumulators())
     s.close()
@@ -125,7 +118,7 @@ def test_set_camera_traces_only_the_camera(engine, rng):
     fresh = oclgi.Session(s.engine, None, camera=cam, photons=PHOTONS, radius=0.05)
     assert s.render()[0].shape == (16, 20, 3)
     assert np.array_equal(s.render()[0], fresh.render()[0])
-    s.move("bunny", _shift(0.1))
+    s.move("bunny", translation(0.1))
     fresh.close()
     fresh = oclgi.Session(s.engine, None, camera=cam, photons=PHOTONS, radius=0.05)
     assert np.array_equal(s.render()[0], fresh.render()[0])
@@ -213,7 +206,7 @@ def test_close_frees_the_sessions_buffers(engine, kind):
         s = oclgi.Session(engine, None, photons=PHOTONS, radius=0.05)
     else:
         s = oclgi.PhotonMapSession(engine, np.array([[0, 0.01, 0, 0, 1, 0]]), photons=PHOTONS, k=20)
-    s.move("bunny", _shift(0.1))
+    s.move("bunny", translation(0.1))
     bufs = _buffers(s)
     engine_bufs = {id(v) for v in vars(engine.compiled).values() if isinstance(v, cl.MemoryObjectHolder)}
     assert len(bufs) > 10
@@ -297,7 +290,7 @@ def test_any_sequence_of_changes_closes_cleanly_and_stays_exact(lit_engine, kind
         steps = ["move", "photons", "light", *rng.choice(["move", "photons", "method", "light"], 4)]
         for step in steps:  # the failing pair (a move, then a photon count) first
             if step == "move":
-                pose = _shift(float(rng.uniform(-0.2, 0.2)))
+                pose = translation(float(rng.uniform(-0.2, 0.2)))
                 s.move("bunny", pose)
             elif step == "photons":  # more (traced and added) or fewer (dropped)
                 photons = 4_500 if photons == 3_000 else int(rng.choice([1_500, 3_000, 6_000]))

@@ -22,16 +22,15 @@ box (E = pi Le / (1 - rho)).
 
 import csv
 import math
-import re
 import sys
 from html.parser import HTMLParser
 
 import numpy as np
 import pytest
 from analytic_scenes import box, disc_mean, exact, face_points, plane_scene
-from cli_run import in_process, run
+from cli_run import entries_under, run
 from scipy.stats import chi2
-from small_scene import BOX_MTL, BOX_OBJ
+from small_scene import write_scene
 
 import oclgi
 from oclgi.errors import OclgiError
@@ -252,11 +251,8 @@ SCENE = "[[mesh]]\npath = \"box.obj\"\n[photons]\ncount = 4000\n[estimator]\nrad
 
 @pytest.fixture
 def scene(tmp_path):
-    (tmp_path / "box.obj").write_text(BOX_OBJ)
-    (tmp_path / "box.mtl").write_text(BOX_MTL)
-    (tmp_path / "s.toml").write_text(SCENE)
     np.save(tmp_path / "p.npy", np.array([[0, 0.0, 0, 0, 1, 0], [0.5, 0.0, 0.5, 0, 1, 0]], float))
-    return tmp_path / "s.toml"
+    return write_scene(tmp_path, scene=SCENE)
 
 
 def test_cli_study(scene, tmp_path):
@@ -283,10 +279,6 @@ def test_cli_study(scene, tmp_path):
     assert res.stderr == "" and "exact (given values)" in (tmp_path / "out2" / "study.md").read_text()
 
 
-def files_under(d):
-    return {p.relative_to(d) for p in d.rglob("*") if p.is_file() or p.is_dir()}
-
-
 @pytest.mark.parametrize("args, match", [
     (["--methods", "detp,fast_detp"], "unknown method 'fast_detp'"),
     (["--photons", "1000,abc"], "positive integers"),
@@ -300,25 +292,19 @@ def files_under(d):
     (["-O", "q=0.5", "--methods", "photon_map"], "taken by none of the methods"),
     (["--methods", "photon_map:k=0"], "photon_map"),
 ])
-def test_cli_bad_input(scene, tmp_path, monkeypatch, capsys, args, match):
+def test_cli_bad_input(scene, tmp_path, cli_fails, args, match):
     """One line on stderr, exit 2, nothing on stdout, no output folder."""
-    before = files_under(tmp_path)
-    res = in_process(monkeypatch, capsys, tmp_path, "study", "s.toml", "--photons", "1000", "--seeds", "2", "--points",
-                     "random:5", "--reference", "detp:4000", *args, "-o", "out")
-    lines = res.stderr.splitlines()
-    assert res.returncode == 2, res.stderr
-    assert len(lines) == 1 and lines[0].startswith("oclgi: error: "), res.stderr
-    assert re.search(match, lines[0]), lines[0]
-    assert res.stdout == "" and files_under(tmp_path) == before
+    cli_fails(tmp_path, "study", "s.toml", "--photons", "1000", "--seeds", "2", "--points", "random:5", "--reference",
+              "detp:4000", *args, "-o", "out", match=match, alone=True)
 
 
 def test_cli_bad_input_subprocess(scene, tmp_path):
-    before = files_under(tmp_path)
+    before = entries_under(tmp_path)
     (tmp_path / "out").write_text("a file where the folder should go")
     res = run(tmp_path, "study", "s.toml", "--photons", "1000", "--seeds", "2", "-o", "out")
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert res.stderr.splitlines() == [res.stderr.strip()] and "not a folder" in res.stderr
-    assert files_under(tmp_path) == before | {tmp_path.joinpath("out").relative_to(tmp_path)}
+    assert entries_under(tmp_path) == before | {tmp_path.joinpath("out").relative_to(tmp_path)}
     res = run(tmp_path, "study", "s.toml", "--image", "--seeds", "2", "-o", "out3")
     # --image needs the scene's camera: refused before any work, nothing written
     assert res.returncode == 2 and "no [camera]" in res.stderr and res.stdout == ""

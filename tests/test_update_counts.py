@@ -12,7 +12,7 @@ room, so n_Rec counts exactly the paths that met it.
 
 import numpy as np
 import trimesh
-from analytic_scenes import box_mesh
+from analytic_scenes import box_mesh, translation
 
 import oclgi
 
@@ -32,19 +32,13 @@ def _engine(f):
     }))
 
 
-def _translate(x, y, z):
-    m = np.eye(4)
-    m[:3, 3] = [x, y, z]
-    return m
-
-
 def test_recomputed_segments_grow_like_f_squared():
     fs = np.array([0.05, 0.1, 0.2, 0.3, 0.4])
     ratios = []
     for f in fs:
         session = oclgi.Session(_engine(f), np.array([[0, -0.99, 0, 0, 1, 0]]), radius=0.05)
         n_r = int(session.segments()[1].sum())
-        stats = session.move("ball", _translate(0, 0, 30))  # out of the room
+        stats = session.move("ball", translation(0, 0, 30))  # out of the room
         ratios.append(stats.segments_removed / n_r)
     ratios = np.array(ratios)
     k = ratios / fs**2

@@ -50,9 +50,13 @@ def _trimesh_scene():
     return trimesh.Scene({"floor": floor, "light": light})
 
 
-def _sums(engine):
-    pts = oclgi.query_points(np.array([[x, 0.0, z] for x in (-0.5, 0.0, 0.5) for z in (-0.5, 0.5)]),
-                             np.tile([0.0, 1.0, 0.0], (6, 1)))
+def _up_and_down_sums(engine):
+    """Sums at points facing up (light from the quad) and facing down (light the floor reflects)."""
+    xz = np.array([[x, z] for x in (-0.5, 0.0, 0.5) for z in (-0.5, 0.5)])
+    up = np.column_stack([xz[:, 0], np.zeros(6), xz[:, 1]])
+    down = np.column_stack([xz[:, 0], np.full(6, 0.5), xz[:, 1]])
+    pts = oclgi.query_points(np.vstack([up, down]), np.vstack([np.tile([0.0, 1.0, 0.0], (6, 1)),
+                                                               np.tile([0.0, -1.0, 0.0], (6, 1))]))
     return engine.irradiance(pts, photons=20_000, radius=0.1).accumulators
 
 
@@ -60,16 +64,16 @@ def test_trimesh_objects_and_face_arrays_give_the_file_scenes_bits(tmp_path):
     scene = _trimesh_scene()
     scene.export(tmp_path / "s.glb")
     (tmp_path / "s.toml").write_text('[[mesh]]\npath = "s.glb"\n')
-    from_file = _sums(oclgi.Engine(oclgi.load_file(tmp_path / "s.toml")))
+    from_file = _up_and_down_sums(oclgi.Engine(oclgi.load_file(tmp_path / "s.toml")))
     assert from_file[:, 0].sum() > 0
-    assert np.array_equal(_sums(oclgi.Engine(scene)), from_file)  # a trimesh Scene straight in
+    assert np.array_equal(_up_and_down_sums(oclgi.Engine(scene)), from_file)  # a trimesh Scene straight in
     as_dict = oclgi.load_dict({"mesh": [{"trimesh": scene}]})
-    assert np.array_equal(_sums(oclgi.Engine(as_dict)), from_file)
+    assert np.array_equal(_up_and_down_sums(oclgi.Engine(as_dict)), from_file)
     arrays = oclgi.load_dict({"mesh": [{"vertices": V, "faces": F,
                                         "face_albedo": [[0.8, 0.2, 0.2]] * 2 + [[0.0, 0.0, 0.0]] * 2,
                                         "face_emission": [[0.0, 0.0, 0.0]] * 2 + [[1.0, 1.0, 1.0]] * 2}]})
     assert [m.name for m in arrays.materials] == ["mesh[0].default", "mesh[0]:#0", "mesh[0]:#1"]
-    assert np.array_equal(_sums(oclgi.Engine(arrays)), from_file)
+    assert np.array_equal(_up_and_down_sums(oclgi.Engine(arrays)), from_file)
 
 
 def test_a_trimesh_scene_without_a_camera_renders_from_trimeshs_default(recwarn):
@@ -118,16 +122,6 @@ def test_the_summary_stages_add_up_to_the_total(cornell):
         assert s["camera"] + s["trace"] + s["estimate"] + s["resolve"] <= s["total"], s
         engine_part, run_part = stats.summary().split(" | ")[1:]
         assert engine_part.startswith("load ") and run_part.startswith("camera ") and " total " in run_part
-
-
-def _up_and_down_sums(engine):
-    """Sums at points facing up (light from the quad) and facing down (light the floor reflects)."""
-    xz = np.array([[x, z] for x in (-0.5, 0.0, 0.5) for z in (-0.5, 0.5)])
-    up = np.column_stack([xz[:, 0], np.zeros(6), xz[:, 1]])
-    down = np.column_stack([xz[:, 0], np.full(6, 0.5), xz[:, 1]])
-    pts = oclgi.query_points(np.vstack([up, down]), np.vstack([np.tile([0.0, 1.0, 0.0], (6, 1)),
-                                                               np.tile([0.0, -1.0, 0.0], (6, 1))]))
-    return engine.irradiance(pts, photons=20_000, radius=0.1).accumulators
 
 
 def test_vertex_albedo_gives_the_bits_of_the_glb_with_its_colours(tmp_path):

@@ -17,6 +17,7 @@ frames) is never drawn, a value the engine must refuse (16385 pixels) is.
 from __future__ import annotations
 
 import copy
+import io
 import tomllib
 from pathlib import Path
 
@@ -129,6 +130,13 @@ toml_values = st.recursive(st.one_of(scalars, vec3, plausible),
                            lambda inner: st.one_of(st.lists(inner, max_size=4),
                                                    st.dictionaries(keys, inner, max_size=3)),
                            max_leaves=8)
+
+
+def _npy_bytes(a, **kw) -> bytes:
+    """``a`` as the bytes of a .npy file."""
+    buf = io.BytesIO()
+    np.save(buf, a, **kw)
+    return buf.getvalue()
 
 
 def _deep_list(depth: int):
@@ -366,17 +374,11 @@ def line_mutation(draw, data: bytes, new_lines) -> bytes:
 
 
 @st.composite
-def obj_cases(draw):
+def line_cases(draw, fmt, member, new_lines):
+    """The Cornell box with ``member`` (its OBJ or MTL file) mutated line by line, rendered."""
     files = cornell_files()
-    files[BOX_OBJ] = draw(line_mutation(files[BOX_OBJ], obj_lines))
-    return Case("obj", files, render_argv())
-
-
-@st.composite
-def mtl_cases(draw):
-    files = cornell_files()
-    files[BOX_MTL] = draw(line_mutation(files[BOX_MTL], MTL_LINES))
-    return Case("mtl", files, render_argv())
+    files[member] = draw(line_mutation(files[member], new_lines))
+    return Case(fmt, files, render_argv())
 
 
 # -- meshes for trimesh: PLY, glTF, GLB ---------------------------------------------------
@@ -558,8 +560,6 @@ def csv_points(draw) -> bytes:
 
 @st.composite
 def npy_points(draw) -> bytes:
-    import io
-
     rows = draw(point_rows)
     a = np.array(rows, dtype=np.float64)
     op = draw(st.sampled_from(["none", "none", "dtype", "shape", "value", "zero_normal"]))
@@ -573,9 +573,7 @@ def npy_points(draw) -> bytes:
         a[draw(st.integers(0, len(a) - 1)), draw(st.integers(0, 5))] = draw(floats)
     elif op == "zero_normal":
         a[draw(st.integers(0, len(a) - 1)), 3:] = 0
-    buf = io.BytesIO()
-    np.save(buf, a, allow_pickle=True)
-    data = buf.getvalue()
+    data = _npy_bytes(a, allow_pickle=True)
     edit = draw(st.sampled_from(["none", "none", "none", "truncate", "magic", "version", "header", "shape"]))
     if edit == "truncate":
         data = data[:draw(st.integers(0, len(data)))]
@@ -700,8 +698,6 @@ STRAY = ["--bogus", "-", "--", "--photons=5", "\u00fc", "-o", "--help-me", "rend
 
 
 def _cli_files() -> dict:
-    import io
-
     files = cornell_files()
     files["scene.toml"] = CLI_SCENE.encode()
     files["cube.obj"] = CUBE_OBJ
@@ -709,15 +705,10 @@ def _cli_files() -> dict:
     files["k.csv"] = b"0,0,0\n0.1,0.1,0\n0.2,0,0.1\n"
     files["m16.csv"] = b"1,0,0,0,0,1,0,0,0,0,1,0,0,0,0,1\n"
 
-    def npy(a):
-        buf = io.BytesIO()
-        np.save(buf, a)
-        return buf.getvalue()
-
-    files["p.npy"] = npy(np.array([[0, 0.01, 0, 0, 1, 0], [0.2, 1.98, 0.1, 0, -1, 0]]))
-    files["k.npy"] = npy(np.array([[0, 0, 0, 0], [0.1, 0, 0.1, 45]]))
-    files["ref.npy"] = npy(np.ones((4, 3)))
-    files["ref2.npy"] = npy(np.full((4,), np.nan))
+    files["p.npy"] = _npy_bytes(np.array([[0, 0.01, 0, 0, 1, 0], [0.2, 1.98, 0.1, 0, -1, 0]]))
+    files["k.npy"] = _npy_bytes(np.array([[0, 0, 0, 0], [0.1, 0, 0.1, 45]]))
+    files["ref.npy"] = _npy_bytes(np.ones((4, 3)))
+    files["ref2.npy"] = _npy_bytes(np.full((4,), np.nan))
     files["bad.npy"] = b"\x93NUMPY\x01\x00\x10\x00{'descr': '<f8'"
     return files
 
@@ -744,5 +735,6 @@ def cli_cases(draw):
     return Case("cli", _cli_files(), argv)
 
 
-FORMATS = {"toml": toml_cases(), "dict": dict_cases(), "obj": obj_cases(), "mtl": mtl_cases(),
-           "ply": ply_cases(), "gltf": gltf_cases(), "points": points_cases(), "cli": cli_cases()}
+FORMATS = {"toml": toml_cases(), "dict": dict_cases(), "obj": line_cases("obj", BOX_OBJ, obj_lines),
+           "mtl": line_cases("mtl", BOX_MTL, MTL_LINES), "ply": ply_cases(), "gltf": gltf_cases(),
+           "points": points_cases(), "cli": cli_cases()}
