@@ -190,17 +190,20 @@ def test_the_bake_is_the_posed_mesh_with_the_api_radiance(viewer):
         glb, done = await test(client)
     run_pages(viewer, outer)
 
+    from oclgi.viewer.mesh_payload import vertex_objects
+
     scene = trimesh.load(io.BytesIO(glb), file_type="glb", process=False)
     api = reference_colours(viewer, done["poses"])
+    objects = vertex_objects(viewer.engine.scene, viewer.tess.vertex_tri)[0]
     bunny = scene.geometry["bunny"]
     static = scene.geometry[viewer.engine.scene.objects[0].name]
-    on = viewer.vertex_objects == 1
+    on = objects == 1
     shift = np.array(bunny_at(0.3, -0.2)).reshape(4, 4)[:3, 3]
     assert np.allclose(np.sort(bunny.vertices, axis=0), np.sort(viewer.tess.vertices[on] + shift, axis=0), atol=1e-6)
-    for geom, mask in ((bunny, on), (static, viewer.vertex_objects == 0)):
+    for geom, mask in ((bunny, on), (static, objects == 0)):
         got = np.asarray(geom.vertex_attributes["_RADIANCE"], np.float32)
         want = api[mask]
         # the mesh keeps its vertices' order within each object
         assert got.shape == want.shape and np.array_equal(got, want)
     colour = np.asarray(static.visual.vertex_colors)[:, :3]
-    assert np.array_equal(colour, np.round(np.clip(2.0 * api[viewer.vertex_objects == 0], 0, 1) * 255))
+    assert np.array_equal(colour, np.round(np.clip(2.0 * api[objects == 0], 0, 1) * 255))

@@ -143,11 +143,11 @@ class FinalGather(Estimator):
                                   seed)
         self.positions = self.upload(points.positions)
         self.normals = self.upload(points.normals)
-        self.hits, self.hit_weights, self.emitted = gather_rays(queue, compiled, self.positions, self.normals,
-                                                                self.n, n_rays, gather_key(int(seed), self.gather_seed),
-                                                                self.local_size)
-        # The variant's own discs at the hits, with their own exact direct light.
         self.key = gather_key(int(seed), self.gather_seed)
+        self.hits, self.hit_weights, self.emitted = gather_rays(queue, compiled, self.positions, self.normals,
+                                                                self.n, n_rays, self.key, self.local_size)
+        self.seen = None  # the emission the rays saw, on the host (read at the first regather)
+        # The variant's own discs at the hits, with their own exact direct light.
         self.make_inner = lambda hits: variant(queue, compiled, hits, radius, direct="exact",
                                                direct_samples=hit_samples(direct_samples, n_rays),
                                                direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
@@ -195,7 +195,8 @@ class FinalGather(Estimator):
         hits, weights, emitted = gather_rays(self.queue, self.compiled, self.positions, self.normals, self.n,
                                              self.n_rays, self.key, self.local_size)
         n = self.n * self.n_rays
-        seen_old, seen_new = (read_buffer(self.queue, e, (n, 4), np.float32) for e in (self.emitted, emitted))
+        seen_old = self.seen if self.seen is not None else read_buffer(self.queue, self.emitted, (n, 4), np.float32)
+        seen_new = read_buffer(self.queue, emitted, (n, 4), np.float32)
         old = self.inner.points
 
         def bits(*arrays):
@@ -204,7 +205,7 @@ class FinalGather(Estimator):
         differ = bits(old.positions, old.normals, old.barys, self.hit_weights, seen_old) != bits(
             hits.positions, hits.normals, hits.barys, weights, seen_new)
         changed = np.nonzero(differ.any(axis=1))[0]
-        self.emitted = emitted
+        self.emitted, self.seen = emitted, seen_new
         if not len(changed):
             return 0
         new = hits.subset(changed)

@@ -468,12 +468,14 @@ class Connection:
     def _bake(self, exposure: float) -> bytes:
         """The GLB of the tessellation at the session's poses, coloured by the current solution's radiance."""
         from ..bake import baked_scene, glb_bytes
+        from ..incremental.attached_points import AttachedPoints
 
         v = self.viewer
-        poses = {name: self.session.engine.pose_matrix(name) for name in v.movable}
-        positions, normals = v.posed_vertices(poses)
-        return glb_bytes(baked_scene(v.engine.scene, v.tess, positions, normals, self.colours, "radiance",
-                                     exposure))
+        placed = AttachedPoints(self.session.engine, v.tess.points(), as_loaded=True)  # as oclgi bake places them
+        placed.update()
+        p = placed.points
+        return glb_bytes(baked_scene(v.engine.scene, v.tess, p.positions[:, :3], p.normals[:, :3], self.colours,
+                                     "radiance", exposure))
 
     async def _send_bake(self, req: Request) -> None:
         t0 = time.perf_counter()

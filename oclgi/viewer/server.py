@@ -66,7 +66,6 @@ class Viewer:
                              f"{', '.join(self.methods)}")
         self.terms = vertex_terms(scene, tess.vertex_tri)
         objects, movable = vertex_objects(scene, tess.vertex_tri)
-        self.vertex_objects = objects
         queried, self.value_of = object_points(tess, objects, np.asarray(scene.tri_material)[tess.vertex_tri],
                                                all_vertices)
         self.points = tess.points().subset(queried)  # each session's query points
@@ -125,17 +124,6 @@ class Viewer:
         return open_session(self.lit_engine(lights), self.points, method=method, photons=photons or r.photons,
                             **options)
 
-    def posed_vertices(self, poses: dict) -> tuple[np.ndarray, np.ndarray]:
-        """The tessellation's vertices and normals (V, 3) float64 with each
-        movable object at ``poses`` (name -> 4x4 world-from-object)."""
-        positions, normals = np.array(self.tess.vertices, np.float64), np.array(self.tess.normals, np.float64)
-        for rank, (name, m) in enumerate(self.movable.items()):
-            rel = np.asarray(poses[name], np.float64) @ np.linalg.inv(m.loaded)
-            on = self.vertex_objects == rank + 1
-            positions[on] = positions[on] @ rel[:3, :3].T + rel[:3, 3]
-            normals[on] = normals[on] @ rel[:3, :3].T
-        return positions, normals
-
     def lit_engine(self, lights: dict | None):
         """The shared engine, or a view of it with the lights moved."""
         if not lights:
@@ -159,8 +147,8 @@ class Viewer:
 
         app = web.Application(middlewares=[self.guard.middleware()])
         app.router.add_get("/", self._page)
-        app.router.add_get("/mesh.bin", self._mesh)
-        app.router.add_get("/levels.bin", self._levels)
+        app.router.add_get("/mesh.bin", functools.partial(self._binary, self.mesh))
+        app.router.add_get("/levels.bin", functools.partial(self._binary, self.levels_payload))
         app.router.add_get("/scene.json", self._scene)
         app.router.add_get("/status.json", self._status)
         app.router.add_get("/socket", self._socket)
@@ -173,15 +161,10 @@ class Viewer:
 
         return web.FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
 
-    async def _mesh(self, request):
+    async def _binary(self, body: bytes, request):
         from aiohttp import web
 
-        return web.Response(body=self.mesh, content_type="application/octet-stream")
-
-    async def _levels(self, request):
-        from aiohttp import web
-
-        return web.Response(body=self.levels_payload, content_type="application/octet-stream")
+        return web.Response(body=body, content_type="application/octet-stream")
 
     async def _scene(self, request):
         from aiohttp import web
