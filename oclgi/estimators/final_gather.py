@@ -222,7 +222,7 @@ class FinalGather(Estimator):
     def resolve(self, scale: float) -> cl.Buffer:
         """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""
         hit_irr = self.inner.resolve(scale)
-        cl.enqueue_copy(self.queue, self.irr, np.zeros((self.n, 4), np.float32))
+        cl.enqueue_fill_buffer(self.queue, self.irr, np.float32(0), 0, self.n * 16)  # no host array a resolve
         self.direct.add(self.positions, self.normals, self.n, self.irr)
         launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.emitted, self.n, self.n_rays,
                self.irr, local_size=self.local_size)
