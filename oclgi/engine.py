@@ -430,9 +430,13 @@ class Engine:
             raise OclgiError("no query points given")
         points.check_triangles(self.scene.n_triangles, f"scene {self.scene.name!r}")
 
-    def estimator(self, points, params: RunParams, count_work: bool = False, **options):
+    def estimator(self, points, params: RunParams, count_work: bool = False, request_points: int | None = None,
+                  **options):
         """A fresh estimator of ``params.method`` over ``points``; ``options``
-        are the method's own (estimators.check_options checks their names)."""
+        are the method's own (estimators.check_options checks their names).
+        ``request_points``: the size of the request ``points`` are part of (a
+        session's layer, default ``len(points)``), which defaults such as
+        the direct light's samples are taken from."""
         if not isinstance(params, RunParams):
             raise OclgiError(f"estimator: params must be a RunParams (Engine.run_params), got {type(params).__name__}")
         cls = ESTIMATORS[params.method]
@@ -445,7 +449,8 @@ class Engine:
         if cls.family == "detp" and options.get("direct") == "exact" and options.get("direct_samples") is None:
             from .estimators.detp_direct import default_samples
 
-            options = dict(options, direct_samples=default_samples(params.photons))
+            n = len(points) if request_points is None else request_points
+            options = dict(options, direct_samples=default_samples(params.photons, n))
         if cls.family == "detp" and options.get("gather", 0):
             from .estimators.final_gather import FinalGather
 

@@ -13,6 +13,7 @@ import pytest
 import oclgi
 from oclgi.errors import OclgiError
 from oclgi.estimators.final_gather import FinalGather
+from oclgi.queries import QueryPoints
 
 VARIANTS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache"]
 KW = dict(photons=6_000, radius=0.12, direct="exact", direct_samples=4, gather=6)
@@ -24,22 +25,25 @@ def engine(scenes_dir):
 
 
 def points(engine, on_bunny=True):
-    """Floor and back-wall points, and (``on_bunny``) points on the bunny's vertices."""
+    """Floor and back-wall points, and (``on_bunny``) points at the centres
+    of 12 of the bunny's triangles, carrying those triangles: they move with
+    the bunny (the session's dynamic layer)."""
     rng = np.random.default_rng(4)
     floor = np.column_stack([rng.uniform(-0.9, 0.9, 30), np.zeros(30), rng.uniform(-0.9, 0.9, 30),
                              np.zeros(30), np.ones(30), np.zeros(30)])
     wall = np.column_stack([rng.uniform(-0.9, 0.9, 10), rng.uniform(0.1, 1.8, 10), np.full(10, -1.0),
                             np.zeros(10), np.zeros(10), np.ones(10)])
-    pts = [floor, wall]
+    a = np.concatenate([floor, wall])
+    tri = np.full(len(a), -1)
     if on_bunny:
         scene = engine.scene
-        a, b = scene.object_ranges()[scene.object_id("bunny")]
-        tri = np.arange(a, b, (b - a) // 12)[:12]
-        p = scene.vertices[scene.faces[tri]]  # the bunny as loaded, where the engine has it
-        centre = p.mean(axis=1)
+        first, end = scene.object_ranges()[scene.object_id("bunny")]
+        ids = np.arange(first, end, (end - first) // 12)[:12]
+        p = scene.vertices[scene.faces[ids]]  # the bunny as loaded, where the engine has it
         n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        pts.append(np.column_stack([centre, n / np.linalg.norm(n, axis=1, keepdims=True)]))
-    return np.concatenate(pts)
+        a = np.concatenate([a, np.column_stack([p.mean(axis=1), n / np.linalg.norm(n, axis=1, keepdims=True)])])
+        tri = np.concatenate([tri, ids])
+    return QueryPoints(np.column_stack([a[:, :3], tri]), a[:, 3:], np.full((len(a), 2), 1 / 3))
 
 
 def moves(engine, n):
@@ -58,6 +62,8 @@ def moves(engine, n):
 
 
 def fresh(engine, pts, matrix, **kw):
+    """A fresh session at the pose ``matrix``, over ``pts`` where they are
+    at that pose (a moved session's ``points``: the bunny's have moved)."""
     e = engine.posed()
     e.place("bunny", matrix)
     with oclgi.Session(e, pts, **kw) as s:
@@ -75,7 +81,7 @@ def test_moves_equal_a_fresh_session(engine, method):
             changed.append(st.rays_changed)
             assert "gather" in st.seconds
             if i % 4 == 3:  # every fourth move, and the last
-                assert np.array_equal(s.irradiance(), fresh(engine, pts, m, **kw)), (method, i)
+                assert np.array_equal(s.irradiance(), fresh(engine, s.points, m, **kw)), (method, i)
     assert min(changed) > 0 and max(changed) < len(pts) * KW["gather"], changed
 
 
@@ -102,3 +108,24 @@ def test_a_session_without_dynamic_points_equals_the_plain_run(engine):
 def test_camera_sessions_refuse_a_gather(engine):
     with pytest.raises(OclgiError, match="camera sessions: gather"):
         oclgi.Session(engine, None, method="detp_disc_index", photons=1000, direct="exact", gather=4)
+
+
+def test_default_light_samples_are_the_whole_requests(engine):
+    """The direct light's default sample count is taken from the whole
+    request (photons and every query point): a session whose bunny points
+    are a layer of their own equals the plain run over all the points at
+    the same pose, bit for bit; the count grows with the photons and falls
+    with the points."""
+    from oclgi.estimators.detp_direct import default_samples
+
+    pts = points(engine)
+    kw = dict(method="detp_disc_index", photons=50_000, radius=0.12, direct="exact")
+    m = moves(engine, 1)[0]
+    with oclgi.Session(engine, pts, **kw) as s:
+        s.move("bunny", m)
+        e = engine.posed()
+        e.place("bunny", m)
+        assert len(s.dyn_index) == 12
+        assert np.array_equal(s.irradiance(), e.irradiance(s.points, **kw).irradiance)
+    assert default_samples(50_000, len(pts)) < default_samples(50_000, 12)  # the bunny's layer alone
+    assert default_samples(10**7, 256) > default_samples(10**6, 256) > default_samples(10**6, 10**6) == 16

@@ -23,8 +23,9 @@ What. With ``direct = "exact"``:
   I(d) cos(theta) / r^2 (I the photons' own intensity, profile included),
   E cos(theta) for the sun; for area lights, a uniform sky and an
   environment map by ``direct_samples`` pairs of a light sample and a
-  cosine (BSDF) sample (default: one per 2^15 photons of the run, from 16
-  to 1,024; with ``gather = N`` each hit takes max(1, direct_samples // N)),
+  cosine (BSDF) sample (default: photons / sqrt(4096 x points) of the run,
+  from 16 to 65,536, see ``default_samples``; with ``gather = N`` each hit
+  takes max(1, direct_samples // N)),
   combined by multiple importance sampling
   (``direct_mis``: "power", the default, or "balance" heuristic; "light"
   or "bsdf" alone, for studies). The light sample picks an emitter by its
@@ -64,18 +65,28 @@ DIRECT_MODES = ("photons", "exact")
 MIS_MODES = ("power", "balance", "light", "bsdf")
 DIRECT_SAMPLES = 16  # pairs of samples per point of an estimator built without a run's photon count
 MAX_SAMPLES = 65536
-# The default with a run (Engine.estimator): one pair per 2^15 photons, from
-# 16 to 1,024 (bench/README.md, "Accuracy": at 16 the light samples' noise
-# outweighed the photons'): their noise falls with the photons' as the run
-# grows, and their cost (2 rays a pair per point) stays small beside the
-# photons' (several segments each).
-PHOTONS_PER_SAMPLE = 1 << 15
-MIN_DEFAULT, MAX_DEFAULT = 16, 1024
+# The default with a run (Engine.estimator) spends the time where the error
+# is. A point's variance is about A / photons + B / S (the discs' noise and
+# the light samples'), the time c_p photons + c_d points S; the least
+# variance for a given time takes S = photons / sqrt(K points), K = (A / B)
+# (c_d / c_p). Measured at 256 points, 5 x 10^6 photons, adaptive radii and
+# gather 1024 (bench/README.md, "Accuracy"): K = 1,140 in the courtyard under
+# a sky (the sky seen through an opening: light samples are noisy), 3,810
+# under the foliage's area light, 20,700 in the Cornell box; K = 4096 is
+# their geometric mean, and missing a scene's own K by 4x costs little (the
+# optimum is flat). Sensor sets (hundreds of points) get thousands of pairs,
+# images (10^5 points and more) tens.
+BALANCE = 4096
+MIN_DEFAULT = 16
 
 
-def default_samples(photons: int) -> int:
-    """The pairs of light and cosine samples per point a run of ``photons`` takes by default."""
-    return min(max(int(photons) // PHOTONS_PER_SAMPLE, MIN_DEFAULT), MAX_DEFAULT)
+def default_samples(photons: int, points: int) -> int:
+    """The pairs of light and cosine samples per point a run of ``photons``
+    over ``points`` query points takes by default (see BALANCE): a function
+    of the whole request, so a session's layers, MPI ranks and batches of a
+    run all take the same."""
+    s = round(int(photons) / np.sqrt(BALANCE * max(int(points), 1)))
+    return int(min(max(s, MIN_DEFAULT), MAX_SAMPLES))
 
 
 def hit_samples(samples: int, n_rays: int) -> int:

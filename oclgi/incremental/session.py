@@ -173,7 +173,8 @@ class Session(SessionBase):
         self.dynamic = self.dynamic_choice or ("detp_disc_index" if cls.family == "detp" else p.method)
         # the static points' index is walked on every move: built for that
         # (DetpDiscIndex.session_tree), unless the options say otherwise
-        self.estimator = self.engine.estimator(est_points, p, **{**getattr(cls, "session_tree", {}), **self.options})
+        self.estimator = self.engine.estimator(est_points, p, request_points=len(self.points),
+                                               **{**getattr(cls, "session_tree", {}), **self.options})
         if isinstance(self.estimator, DetpDiscIndex):
             self.estimator.list_crossings = True  # it lives as long as the store (DetpDiscIndex.accumulate_change)
         self.estimator.accumulate(self.store.batch)
@@ -435,4 +436,4 @@ class Session(SessionBase):
         # an index built on every move, walked once (DetpDiscIndex.dynamic_tree)
         options = {**getattr(ESTIMATORS[self.dynamic], "dynamic_tree", {}), **options}
         self.dyn_est = self.engine.estimator(self.view.subset(self.dyn_index), replace(p, method=self.dynamic),
-                                             **options)
+                                             request_points=len(self.points), **options)
