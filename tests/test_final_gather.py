@@ -23,8 +23,8 @@ kernels/final_gather.cl).
   reaches the point by its gather rays (the quadrature of its image); the
   Cornell box (an area light) gathers to its photons' mean.
 - Refused with one error line: direct = "photons", bad values, camera
-  sessions and light animations, methods other than DETP (sessions over
-  given points: tests/test_gather_session.py).
+  sessions, methods other than DETP (sessions over given points:
+  tests/test_gather_session.py; light sessions: tests/test_light_session.py).
 """
 
 import numpy as np
@@ -36,7 +36,6 @@ from analytic_scenes import H, INTENSITY, on_plane, plane_scene, quad
 from oclgi.errors import OclgiError
 from oclgi.estimators.detp_disc_index import DetpDiscIndex
 from oclgi.study import Config, run_study
-from oclgi.tracing.light_reuse import LightReuse
 
 VARIANTS = ["detp", "detp_disc_index", "detp_ray_map", "detp_sphere_cache"]
 RHO = 0.5
@@ -213,14 +212,6 @@ def test_the_cornell_box_gathers_to_its_photons(cornell):
     photons = cornell.irradiance(pts, **kw).irradiance[:, 0].astype(np.float64)
     gathered = cornell.irradiance(pts, direct="exact", gather=32, **kw).irradiance[:, 0].astype(np.float64)
     assert abs(gathered.mean() / photons.mean() - 1) < 0.02
-
-
-def test_light_animations_refuse_it():
-    from test_light_reuse import POSITIONS, box, points
-
-    reuse = LightReuse(oclgi.Engine(box(POSITIONS[0])), "lamp", POSITIONS, photons=500, seed=1, max_depth=2)
-    with pytest.raises(OclgiError, match="light animations: gather"):
-        reuse.estimator(points(), radius=0.1, direct="exact", gather=8)
 
 
 def test_the_study_compares_it(shadow):

@@ -97,3 +97,28 @@ def test_a_light_path_in_the_scene_file(tmp_path, monkeypatch, capsys):
     scene_file.write_text(text.replace("path = [[-0.5, 1.5, 0.0], [0.5, 1.6, 0.2], [0.0, 1.8, -0.4]]\n", ""))
     r = in_process(monkeypatch, capsys, tmp_path, *common, "-o", tmp_path / "c")
     assert r.returncode == 2 and "has no path in the scene file" in r.stderr
+
+
+def test_a_light_session_gathers_exactly():
+    """Final gathering with the light dragged: each precomputed position
+    equals the animation's plain frame (every batch through a fresh
+    estimator) bit for bit, sums and irradiance, through the disc index's
+    re-weighting; a free position equals a fresh engine's gathered run;
+    the gather changes the answer."""
+    engine = oclgi.Engine(box(POSITIONS[0]))
+    kw = dict(radius=RADIUS, direct="exact", gather=8)
+    s = LightSession(engine, points(), light="lamp", positions=POSITIONS, photons=N, seed=3, max_depth=6, **kw)
+    assert s.reweighting is not None
+    reuse = LightReuse(engine, "lamp", POSITIONS, photons=N, seed=3, max_depth=6)
+    frames = reuse.frames_irradiance(points(), **kw)
+    plain = reuse.frames_irradiance(points(), radius=RADIUS, direct="exact")
+    for j in (2, 0, 3, 1):
+        assert s.move_light(POSITIONS[j]).reused
+        assert np.array_equal(s.accumulators(), frames[j].accumulators)
+        assert np.array_equal(s.irradiance(), frames[j].irradiance)
+        assert not np.array_equal(s.irradiance(), plain[j].irradiance)
+    free = (0.1, 1.4, 0.1)
+    assert not s.move_light(free).reused
+    fresh = oclgi.Engine(box(free)).irradiance(points(), photons=N, seed=3, max_depth=6, **kw)
+    assert np.array_equal(s.irradiance(), fresh.irradiance)
+    s.close()

@@ -68,8 +68,14 @@ over the whole store, as a fresh run's would be. The rays are the same
 for any point subset only by point index: a session keys them by each
 point's index in its own static or dynamic set, so it equals a fresh
 session at the same pose bit for bit (and a plain run when no point is on
-a movable object). Refused where it could not be exact: camera sessions
-and light animations; their errors say so.
+a movable object). Light animations and light sessions (path reuse,
+oclgi/tracing/light_reuse.py) keep it exact too: a light that moves moves
+no geometry, so the rays and their hits stay; each frame's sums go to the
+hits' discs (re-weighted, with disc indexing) and each frame's resolve
+takes the direct light with the light where the frame has it. Camera
+sessions too: their static layer's points stay for the camera (its rays
+are traced again after each move, as given points' are) and the pixels
+that see a movable object are new points each move, gathered afresh.
 """
 
 from __future__ import annotations
@@ -122,7 +128,7 @@ class FinalGather(Estimator):
     to the points (see the module's docstring)."""
 
     family = "detp"
-    incremental = False  # the hits move with the geometry (refused by sessions)
+    incremental = False  # not a session's method itself: a session's DETP variant gathers (regather)
 
     def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
                  direct: str = "photons", direct_samples: int = DIRECT_SAMPLES, direct_mis: str = "power",
@@ -182,7 +188,8 @@ class FinalGather(Estimator):
         return self.inner.work()
 
     def replace_points(self, index, new) -> None:
-        raise OclgiError("gather (final gathering): the query points cannot be replaced (camera sessions refuse it)")
+        raise OclgiError("gather (final gathering): the query points cannot be replaced (a session builds a "
+                         "gathering estimator over its new points instead)")
 
     def forget_store(self, store) -> None:
         self.inner.forget_store(store)

@@ -1,7 +1,6 @@
 """The options of DETP's final gathering (oclgi/estimators/final_gather.py)
-checked, and the refusal of the places that cannot keep it exact; apart, so
-that the DETP base class can check them without importing the estimator
-built on it."""
+checked; apart, so that the DETP base class can check them without importing
+the estimator built on it."""
 
 from __future__ import annotations
 
@@ -29,11 +28,3 @@ def requested_rays(options: dict) -> int:
     refuse counts 0 here (the estimator refuses it with its reason)."""
     n = integral(options.get("gather", 0))
     return n if n is not None and 0 < n <= MAX_RAYS else 0
-
-
-def refuse_incremental(options: dict, where: str) -> None:
-    """Sessions cannot keep a gathered estimate exact (light animations, in
-    oclgi.tracing, which may not import estimators, say so in their own words)."""
-    if options.get("gather", 0):
-        raise OclgiError(f"{where}: gather (final gathering) is not offered here: its discs sit where the "
-                         "query points' rays hit, which a move changes; use gather = 0")

@@ -135,11 +135,16 @@ class LightSession(SessionBase):
     def _set_estimator(self, est) -> None:
         """The estimator of every frame; disc indexing re-weights the tails'
         stored pairs (oclgi/tracing/light_reweight.py: the same sums, the
-        tails not walked again each frame)."""
+        tails not walked again each frame). With final gathering the sums
+        are the gather hits' discs (``FinalGather.inner``): the hits depend
+        on the geometry alone, which a light session never moves, and the
+        direct light at the points and the hits is taken at each frame's
+        resolve with the light where the frame has it."""
         from ..tracing.light_reweight import Reweighting
 
         self.estimator = est
-        self.reweighting = Reweighting(self.reuse, est) if est.name == "detp_disc_index" else None
+        sums = getattr(est, "inner", est)
+        self.reweighting = Reweighting(self.reuse, sums) if sums.name == "detp_disc_index" else None
 
     def move(self, name: str, matrix):
         raise OclgiError("objects do not move in a light session (its stored paths are the light animation's); "

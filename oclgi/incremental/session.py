@@ -120,11 +120,7 @@ class Session(SessionBase):
     @staticmethod
     def _check_method(method: str, dynamic, options: dict, camera: bool) -> None:
         from ..estimators import ESTIMATORS
-        from ..estimators.gather_options import refuse_incremental
-
         cls = ESTIMATORS[method]
-        if camera:  # its pixels' points change with every move; given points keep a gather exact (regather)
-            refuse_incremental(options, "camera sessions")
         if not cls.incremental:
             raise OclgiError(f"method {method!r} has no exact incremental update; sessions take "
                              f"{', '.join(m for m, c in ESTIMATORS.items() if c.incremental)}")

@@ -307,9 +307,6 @@ class LightReuse:
         with the run's parameters: n photons, for the resolve)."""
         from .. import queries
 
-        if options.get("gather", 0):  # (the estimators' refusal, gather_options.refuse_incremental, in words)
-            raise OclgiError("light animations: gather (final gathering) is not offered here: its discs sit "
-                             "where the query points' rays hit, and each frame's would need its own; use gather = 0")
         if not isinstance(points, queries.QueryPoints):  # an (n, 6) array, as Engine.irradiance takes
             a = queries.real_array(points, "points")
             if a.ndim != 2 or a.shape[1] != 6:
@@ -330,7 +327,8 @@ class LightReuse:
         estimator.restore(estimator._reuse_empty)
         t0 = time.perf_counter()
         if reweighting is not None:
-            if reweighting.reuse is not self or reweighting.estimator is not estimator:
+            # a gathering estimator's sums are its hits' discs (FinalGather.inner)
+            if reweighting.reuse is not self or reweighting.estimator is not getattr(estimator, "inner", estimator):
                 raise OclgiError("the re-weighting belongs to another animation or estimator")
             self._check_frame(frame)
             reweighting.accumulate(frame)
