@@ -446,11 +446,17 @@ class Engine:
         if getattr(cls, "radii_maker", None) is not None and options.get("radius_mode") == "adaptive" \
                 and options.get("radii") is None:
             options = dict(options, pilot=self.pilot_paths(options))
+        defaulted = None  # the request's points, when the direct light's samples are the default's
         if cls.family == "detp" and options.get("direct") == "exact" and options.get("direct_samples") is None:
             from .estimators.detp_direct import default_samples
 
-            n = len(points) if request_points is None else request_points
-            options = dict(options, direct_samples=default_samples(params.photons, n))
+            defaulted = len(points) if request_points is None else request_points
+            options = dict(options, direct_samples=default_samples(params.photons, defaulted))
+        est = self._new_estimator(cls, points, params, count_work, options)
+        est.default_direct_points = defaulted  # a longer run (Run.extend) takes its own count's default
+        return est
+
+    def _new_estimator(self, cls, points, params: RunParams, count_work, options: dict):
         if cls.family == "detp" and options.get("gather", 0):
             from .estimators.final_gather import FinalGather
 

@@ -304,3 +304,19 @@ def test_the_cornell_box_direct_light_matches_its_photons(cornell):
     photons = cornell.irradiance(pts, **kw).irradiance[:, 0].astype(np.float64)
     exact_direct = cornell.irradiance(pts, direct="exact", **kw).irradiance[:, 0].astype(np.float64)
     assert len(xz) == 300 and abs(exact_direct.mean() / photons.mean() - 1) < 0.015
+
+
+def test_an_extended_run_takes_the_longer_runs_default(cornell):
+    """The default sample count grows with the photons: a run extended to
+    more photons takes the total's (for the points and a gather's hits), so
+    it equals one run of the total bit for bit."""
+    from oclgi.estimators.detp_direct import default_samples
+
+    engine = cornell
+    pts = np.array([[0.0, 0.01, 0.0, 0.0, 1.0, 0.0], [-0.99, 1.0, 0.2, 1.0, 0.0, 0.0], [0.3, 1.0, -1.04, 0.0, 0.0, 1.0]])
+    assert default_samples(20_000, len(pts)) != default_samples(60_000, len(pts))
+    for extra in ({}, {"gather": 4}):
+        kw = dict(method="detp_disc_index", radius=0.1, direct="exact", **extra)
+        run = engine.run(pts, photons=20_000, **kw)
+        run.extend(40_000)
+        assert np.array_equal(run.complete(False).irradiance, engine.irradiance(pts, photons=60_000, **kw).irradiance)

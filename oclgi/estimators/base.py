@@ -57,6 +57,20 @@ class Estimator:
     def work(self) -> dict | None:
         return work_counts(self.queue, self.work_buf) if self.count_work else None
 
+    # The request's query points when the exact direct light's sample count
+    # is the default's (set by Engine.estimator): it follows the photons.
+    default_direct_points = None
+
+    def extended(self, photons: int) -> None:
+        """The run now counts ``photons`` in all (Run.extend): a default the
+        photon count sets follows it, so the longer run equals one run of
+        the total bit for bit."""
+        if self.default_direct_points is not None:
+            self.set_direct_samples(detp_direct.default_samples(photons, self.default_direct_points))
+
+    def set_direct_samples(self, samples: int) -> None:
+        """The exact direct light's sample pairs per point from the next resolve on."""
+
     # Sums kept per query point (DETP, Photon Maps) must be recomputed when a
     # point changes; sums kept per triangle (Impact Count) need not.
     sums_per_point = True
@@ -249,6 +263,10 @@ class DetpEstimator(Estimator):
 
     def points_changed(self) -> None:
         """Rebuild whatever the variant built over the points (default: nothing)."""
+
+    def set_direct_samples(self, samples: int) -> None:
+        if self.direct is not None:
+            self.direct.samples = int(samples)
 
     def resolve(self, scale: float) -> cl.Buffer:
         """Irradiance (float4 per point, on the device): E = acc / (scale pi d^2),

@@ -155,7 +155,7 @@ class FinalGather(Estimator):
         self.seen = None  # the emission the rays saw, on the host (read at the first regather)
         # The variant's own discs at the hits, with their own exact direct light.
         self.make_inner = lambda hits: variant(queue, compiled, hits, radius, direct="exact",
-                                               direct_samples=hit_samples(direct_samples, n_rays),
+                                               direct_samples=hit_samples(self.direct.samples, n_rays),
                                                direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
         self.inner = self.make_inner(self.hits)
         self.radius = self.inner.radius
@@ -170,6 +170,11 @@ class FinalGather(Estimator):
 
     def accumulate(self, batch):
         self.inner.accumulate(batch)
+
+    def set_direct_samples(self, samples: int) -> None:
+        """The points' sample pairs from the next resolve on, the hits' their share."""
+        self.direct.samples = int(samples)
+        self.inner.set_direct_samples(hit_samples(samples, self.n_rays))
 
     def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
         self.inner.first_batch(paths_done, paths_total, segments)

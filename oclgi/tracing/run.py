@@ -217,6 +217,7 @@ class Run:
         params_mod.photons(total, "photons (the run's and the added ones)")
         self.params = dataclasses.replace(self.params, photons=total)
         self.paths = PathRange(self.paths.first, self.paths.count + photons)
+        self.estimator.extended(total)
 
     def complete(self, progress: bool | None = None, on_batch=None):
         """``trace`` to the end of the range, then ``finish()``."""
