@@ -34,6 +34,8 @@ SESSION_RADIUS = 0.15
 SESSION_POINTS = 64
 WORK_KEYS = ("t", "u", "nodes")
 GATHER = dict(method="detp_disc_index", photons=PHOTONS, radius=RADIUS, direct="exact", gather=8)
+# the Cornell box's area light sampled with MIS (the default sample count: the whole request's)
+AREA = dict(method="detp_disc_index", photons=PHOTONS, radius=RADIUS, direct="exact")
 
 
 def cornell_points(engine):
@@ -78,6 +80,9 @@ def irradiance(comm, out):
     if root:
         _save(out, "render_radiance", result.radiance)
         _save(out, "render_pixels", result.pixels)
+    est = distributed.irradiance(engine, pts, comm, **AREA)
+    if root:
+        _save(out, "area_irr", est.irradiance)
     # final gathering (a delta light: the IES downlight): its sums are the hits'
     ies = oclgi.Engine(distributed.load_scene(comm, SCENES / "cornell_ies.toml"))
     est = distributed.irradiance(ies, cornell_points(ies) if root else None, comm, **GATHER)

@@ -5,7 +5,8 @@ oversubscribe a small machine, which MPICH allows; a range split in three
 is the uneven case) on tests/mpi_worker.py, whose rank 0
 writes its results as .npy files, and compares them with the same
 computation made here in one process: the accumulators and irradiance of
-every estimator, a render, and the sums of every incremental method after
+every estimator, the exact direct light of an area light (light samples
+and MIS), a final gathering, a render, and the sums of every incremental method after
 20 moves. An error on one rank must end every rank, with one message.
 """
 
@@ -74,6 +75,7 @@ def single():
     out["work"] = [work[k] for k in worker.WORK_KEYS]
     out["render"] = engine.render(width=worker.VIEW[0], height=worker.VIEW[1], method="detp_disc_index",
                                   photons=worker.PHOTONS, radius=worker.RADIUS)
+    out["area"] = engine.irradiance(pts, **worker.AREA)
     ies = oclgi.Engine(oclgi.load_file(worker.SCENES / "cornell_ies.toml"))
     out["gather"] = ies.irradiance(worker.cornell_points(ies), **worker.GATHER)
     return out
@@ -115,6 +117,7 @@ def test_every_estimator_equals_one_process(tmp_path, single, ranks):
     assert any(single["work"]) and np.load(tmp_path / "work.npy").tolist() == single["work"]
     assert _same(np.load(tmp_path / "render_radiance.npy"), single["render"].radiance)
     assert _same(np.load(tmp_path / "render_pixels.npy"), single["render"].pixels)
+    assert _same(np.load(tmp_path / "area_irr.npy"), single["area"].irradiance)  # light samples and MIS
     gather = single["gather"]
     assert len(gather.accumulators) == 8 * len(gather.irradiance) and gather.accumulators.any()
     assert _same(np.load(tmp_path / "gather_acc.npy"), gather.accumulators)
