@@ -29,16 +29,20 @@ def _env(**extra):
     return env
 
 
-def _start(cwd, *args, env=None, ignore_sigint=False, stdout=subprocess.PIPE, code=None):
-    cmd = [sys.executable, "-c", code] if code else [sys.executable, "-m", "oclgi", *map(str, args)]
+def _terminal_job(ignore_sigint=False):
+    """A child's preexec_fn: as a terminal's job, SIGINT at its default (or
+    ignored, as a background job's), whatever this test process inherited
+    (a worker of the parallel suite may hold it ignored or blocked)."""
     def pre():
-        # As a terminal's job: SIGINT at its default (or ignored, as a
-        # background job's), whatever this test process inherited.
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         signal.signal(signal.SIGINT, signal.SIG_IGN if ignore_sigint else signal.SIG_DFL)
+    return pre
 
+
+def _start(cwd, *args, env=None, ignore_sigint=False, stdout=subprocess.PIPE, code=None):
+    cmd = [sys.executable, "-c", code] if code else [sys.executable, "-m", "oclgi", *map(str, args)]
     return subprocess.Popen(cmd, cwd=cwd, env=env or _env(), stdout=stdout, stderr=subprocess.PIPE,
-                            text=True, preexec_fn=pre)
+                            text=True, preexec_fn=_terminal_job(ignore_sigint))
 
 
 def _render(out, photons, size, method="detp"):
@@ -259,6 +263,6 @@ def test_a_ctrl_c_a_library_swallows_still_stops_the_run(tmp_path):
     scene = ROOT / "scenes" / "cornell_bunny.toml"
     p = subprocess.run([sys.executable, "-c", SWALLOWING, "render", str(scene), "--photons", "2000000", "--width",
                         "16", "--height", "16", "-o", str(tmp_path / "x.exr")], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=300)
+                       text=True, timeout=300, preexec_fn=_terminal_job())
     assert (p.returncode, p.stderr) == (130, "oclgi: interrupted\n"), p.stderr[-2000:]
     assert not list(tmp_path.glob("x.*")) and not list(tmp_path.glob(".x.*"))
