@@ -212,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "lux, one column (RGB as linear Rec. 709, 683 lm/W)")
     i.add_argument("--plain", action="store_true",
                    help="the method's own estimate alone. By default a DETP method takes -O radius_mode=adaptive "
-                        "-O direct=exact -O gather=1024 (fewer rays past 4,096 points): the most accurate at "
+                        "-O direct=exact -O gather=1024 (fewer rays past 256 points): the most accurate at "
                         "equal time on the area-, sky- and sun-lit benchmarks (median 0.1-1.7%% against "
                         "1.2-4.2%% plain, no point off by 2x; bench/README.md); giving any of the three "
                         "options sets them yourself")
