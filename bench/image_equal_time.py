@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from common import RESULTS, ROOT, arguments, cached_pair, engine as make_engine, figure, machine_line, timed, write
+from oclgi import params
 from oclgi.photometry import LUMINANCE
 from oclgi.study import mitsuba as mitsuba_reference
 from oclgi.study.image_compare import error_colours
@@ -39,12 +40,8 @@ ERROR_SCALE = 0.25  # of the error maps: full colour at +-25%
 
 
 def parse_config(text: str) -> dict:
-    """"spp=4;direct=exact" -> {"spp": 4, "direct": "exact"}."""
-    out = {}
-    for item in filter(None, text.split(";")):
-        key, value = item.split("=")
-        out[key] = int(value) if value.isdigit() else value
-    return out
+    """"spp=4;direct=exact" -> {"spp": 4, "direct": "exact"} (values read as -O's are: numbers, true/false, words)."""
+    return dict(params.option_text(item) for item in filter(None, text.split(";")))
 
 
 def mean_rel(image, ref, lit) -> float:
