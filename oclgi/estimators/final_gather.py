@@ -154,9 +154,9 @@ class FinalGather(Estimator):
                                                                 self.n, n_rays, self.key, self.local_size)
         self.seen = None  # the emission the rays saw, on the host (read at the first regather)
         # The variant's own discs at the hits, with their own exact direct light.
-        self.make_inner = lambda hits: variant(queue, compiled, hits, radius, direct="exact",
-                                               direct_samples=hit_samples(self.direct.samples, n_rays),
-                                               direct_mis=direct_mis, seed=seed, count_work=count_work, **kw)
+        self.make_inner = lambda hits, radii=None: variant(
+            queue, compiled, hits, radius, direct="exact", direct_samples=hit_samples(self.direct.samples, n_rays),
+            direct_mis=direct_mis, seed=seed, count_work=count_work, **(kw if radii is None else dict(kw, radii=radii)))
         self.inner = self.make_inner(self.hits)
         self.radius = self.inner.radius
         self.weights_buf = self.upload(self.hit_weights)
@@ -221,8 +221,9 @@ class FinalGather(Estimator):
         if not len(changed):
             return 0
         new = hits.subset(changed)
-        self.inner.replace_points(changed, new)
-        fresh = self.make_inner(new)  # the changed discs' sums over the whole store, as a fresh run's
+        self.inner.replace_points(changed, new)  # (adaptive radii: the new hits' radii, taken once here)
+        fresh = self.make_inner(new, self.inner.radii[changed] if self.inner.adaptive is not None else None)
+        # ^ the changed discs' sums over the whole store, as a fresh run's
         fresh.accumulate(batch)
         acc = self.inner.accumulators()
         acc[changed] = fresh.accumulators()
