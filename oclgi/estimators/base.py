@@ -57,6 +57,12 @@ class Estimator:
     def work(self) -> dict | None:
         return work_counts(self.queue, self.work_buf) if self.count_work else None
 
+    @property
+    def summing(self):
+        """The estimator whose accumulators the segments go to: this one
+        (a final gathering's: its hits' discs, FinalGather.inner)."""
+        return self
+
     # The request's query points when the exact direct light's sample count
     # is the default's (set by Engine.estimator): it follows the photons.
     default_direct_points = None

@@ -168,6 +168,11 @@ class FinalGather(Estimator):
         """The discs' radii, one per hit (point-major, n_rays per point)."""
         return self.inner.radii
 
+    @property
+    def summing(self):
+        """The hits' discs: the segments' sums are theirs."""
+        return self.inner
+
     def accumulate(self, batch):
         self.inner.accumulate(batch)
 

@@ -143,7 +143,7 @@ class LightSession(SessionBase):
         from ..tracing.light_reweight import Reweighting
 
         self.estimator = est
-        sums = getattr(est, "inner", est)
+        sums = est.summing
         self.reweighting = Reweighting(self.reuse, sums) if sums.name == "detp_disc_index" else None
 
     def move(self, name: str, matrix):

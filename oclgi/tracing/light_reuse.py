@@ -327,8 +327,7 @@ class LightReuse:
         estimator.restore(estimator._reuse_empty)
         t0 = time.perf_counter()
         if reweighting is not None:
-            # a gathering estimator's sums are its hits' discs (FinalGather.inner)
-            if reweighting.reuse is not self or reweighting.estimator is not getattr(estimator, "inner", estimator):
+            if reweighting.reuse is not self or reweighting.estimator is not estimator.summing:
                 raise OclgiError("the re-weighting belongs to another animation or estimator")
             self._check_frame(frame)
             reweighting.accumulate(frame)
