@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.scene import triangle_areas
+
 SMOOTH_COS = float(np.cos(np.radians(25.0)))  # neighbours closer than 25 degrees are one patch
 
 
@@ -86,8 +88,7 @@ class SurfacePatches:
         graph = coo_matrix((np.ones(len(pair)), (ts[pair], ts[pair + 1])), shape=(nf, nf))
         self.n_patches, self.label = connected_components(graph, directed=False)
         v = vertices[faces]
-        areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-        self.area = np.bincount(self.label, weights=areas, minlength=self.n_patches)
+        self.area = np.bincount(self.label, weights=triangle_areas(vertices, faces), minlength=self.n_patches)
         # boundary: the edge occurrences that joined nothing
         occ = order[single]  # index into the (F * 3) edge occurrences
         t, k = occ // 3, occ % 3

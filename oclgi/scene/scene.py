@@ -24,6 +24,12 @@ from .materials import DARK_GLASS, Material
 from .lights import PointLight  # noqa: F401  (oclgi.scene.scene.PointLight, as it always was)
 
 
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F,) the area of each face of ``faces`` into ``vertices``."""
+    v = np.asarray(vertices)[faces]
+    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
 @dataclass
 class SceneObject:
     """A group of triangles that moves as one (an instance over its own BVH).
@@ -149,8 +155,7 @@ class Scene:
         return float(np.linalg.norm(hi - lo))
 
     def triangle_areas(self) -> np.ndarray:
-        v = self.vertices[self.faces]
-        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        return triangle_areas(self.vertices, self.faces)
 
     def triangle_normals(self) -> np.ndarray:
         v = self.vertices[self.faces]

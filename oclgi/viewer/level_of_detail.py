@@ -73,9 +73,10 @@ class Level:
 
 def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V,) float64: a third of the area of the faces at each vertex."""
-    p = np.asarray(vertices, np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]), axis=1)
-    return np.bincount(faces.reshape(-1), np.repeat(area / 3.0, 3), minlength=len(p))
+    from ..scene.scene import triangle_areas
+
+    area = triangle_areas(np.asarray(vertices, np.float64), faces)
+    return np.bincount(faces.reshape(-1), np.repeat(area / 3.0, 3), minlength=len(vertices))
 
 
 def _clusters(vertices, normals, objects, cell: float) -> np.ndarray:
