@@ -235,9 +235,10 @@ async function main() {
   const meshes = [makeMesh(positions, objectOf, faces), ...levelData.map(l => makeMesh(l.positions, l.objects, l.faces))];
   const colours = state.colours = meshes[0].colours; // float16 values (exact in float32), times 2^scaleExponent
   state.scaleExponent = 0;
-  state.fullSeq = -1; // the update the tessellation's colours are of
   state.drawnLevel = 0;
-  state.levelSeqs = meshes.map(() => -1);
+  // the update each mesh's colours are of (for tests: the meshes' own)
+  Object.defineProperty(state, "levelSeqs", {get: () => meshes.map(m => m.seq)});
+  Object.defineProperty(state, "fullSeq", {get: () => meshes[0].seq});
   // the measured draw times (ms): the exact frame of the full mesh, and the motion frame of each mesh
   state.frameMs = {full: null, motion: meshes.map(() => null)};
   state.drawsByLevel = meshes.map(() => 0);
@@ -567,8 +568,7 @@ async function main() {
       }
     }
     mesh.seq = seq;
-    state.levelSeqs[level] = seq;
-    if (level === 0) { state.fullSeq = seq; state.scaleExponent = e; }
+    if (level === 0) state.scaleExponent = e;
     state.seq = seq;
     state.frames++;
     state.frameStats = {bytes: buf.byteLength, vertices: sentVertices, level, applyMs: performance.now() - applyStart};
