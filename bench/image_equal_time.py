@@ -49,14 +49,18 @@ def mean_rel(image, ref, lit) -> float:
     return float(np.mean(np.abs(a - b) / b))
 
 
-def time_at(curve, level: float) -> float:
-    """The time a curve of (seconds, error) reaches ``level`` at, in log-log (NaN outside its range)."""
+def time_at(curve, level: float) -> tuple[float, bool]:
+    """The time a curve of (seconds, error) reaches ``level`` at, in log-log,
+    and whether that is a bound only: (the fastest run's time, True) where
+    every run is already below the level (the sweep starts past it);
+    (NaN, False) where no run reaches it."""
     pts = sorted(curve)
     for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
         if min(e0, e1) <= level <= max(e0, e1) and e0 != e1:
             f = (np.log(level) - np.log(e0)) / (np.log(e1) - np.log(e0))
-            return float(np.exp(np.log(t0) + f * (np.log(t1) - np.log(t0))))
-    return float("nan")
+            return float(np.exp(np.log(t0) + f * (np.log(t1) - np.log(t0)))), False
+    below = [t for t, e in pts if e <= level]
+    return (min(below), True) if below else (float("nan"), False)
 
 
 def srgb(radiance, exposure):
@@ -94,7 +98,7 @@ def bench_scene(name, args):
     mitsuba = {b: e for _, e, _, b in runs[label]}
     levels = [mitsuba[f"{spp} spp"] for spp in args.levels]
     curves = {k: [(t, e) for t, e, _, _ in v] for k, v in runs.items()}
-    equal = {k: [time_at(c, lv) if k != label else next(t for t, e, _, b in runs[label] if e == lv)
+    equal = {k: [time_at(c, lv) if k != label else (next(t for t, e, _, b in runs[label] if e == lv), False)
                  for lv in levels] for k, c in curves.items()}
     pictures(name, ref, lit, runs, label, levels[0])
     return dict(name=name, size=(w, h), ref_spp=args.ref_spp, ref_seconds=ref_seconds, ref_error=ref_error,
@@ -132,7 +136,8 @@ def markdown(rows, machine, args) -> str:
            "Mean relative error of luminance over the pixels the reference lights; wall-clock seconds of "
            "each render after a warm-up; the levels are Mitsuba's errors at "
            f"{' and '.join(str(s) for s in args.levels)} spp; ratio = oclgi's time / Mitsuba's at a level "
-           "(goal <= 0.5; blank: the sweep does not reach it).", ""]
+           "(goal <= 0.5; blank: the sweep does not reach it; <=: its fastest run is already past the level, "
+           "a bound).", ""]
     for r in rows:
         w, h = r["size"]
         out += [f"## {r['name']}: {w} x {h} pixels, {r['triangles']:,} triangles", "",
@@ -141,10 +146,13 @@ def markdown(rows, machine, args) -> str:
         out += [f"| {k} | {b} | {t:.2f} | {e:.4f} |" for k, v in r["runs"].items() for t, e, b in v]
         out += ["", "| renderer | " + " | ".join(f"time to {lv:.4f}" for lv in r["levels"]) + " | ratios |",
                 "|---|" + "---:|" * (len(r["levels"]) + 1)]
-        base = r["equal"][r["mitsuba"]]
+        base = [t for t, _ in r["equal"][r["mitsuba"]]]
+
+        def cell(t, bound, unit=1.0):
+            return "" if np.isnan(t) else ("<= " if bound else "") + f"{t / unit:.2f}"
         for k, ts in r["equal"].items():
-            ratios = " / ".join("" if np.isnan(t) else f"{t / m:.2f}" for t, m in zip(ts, base))
-            out.append(f"| {k} | " + " | ".join("" if np.isnan(t) else f"{t:.2f}" for t in ts) + f" | {ratios} |")
+            ratios = " / ".join(cell(t, b, m) for (t, b), m in zip(ts, base))
+            out.append(f"| {k} | " + " | ".join(cell(t, b) for t, b in ts) + f" | {ratios} |")
         out += ["", f"![{r['name']}](image_equal_time_{r['name']}.png)", ""]
     return "\n".join(out) + "\n"
 

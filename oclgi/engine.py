@@ -459,10 +459,17 @@ class Engine:
     def _new_estimator(self, cls, points, params: RunParams, count_work, options: dict):
         if cls.family == "detp" and options.get("gather", 0):
             from .estimators.final_gather import FinalGather
+            from .estimators.gather_options import spacing
+            from .estimators.irradiance_cache import IrradianceCache
 
-            return FinalGather(cls, self.queue, self.compiled, points, radius=params.radius, seed=params.seed,
-                               extension=params.extension, count_emitted=params.count_emitted,
-                               local_size=self.local_size, count_work=flag(count_work, "count_work"), **options)
+            options = dict(options)
+            sparse = spacing(options.get("gather_spacing", 1)) > 1
+            if not sparse:
+                options.pop("gather_spacing", None)
+            return (IrradianceCache if sparse else FinalGather)(
+                cls, self.queue, self.compiled, points, radius=params.radius, seed=params.seed,
+                extension=params.extension, count_emitted=params.count_emitted, local_size=self.local_size,
+                count_work=flag(count_work, "count_work"), **options)
         if cls.family == "detp":  # the exact direct light's random numbers are the run's
             options = dict(options, seed=params.seed)
         return cls(self.queue, self.compiled, points, radius=params.radius, extension=params.extension,

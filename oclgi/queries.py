@@ -76,6 +76,9 @@ class QueryPoints:
     # (n, 4) float32: the weight each point's radiance is seen with (a
     # camera path through mirrors and glass, kernels/camera.cl); None: 1
     weights: np.ndarray | None = None
+    # camera points: how many images of (height / samples) rows are stacked
+    # (a render's samples per pixel, ``stack``)
+    samples: int = 1
 
     def __post_init__(self):
         pos = _array(self.positions, "positions", (3, 4), None)
@@ -141,6 +144,11 @@ class QueryPoints:
             if h < 0 or w < 0 or h * w != n:
                 raise OclgiError(f"query points: shape {self.shape!r} does not hold {n} points")
             self.shape = (h, w)
+        if isinstance(self.samples, bool) or not isinstance(self.samples, (int, np.integer)) or self.samples < 1 \
+                or (self.shape is not None and self.shape[0] % self.samples):
+            raise OclgiError(f"query points: samples must be a whole number of stacked images of shape "
+                             f"{self.shape!r}, got {self.samples!r}")
+        self.samples = int(self.samples)
 
     def check_triangles(self, n_triangles: int, what: str = "the scene") -> QueryPoints:
         """These points, checked for use with a scene of ``n_triangles``: the
@@ -166,7 +174,7 @@ class QueryPoints:
 
     def copy(self) -> "QueryPoints":
         return QueryPoints(self.positions.copy(), self.normals.copy(), self.barys.copy(), self.kind, self.shape,
-                           None if self.weights is None else self.weights.copy())
+                           None if self.weights is None else self.weights.copy(), self.samples)
 
     def subset(self, index) -> "QueryPoints":
         """The points ``index`` (copies), as a flat set of the same kind.
@@ -174,7 +182,7 @@ class QueryPoints:
         one on every move)."""
         out = object.__new__(QueryPoints)
         out.positions, out.normals, out.barys = self.positions[index], self.normals[index], self.barys[index]
-        out.kind, out.shape = self.kind, None
+        out.kind, out.shape, out.samples = self.kind, None, 1
         out.weights = None if self.weights is None else self.weights[index]
         return out
 
@@ -228,7 +236,7 @@ def stack(images: list) -> QueryPoints:
     weights = None if all(im.weights is None for im in images) else np.concatenate([im.weights4() for im in images])
     return QueryPoints(np.concatenate([im.positions for im in images]), np.concatenate([im.normals for im in images]),
                        np.concatenate([im.barys for im in images]), kind=images[0].kind, shape=(len(images) * h, w),
-                       weights=weights)
+                       weights=weights, samples=len(images))
 
 
 def from_arrays(points, normals) -> QueryPoints:

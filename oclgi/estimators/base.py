@@ -158,7 +158,9 @@ class DetpEstimator(Estimator):
     oclgi/estimators/detp_direct.py); ``gather`` N > 0 with
     ``gather_seed``: final gathering, the discs at the hits of N cosine
     rays per point (oclgi/estimators/final_gather.py, made by
-    Engine.estimator). Every variant selects segments
+    Engine.estimator); with ``gather_spacing`` s > 1 a render gathers at
+    every s-th pixel each way and interpolates the indirect light between
+    (oclgi/estimators/irradiance_cache.py). Every variant selects segments
     with ``detp_crosses``/``DETP_TEST`` (kernels/detp.h), so all give the
     same sums, bit for bit.
     """
@@ -174,12 +176,16 @@ class DetpEstimator(Estimator):
                  radius_mode: str = "fixed", adaptive_k: int = 16, pilot_photons: int = 32768,
                  radius_min: float = 0.25, radii=None, pilot=None, consistent: bool = False,
                  consistent_span: float = 1.0, direct: str = "photons", direct_samples: int = detp_direct.DIRECT_SAMPLES,
-                 direct_mis: str = "power", gather: int = 0, gather_seed: int = 0, seed: int = 0, **kw):
+                 direct_mis: str = "power", gather: int = 0, gather_seed: int = 0, gather_spacing: int = 1,
+                 seed: int = 0, **kw):
         if gather_options.check(gather, gather_seed):
             # the points' discs give way to discs at the hits of their rays: a
             # different estimator over this variant (Engine.estimator makes it)
             raise OclgiError("gather > 0: build the estimator with Engine.estimator (final_gather.FinalGather "
                              f"over {self.name})")
+        if gather_options.spacing(gather_spacing) != 1:
+            raise OclgiError(f"gather_spacing {gather_spacing!r} interpolates final gathering between pixels: it "
+                             f"needs gather = N rays (and direct = 'exact')")
         radius_options.check(radius_mode, adaptive_k, pilot_photons, radius_min)
         exact_direct = detp_direct.check(direct, direct_samples, direct_mis)
         span = radius_options.consistent_span(consistent, consistent_span)

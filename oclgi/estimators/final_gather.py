@@ -132,7 +132,7 @@ class FinalGather(Estimator):
 
     def __init__(self, variant, queue, compiled, points, radius: float, gather: int, gather_seed: int = 0,
                  direct: str = "photons", direct_samples: int = DIRECT_SAMPLES, direct_mis: str = "power",
-                 seed: int = 0, **kw):
+                 seed: int = 0, point_direct: bool = True, **kw):
         n_rays = check(gather, gather_seed)
         if not check_direct(direct, direct_samples, direct_mis):
             raise OclgiError(f"gather (final gathering) needs direct = 'exact': the direct light of the points "
@@ -143,6 +143,9 @@ class FinalGather(Estimator):
                          local_size=kw.get("local_size"), count_work=count_work)
         self.name = variant.name
         self.n_rays = n_rays
+        # False: the points' own direct light is left out of the resolve
+        # (an irradiance cache adds it at every pixel: irradiance_cache.py)
+        self.point_direct = bool(point_direct)
         self.gather_seed = int(gather_seed)  # checked integral by check()
         # The direct light at the points themselves.
         self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size, direct_samples, direct_mis,
@@ -241,7 +244,8 @@ class FinalGather(Estimator):
         """E(x) = the direct light at x + (1 / N) sum_j weight_j E(h_j)."""
         hit_irr = self.inner.resolve(scale)
         cl.enqueue_fill_buffer(self.queue, self.irr, np.float32(0), 0, self.n * 16)  # no host array a resolve
-        self.direct.add(self.positions, self.normals, self.n, self.irr)
+        if self.point_direct:
+            self.direct.add(self.positions, self.normals, self.n, self.irr)
         launch(self.queue, self.k_resolve, self.n, hit_irr, self.weights_buf, self.emitted, self.n, self.n_rays,
                self.irr, local_size=self.local_size)
         return self.irr

@@ -1,5 +1,5 @@
-"""The options of DETP's final gathering (oclgi/estimators/final_gather.py)
-checked; apart, so that the DETP base class can check them without importing
+"""The options of DETP's final gathering (oclgi/estimators/final_gather.py,
+irradiance_cache.py) checked; apart, so that the DETP base class can check them without importing
 the estimator built on it."""
 
 from __future__ import annotations
@@ -9,6 +9,7 @@ from ..params import integral
 
 MAX_RAYS = 65536
 MAX_GATHER_SEED = 1 << 31  # the Philox counter's block is 2 gather_seed (+1): a uint
+MAX_SPACING = 64  # pixels between an irradiance cache's records (irradiance_cache.py)
 
 
 def check(gather, gather_seed) -> int:
@@ -22,9 +23,21 @@ def check(gather, gather_seed) -> int:
     return n
 
 
+def spacing(gather_spacing) -> int:
+    """The pixels between gathered points (1: every point); one error line for a bad value."""
+    s = integral(gather_spacing)
+    if s is None or not 1 <= s <= MAX_SPACING:
+        raise OclgiError(f"gather_spacing must be an integer from 1 (gather at every point) to {MAX_SPACING} "
+                         f"pixels, got {gather_spacing!r}")
+    return s
+
+
 def requested_rays(options: dict) -> int:
     """The gather rays per point that ``options`` ask for (0: none), for a
     memory check made before the estimator exists; a value ``check`` would
     refuse counts 0 here (the estimator refuses it with its reason)."""
     n = integral(options.get("gather", 0))
-    return n if n is not None and 0 < n <= MAX_RAYS else 0
+    if n is None or not 0 < n <= MAX_RAYS:
+        return 0
+    s = integral(options.get("gather_spacing", 1))  # an irradiance cache: one point in s^2 of an image gathers
+    return -(-n // s**2) if s is not None and 1 < s <= MAX_SPACING else n
