@@ -118,7 +118,7 @@ def pictures(name, ref, lit, runs, label, level):
     panels = [("reference", ref, None)]
     for k, v in runs.items():
         t, e, img, budget = min(v, key=lambda r: abs(np.log(r[1] / level)))
-        panels.append((f"{k}\n{budget}, {t:.2f} s, {e:.3f}", img, img))
+        panels.append((k.replace(";", "\n") + f"\n{budget}, {t:.2f} s, {e:.3f}", img, img))
     for col, (title, img, test) in enumerate(panels):
         axes[0, col].imshow(srgb(img, exposure))
         axes[0, col].set_title(title, fontsize=7)

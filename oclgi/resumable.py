@@ -102,6 +102,7 @@ def settle(args, parser) -> None:
         if not isinstance(saved, dict):
             raise OclgiError(f"{args.resume}: a damaged oclgi checkpoint (its command settings)")
     actions = {a.dest: a for a in parser._actions}
+    args.named_settings = {name for name in defaults if getattr(args, name) is not None or name in saved}
     for name, default in defaults.items():
         if getattr(args, name) is not None:
             continue
@@ -149,8 +150,9 @@ def run_kwargs(args, saved: dict | None) -> dict:
         for key, value in (saved.get("params") or {}).items():
             if key in params.RUN_KEYS and key not in given and key not in options:
                 given[key] = value
-        if not args.option:
-            options = dict(saved.get("options") or {})
+        # the saved options, those the command line names replacing theirs
+        # (checked against the saved ones after: a changed option is refused)
+        options = {**dict(saved.get("options") or {}), **options}
     return {**given, **options}
 
 

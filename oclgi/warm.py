@@ -8,7 +8,8 @@ starts from a filled cache.
 
 What is built is found by running, not by a list kept in sync by hand:
 every command's code path runs once on a tiny view of the Cornell box with
-the bunny (each estimator, a render, a DETP session and a Photon Map session
+the bunny (each estimator, a render plain and with the command's default
+estimate, a DETP session and a Photon Map session
 with one move each), which builds exactly the programs and defines real
 runs use (the bunny's 69k triangles also build its SAH tree on the device,
 ``accel/bvh_sah_device.py``, as every scene tree of 50,000 triangles or
@@ -40,6 +41,7 @@ def warm(device: str | None = None, report=None) -> dict:
     """
     from . import scene_path
     from .engine import Engine
+    from .estimators.render_preset import render_settings
     from .incremental.photon_map_session import PhotonMapSession
     from .incremental.session import Session
     from .scene.description import load_file
@@ -53,6 +55,9 @@ def warm(device: str | None = None, report=None) -> dict:
         engine.irradiance(points, method=method, photons=PHOTONS)
     say("render")
     engine.render(width=SIDE, height=SIDE, photons=PHOTONS)
+    say("render, the command's default estimate")  # estimators/render_preset.py: gathering, direct light
+    preset = render_settings("detp", {}, False, SIDE, SIDE)
+    engine.render(width=SIDE, height=SIDE, photons=PHOTONS, **preset)
     moved = np.eye(4)
     moved[0, 3] = 0.05
     say("DETP session")

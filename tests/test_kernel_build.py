@@ -125,7 +125,7 @@ def test_compiler_output_is_kept_off_the_terminal_unless_asked(tmp_path, scenes_
 
 def test_a_kernel_that_does_not_build_gives_one_line(tmp_path, scenes_dir, monkeypatch):
     monkeypatch.setenv("OCLGI_KERNEL_DIR", str(_kernels_with(tmp_path, "image", "__kernel void oclgi_broken(__global int *o) { o[0] = no_such_name; }")))
-    res = run(tmp_path, "render", scenes_dir / "cornell_box.toml", *SMALL, "-o", tmp_path / "x.exr")
+    res = run(tmp_path, "render", scenes_dir / "cornell_box.toml", *SMALL, "--plain", "-o", tmp_path / "x.exr")
     assert res.returncode == 1
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1, res.stderr

@@ -72,7 +72,7 @@ def test_huge_image_refused_with_its_estimate(scene, device, cli):
     """Was a pyopencl INVALID_BUFFER_SIZE traceback after the camera had run."""
     device(int(9.8 * GIB), int(23.4 * GIB))
     line = cli(scene.parent, "render", "s.toml", "--method", "detp", "--width", "16384", "--height", "16384",
-               "-o", "x.png")
+               "--plain", "-o", "x.png")
     m = re.fullmatch(r"oclgi: error: a 16384x16384 image needs about ([\d.]+) GiB of device memory, ([\d.]+) GiB in "
                      r"its largest buffer \(sums\) \(the device allows 9.8 GiB in one buffer, 23.4 GiB in all\); "
                      r"use a smaller width/height", line)

@@ -262,7 +262,7 @@ def test_a_ctrl_c_a_library_swallows_still_stops_the_run(tmp_path):
     ran the whole render and exited 0. It stops it, in one line and 130."""
     scene = ROOT / "scenes" / "cornell_bunny.toml"
     p = subprocess.run([sys.executable, "-c", SWALLOWING, "render", str(scene), "--photons", "2000000", "--width",
-                        "16", "--height", "16", "-o", str(tmp_path / "x.exr")], cwd=tmp_path, capture_output=True,
+                        "16", "--height", "16", "--plain", "-o", str(tmp_path / "x.exr")], cwd=tmp_path, capture_output=True,
                        text=True, timeout=300, preexec_fn=_terminal_job())
     assert (p.returncode, p.stderr) == (130, "oclgi: interrupted\n"), p.stderr[-2000:]
     assert not list(tmp_path.glob("x.*")) and not list(tmp_path.glob(".x.*"))
