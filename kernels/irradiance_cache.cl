@@ -16,10 +16,12 @@
  *     counts for nothing,
  *   x exp(-(|(x - x_r) . n_r| / (0.1 |x - x_r|))^2): a record whose
  *     offset from the point leaves its plane by more than about 6 degrees
- *     (a surface in front or behind, a bend) counts for almost nothing.
- * Those are functions of the geometry only: ``irradiance_cache_weights``
- * gives the sum of each point's weights before anything is gathered, so
- * the points whose sum is below MIN_WEIGHT become records of their own.
+ *     (a surface in front or behind, a bend) counts for almost nothing,
+ * and only a record of the point's own material counts (a lamp a
+ * centimetre below a ceiling is another surface). Those are functions of
+ * the geometry only: ``irradiance_cache_weights`` gives the sum of each
+ * point's weights before anything is gathered, so the points whose sum is
+ * below MIN_WEIGHT become records of their own.
  *
  * One work-item per point reads its 16 records in a fixed order: the same
  * bits for every work-group size and launch split.
@@ -28,13 +30,15 @@
 #define IC_PLANE 0.1f
 
 /* The sum of point i's weights, and (values != 0) the weighted sum of the
- * records' irradiance. */
+ * records' irradiance into *sum. */
 static float ic_gather(int i, int width, int height, int spacing, int grid_w, int grid_h,
                        __global const int *cells, __global const float4 *rec_pos, __global const float4 *rec_nrm,
-                       float4 pos, float4 nrm, __global const float4 *values, float3 *sum)
+                       __global const int *tri_material, float4 pos, float4 nrm, __global const float4 *values,
+                       float3 *sum)
 {
     int x = i % width, y = (i / width) % height;
     int gx0 = x / spacing, gy0 = y / spacing;
+    int material = tri_material[as_int(pos.w)];
     float reach = 2.0f * (float)spacing;
     float total = 0.0f;
     *sum = (float3)(0.0f);
@@ -50,13 +54,16 @@ static float ic_gather(int i, int width, int height, int spacing, int grid_w, in
             if (r < 0) continue;
             float wx = 1.0f - fabs((float)(gx * spacing - x)) / reach;
             if (wx <= 0.0f) continue;
+            float4 rp = rec_pos[r];
+            if (tri_material[as_int(rp.w)] != material) continue;
             float3 rn = rec_nrm[r].xyz;
             float c = fmax(dot(nrm.xyz, rn), 0.0f);
             if (c <= 0.0f) continue;
-            float3 d = pos.xyz - rec_pos[r].xyz;
+            float3 d = pos.xyz - rp.xyz;
             float t = fabs(dot(d, rn)) / (IC_PLANE * length(d) + 1e-30f);
             float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4;
             float w = wy * wx * (c8 * c8) * exp(-t * t);  /* (n . n_r)^16 */
+            if (w <= 0.0f) continue;
             total += w;
             if (values) *sum += w * values[r].xyz;
         }
@@ -68,15 +75,16 @@ static float ic_gather(int i, int width, int height, int spacing, int grid_w, in
 __kernel void irradiance_cache_weights(__global const float4 *positions, __global const float4 *normals, int n,
                                        int width, int height, int spacing, int grid_w, int grid_h,
                                        __global const int *cells, __global const float4 *rec_pos,
-                                       __global const float4 *rec_nrm, __global float *weight)
+                                       __global const float4 *rec_nrm, __global const int *tri_material,
+                                       __global float *weight)
 {
     int i = get_global_id(0);
     if (i >= n) return;
     float4 nrm = normals[i];
     float3 sum;
     weight[i] = dot(nrm.xyz, nrm.xyz) > 0.0f
-        ? ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm, positions[i], nrm,
-                    0, &sum)
+        ? ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm, tri_material,
+                    positions[i], nrm, 0, &sum)
         : 0.0f;
 }
 
@@ -85,8 +93,9 @@ __kernel void irradiance_cache_weights(__global const float4 *positions, __globa
 __kernel void irradiance_cache_interpolate(__global const float4 *positions, __global const float4 *normals, int n,
                                            int width, int height, int spacing, int grid_w, int grid_h,
                                            __global const int *cells, __global const float4 *rec_pos,
-                                           __global const float4 *rec_nrm, __global const int *own,
-                                           __global const float4 *rec_irradiance, __global float4 *out)
+                                           __global const float4 *rec_nrm, __global const int *tri_material,
+                                           __global const int *own, __global const float4 *rec_irradiance,
+                                           __global float4 *out)
 {
     int i = get_global_id(0);
     if (i >= n) return;
@@ -97,8 +106,8 @@ __kernel void irradiance_cache_interpolate(__global const float4 *positions, __g
         e = rec_irradiance[r].xyz;
     } else if (dot(nrm.xyz, nrm.xyz) > 0.0f) {
         float3 sum;
-        float total = ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm, positions[i],
-                                nrm, rec_irradiance, &sum);
+        float total = ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm,
+                                tri_material, positions[i], nrm, rec_irradiance, &sum);
         if (total > 0.0f) e = sum / total;
     }
     out[i] = (float4)(e, 0.0f);

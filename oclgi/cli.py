@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "direct_mis=light -O gather=128 -O gather_spacing=3 (exact direct light at every sample, "
                         "the indirect gathered at one pixel in 3 x 3 and interpolated; fewer samples and a wider "
                         "spacing for images past 512 x 512): the fastest to a path tracer's error on the image "
-                        "benchmarks (0.26-0.99x Mitsuba 3's time to its 256-spp error on three scenes, which the "
+                        "benchmarks (0.24-1.10x Mitsuba 3's time to its 256-spp error on three scenes, which the "
                         "plain estimate reaches on one; bench/README.md); --spp or any of those options sets them yourself")
     resumable.add_arguments(r, progressive=True)
 

@@ -7,8 +7,8 @@ Mitsuba 3's ``llvm_ad_rgb`` at 2 x 8,192 spp, on 2 cores, one run side by
 side): 16 samples a pixel, each with its own exact direct light from 4
 light samples, and the indirect light gathered with 128 rays at one pixel
 in 3 x 3 (irradiance caching, oclgi/estimators/irradiance_cache.py) reach
-Mitsuba's error at 256 spp in 0.37x its time on the Cornell box, at most
-0.26x on CornellBox-Sphere (glass) and 0.57-0.99x (three runs) on
+Mitsuba's error at 256 spp in 0.40x its time on the Cornell box, at most
+0.24x on CornellBox-Sphere (glass) and 0.57-1.10x (four runs) on
 textured Sponza under sun and sky: the only setting measured that reaches
 that error on all three. Cheaper ones (2 to 6 samples, 32 to 96 rays at
 one pixel in 4 x 4) are faster at Mitsuba's 64-spp error but stop above
