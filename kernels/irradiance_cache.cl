@@ -19,8 +19,8 @@
  *     (a surface in front or behind, a bend) counts for almost nothing,
  * and only a record of the point's own material counts (a lamp a
  * centimetre below a ceiling is another surface). Those are functions of
- * the geometry only: ``irradiance_cache_weights`` gives the sum of each
- * point's weights before anything is gathered, so the points whose sum is
+ * the geometry only: ``irradiance_cache_interpolate`` with weights_only
+ * gives the sum of each point's weights before anything is gathered, so the points whose sum is
  * below MIN_WEIGHT become records of their own.
  *
  * One work-item per point reads its 16 records in a fixed order: the same
@@ -71,44 +71,30 @@ static float ic_gather(int i, int width, int height, int spacing, int grid_w, in
     return total;
 }
 
-/* Each point's sum of weights (0 for a point that sees nothing). */
-__kernel void irradiance_cache_weights(__global const float4 *positions, __global const float4 *normals, int n,
-                                       int width, int height, int spacing, int grid_w, int grid_h,
-                                       __global const int *cells, __global const float4 *rec_pos,
-                                       __global const float4 *rec_nrm, __global const int *tri_material,
-                                       __global float *weight)
-{
-    int i = get_global_id(0);
-    if (i >= n) return;
-    float4 nrm = normals[i];
-    float3 sum;
-    weight[i] = dot(nrm.xyz, nrm.xyz) > 0.0f
-        ? ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm, tri_material,
-                    positions[i], nrm, 0, &sum)
-        : 0.0f;
-}
-
 /* Each point's indirect irradiance: its own record's, or the weighted mean
- * of the grid records' (0 for a point that sees nothing). */
+ * of the grid records' (0 for a point that sees nothing); with
+ * weights_only, each point's sum of weights instead (in .x; ``own`` and the
+ * records' irradiance unread), before anything is gathered. */
 __kernel void irradiance_cache_interpolate(__global const float4 *positions, __global const float4 *normals, int n,
                                            int width, int height, int spacing, int grid_w, int grid_h,
                                            __global const int *cells, __global const float4 *rec_pos,
                                            __global const float4 *rec_nrm, __global const int *tri_material,
-                                           __global const int *own, __global const float4 *rec_irradiance,
-                                           __global float4 *out)
+                                           int weights_only, __global const int *own,
+                                           __global const float4 *rec_irradiance, __global float4 *out)
 {
     int i = get_global_id(0);
     if (i >= n) return;
-    int r = own[i];
+    int r = weights_only ? -1 : own[i];
     float4 nrm = normals[i];
     float3 e = (float3)(0.0f);
+    float total = 0.0f;
     if (r >= 0) {
         e = rec_irradiance[r].xyz;
     } else if (dot(nrm.xyz, nrm.xyz) > 0.0f) {
         float3 sum;
-        float total = ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm,
-                                tri_material, positions[i], nrm, rec_irradiance, &sum);
+        total = ic_gather(i, width, height, spacing, grid_w, grid_h, cells, rec_pos, rec_nrm, tri_material,
+                          positions[i], nrm, weights_only ? 0 : rec_irradiance, &sum);
         if (total > 0.0f) e = sum / total;
     }
-    out[i] = (float4)(e, 0.0f);
+    out[i] = weights_only ? (float4)(total, 0.0f, 0.0f, 0.0f) : (float4)(e, 0.0f);
 }

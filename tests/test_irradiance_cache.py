@@ -100,7 +100,7 @@ def test_interpolation_against_reference(cached, engine):
     values = np.random.default_rng(3).uniform(0.5, 2.0, (est.n_records, 4)).astype(np.float32)
     out = est.zeros(est.n * 16)
     launch(engine.queue, est.k_interpolate, est.n, est.positions, est.normals, np.int32(est.n), *est.geometry,
-           est.own, est.upload(values), out)
+           np.int32(0), est.own, est.upload(values), out)
     got = read_buffer(engine.queue, out, (est.n, 4), np.float32)[:, :3]
     _, mean, _ = _reference_weights(pts, est.spacing, engine.scene.tri_material, values[:, :3].astype(np.float64))
     mine = np.zeros(est.n, bool)

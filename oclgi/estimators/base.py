@@ -138,6 +138,42 @@ class Estimator:
         cl.enqueue_copy(self.queue, buf, np.ascontiguousarray(a))
 
 
+class Wrapping(Estimator):
+    """An estimator whose sums are another's (``wrapped``): final
+    gathering's are its hits' discs (final_gather.py), an irradiance
+    cache's its records' gathering (irradiance_cache.py). The batches, the
+    sums, their saved state and the work counts all go to that one."""
+
+    @property
+    def wrapped(self) -> Estimator:
+        raise NotImplementedError
+
+    @property
+    def summing(self):
+        return self.wrapped.summing
+
+    def accumulate(self, batch):
+        self.wrapped.accumulate(batch)
+
+    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
+        self.wrapped.first_batch(paths_done, paths_total, segments)
+
+    def accumulators(self) -> np.ndarray:
+        return self.wrapped.accumulators()
+
+    def state(self) -> dict:
+        return self.wrapped.state()
+
+    def restore(self, state: dict) -> None:
+        self.wrapped.restore(state)
+
+    def work(self) -> dict | None:
+        return self.wrapped.work()
+
+    def forget_store(self, store) -> None:
+        self.wrapped.forget_store(store)
+
+
 class DetpEstimator(Estimator):
     """Shared by every DETP variant: the discs, the per-point sums, resolve.
 

@@ -86,7 +86,7 @@ import pyopencl as cl
 from .. import queries
 from ..cl.programs import launch, programs, read_buffer
 from ..errors import OclgiError
-from .base import Estimator
+from .base import Wrapping
 from .detp_direct import DIRECT_SAMPLES, DirectLight, hit_samples
 from .detp_direct import check as check_direct
 from .gather_options import check
@@ -123,7 +123,7 @@ def gather_rays(queue, compiled, pts: cl.Buffer, nrm: cl.Buffer, n_points: int, 
     return queries.QueryPoints(*host[:3]), host[3], emitted
 
 
-class FinalGather(Estimator):
+class FinalGather(Wrapping):
     """A DETP variant's discs at the hits of N rays per point, gathered back
     to the points (see the module's docstring)."""
 
@@ -172,40 +172,18 @@ class FinalGather(Estimator):
         return self.inner.radii
 
     @property
-    def summing(self):
+    def wrapped(self):
         """The hits' discs: the segments' sums are theirs."""
         return self.inner
-
-    def accumulate(self, batch):
-        self.inner.accumulate(batch)
 
     def set_direct_samples(self, samples: int) -> None:
         """The points' sample pairs from the next resolve on, the hits' their share."""
         self.direct.samples = int(samples)
         self.inner.set_direct_samples(hit_samples(samples, self.n_rays))
 
-    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
-        self.inner.first_batch(paths_done, paths_total, segments)
-
-    def accumulators(self) -> np.ndarray:
-        """The hits' int64 sums (n * n_rays rows, point-major)."""
-        return self.inner.accumulators()
-
-    def state(self) -> dict:
-        return self.inner.state()
-
-    def restore(self, state: dict) -> None:
-        self.inner.restore(state)
-
-    def work(self) -> dict | None:
-        return self.inner.work()
-
     def replace_points(self, index, new) -> None:
         raise OclgiError("gather (final gathering): the query points cannot be replaced (a session builds a "
                          "gathering estimator over its new points instead)")
-
-    def forget_store(self, store) -> None:
-        self.inner.forget_store(store)
 
     def regather(self, batch) -> int:
         """After a move: every ray traced again at the current pose; the

@@ -62,7 +62,7 @@ import pyopencl as cl
 from .. import budget
 from ..cl.programs import launch, read_buffer
 from ..errors import OclgiError
-from .base import Estimator
+from .base import Wrapping
 from .detp_direct import DIRECT_SAMPLES, DirectLight
 from .gather_options import spacing as check_spacing
 
@@ -71,7 +71,7 @@ from .gather_options import spacing as check_spacing
 MIN_WEIGHT = 1e-3
 
 
-class IrradianceCache(Estimator):
+class IrradianceCache(Wrapping):
     """Final gathering at a grid of a render's points and where the grid
     cannot stand for a point, interpolated to the rest (module docstring)."""
 
@@ -108,7 +108,6 @@ class IrradianceCache(Estimator):
         self.geometry = (np.int32(width), np.int32(height), np.int32(spacing), np.int32(gw), np.int32(gh),
                          self.upload(cells), self.upload(points.positions[self.grid_records]),
                          self.upload(points.normals[self.grid_records]), compiled.tri_material)
-        self.k_weights = prog.irradiance_cache_weights
         weights = self._weights()
         alone = (weights < MIN_WEIGHT) & (points.tri >= 0)
         own = np.full(self.n, -1, np.int32)
@@ -131,53 +130,33 @@ class IrradianceCache(Estimator):
 
     def _weights(self) -> np.ndarray:
         """Each point's sum of weights (the geometry's alone)."""
-        weight_buf = self.zeros(self.n * 4)
-        launch(self.queue, self.k_weights, self.n, self.positions, self.normals, np.int32(self.n), *self.geometry,
-               weight_buf, local_size=self.local_size)
-        return read_buffer(self.queue, weight_buf, self.n, np.float32)
+        out = self.zeros(self.n * 16)
+        none = self.upload(np.zeros(1, np.int32))
+        launch(self.queue, self.k_interpolate, self.n, self.positions, self.normals, np.int32(self.n),
+               *self.geometry, np.int32(1), none, self.upload(np.zeros(4, np.float32)), out,
+               local_size=self.local_size)
+        return read_buffer(self.queue, out, (self.n, 4), np.float32)[:, 0]
 
     @property
-    def summing(self):
-        return self.gather.summing
+    def wrapped(self):
+        return self.gather
 
     @property
     def n_records(self) -> int:
         """The points gathered at: the grid's and those it cannot stand for."""
         return len(self.records)
 
-    def accumulate(self, batch):
-        self.gather.accumulate(batch)
-
     def set_direct_samples(self, samples: int) -> None:
         self.direct.samples = int(samples)
         self.gather.set_direct_samples(samples)
 
-    def first_batch(self, paths_done: int, paths_total: int, segments: int) -> None:
-        self.gather.first_batch(paths_done, paths_total, segments)
-
-    def accumulators(self) -> np.ndarray:
-        """The records' hits' int64 sums (FinalGather.accumulators)."""
-        return self.gather.accumulators()
-
-    def state(self) -> dict:
-        return self.gather.state()
-
-    def restore(self, state: dict) -> None:
-        self.gather.restore(state)
-
-    def work(self) -> dict | None:
-        return self.gather.work()
-
     def replace_points(self, index, new) -> None:
         raise OclgiError("gather_spacing: a render's points cannot be replaced (a session gathers at every point)")
-
-    def forget_store(self, store) -> None:
-        self.gather.forget_store(store)
 
     def resolve(self, scale: float) -> cl.Buffer:
         """E(x) = the direct light at x + the records' indirect light at x."""
         indirect = self.gather.resolve(scale)
         launch(self.queue, self.k_interpolate, self.n, self.positions, self.normals, np.int32(self.n),
-               *self.geometry, self.own, indirect, self.irr, local_size=self.local_size)
+               *self.geometry, np.int32(0), self.own, indirect, self.irr, local_size=self.local_size)
         self.direct.add(self.positions, self.normals, self.n, self.irr)
         return self.irr
