@@ -14,7 +14,7 @@ from conftest import ROOT
 from test_signals import _env
 
 BOX = ROOT / "scenes" / "cornell_box.toml"
-RENDER = ("render", BOX, "--photons", 2000, "--width", 8, "--height", 8, "--quiet")
+RENDER = ("render", BOX, "--photons", 2000, "--width", 8, "--height", 8, "--plain", "--quiet")  # the build's, not the estimate's
 
 
 def _run(cwd, *args, **env):

@@ -46,8 +46,10 @@ def _start(cwd, *args, env=None, ignore_sigint=False, stdout=subprocess.PIPE, co
 
 
 def _render(out, photons, size, method="detp"):
+    # --plain: the method's own estimate, whose run these tests time and interrupt (the command's
+    # default estimate is tests/test_render_preset.py's and tests/test_checkpoint.py's)
     return ("render", BOX, "--method", method, "--photons", photons, "--width", size, "--height", size,
-            "-o", out, "--quiet")
+            "--plain", "-o", out, "--quiet")
 
 
 # -- Ctrl-C during start-up ------------------------------------------------------
