@@ -1,6 +1,6 @@
 # Two commands do everything on a fresh Debian/Ubuntu machine:
 #   make render   set up (OpenCL, venv, package) and render the default scene to out/
-#   make test     set up and run the test suite (every property; about 4 minutes on 2 cores)
+#   make test     set up and run the test suite (every property; 4-5 minutes on 2 cores)
 #   make test-full  the suite with its long campaigns, then the fuzzing campaign
 #   make fuzz     the long fuzzing campaign (bench/fuzz.py; CASES=2000 SEED=0)
 # Every step is idempotent: a second run only does what is missing.
