@@ -190,12 +190,17 @@ def point_buffers(method: str, n: int, k: int | None = None) -> dict:
 def gather_buffers(method: str, n_points: int, gather: int, k: int | None = None) -> tuple[dict, int]:
     """Final gathering's device buffers and host bytes: a disc at each of
     the ``gather`` hits of each point (0: none)."""
-    hits = n_points * max(int(gather or 0), 0)
+    hits = math.ceil(n_points * max(float(gather or 0), 0.0))  # (an irradiance cache: a fraction of a ray a point)
     if not hits:
         return {}, 0
     device = {f"gather hits' {name}": size for name, size in point_buffers(method, hits, k).items()}
     device["gather hits' weights and direct light"] = hits * GATHER_HIT_DEVICE_BYTES
     return device, hits * GATHER_HIT_HOST_BYTES
+
+
+def _rays(gather) -> str:
+    """Rays a point in words: a whole number, or an irradiance cache's fraction."""
+    return f"{int(gather):,}" if float(gather).is_integer() else f"{gather:.3g}"
 
 
 def _gather_hint(gather: int, hint: str) -> str:
@@ -206,7 +211,7 @@ def irradiance_need(n_points: int, method: str, photons: int, max_depth: int, ba
                     k: int | None = None, gather: int = 0) -> Need:
     extra, extra_host = gather_buffers(method, n_points, gather, k)
     device = {**point_buffers(method, n_points, k), **batch_buffers(photons, max_depth, batch_bytes), **extra}
-    return Need(f"an estimate at {n_points:,} points" + (f" with {gather:,} gather rays each" if gather else ""),
+    return Need(f"an estimate at {n_points:,} points" + (f" with {_rays(gather)} gather rays each" if gather else ""),
                 device, n_points * POINT_HOST_BYTES + extra_host, _gather_hint(gather, "use fewer points"))
 
 
@@ -216,7 +221,7 @@ def render_need(width: int, height: int, method: str, photons: int, max_depth: i
     extra, extra_host = gather_buffers(method, n, gather, k)
     device = {**point_buffers(method, n, k), **batch_buffers(photons, max_depth, batch_bytes),
               **{name: n * size for name, size in PIXEL_BUFFERS.items()}, **extra}
-    return Need(f"a {width}x{height} image" + (f" with {gather:,} gather rays a pixel" if gather else ""),
+    return Need(f"a {width}x{height} image" + (f" with {_rays(gather)} gather rays a pixel" if gather else ""),
                 device, n * PIXEL_HOST_BYTES + extra_host, _gather_hint(gather, "use a smaller width/height"))
 
 

@@ -554,7 +554,7 @@ class Engine:
         spp = params.samples_per_pixel(spp)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
         budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                        self.batch_bytes, estimate_args.get("k"), requested_rays(estimate_args)),
+                                        self.batch_bytes, estimate_args.get("k"), requested_rays(estimate_args, spp)),
                      self.queue.device)
         return cam, spp, self.camera_points(cam, spp=spp, lift=r.radius)
 

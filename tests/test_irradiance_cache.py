@@ -167,3 +167,17 @@ def test_given_points_and_sessions_refused(engine):
         engine.irradiance(pts, photons=1000, **OPTS)
     with pytest.raises(OclgiError, match="interpolates over an image"):
         oclgi.Session(engine, points=pts, photons=1000, method="detp_disc_index", **OPTS)
+
+
+def test_memory_check_counts_the_records_rays():
+    """The render's memory check before the run counts N / (s^2 spp) rays a point, not N."""
+    from oclgi import budget
+    from oclgi.estimators.gather_options import requested_rays
+
+    assert requested_rays({"gather": 128, "gather_spacing": 4}, 2) == 4.0
+    assert requested_rays({"gather": 128}, 2) == 128 and requested_rays({"gather": 0, "gather_spacing": 4}) == 0
+    full = budget.render_need(1024, 1024 * 16, "detp", 10**6, 8, 1 << 28, None, 128)
+    cached = budget.render_need(1024, 1024 * 16, "detp", 10**6, 8, 1 << 28, None,
+                                requested_rays({"gather": 128, "gather_spacing": 3}, 16))
+    assert cached.device_total < full.device_total / 20
+    assert "0.889 gather rays a pixel" in cached.what and "128 gather rays a pixel" in full.what

@@ -32,12 +32,16 @@ def spacing(gather_spacing) -> int:
     return s
 
 
-def requested_rays(options: dict) -> int:
+def requested_rays(options: dict, samples: int = 1) -> float:
     """The gather rays per point that ``options`` ask for (0: none), for a
     memory check made before the estimator exists; a value ``check`` would
-    refuse counts 0 here (the estimator refuses it with its reason)."""
+    refuse counts 0 here (the estimator refuses it with its reason). An
+    irradiance cache (``gather_spacing`` s) gathers at one pixel in s^2 of
+    one of an image's ``samples`` stacked samples: N / (s^2 samples) a
+    point on average (the points it gathers at besides are counted when
+    it is built, irradiance_cache.py)."""
     n = integral(options.get("gather", 0))
     if n is None or not 0 < n <= MAX_RAYS:
         return 0
-    s = integral(options.get("gather_spacing", 1))  # an irradiance cache: one point in s^2 of an image gathers
-    return -(-n // s**2) if s is not None and 1 < s <= MAX_SPACING else n
+    s = integral(options.get("gather_spacing", 1))
+    return n / (s * s * max(int(samples), 1)) if s is not None and 1 < s <= MAX_SPACING else n
