@@ -454,21 +454,27 @@ def cmd_render(args):
         print(f"wrote {p}")
 
 
+def _preset_inputs(args, engine) -> tuple[str, dict]:
+    """What a command's preset is chosen from: the run's method's family and
+    the -O options given, with the run's count_emitted (the scene's unless given)."""
+    from .estimators import ESTIMATORS
+
+    given = dict(args.option)
+    run = engine.run_params(args.method, args.photons, args.radius, args.seed, args.max_depth,
+                            given.get("extension"), given.get("count_emitted"))
+    return ESTIMATORS[run.method].family, {**given, "count_emitted": run.count_emitted}
+
+
 def _render_preset(args, engine, say: bool) -> None:
     """The command's default render (oclgi/estimators/render_preset.py):
     its samples per pixel and options, unless --plain, --spp or one of its
     options is given, or the run is resumed (the checkpoint has them)."""
-    from .estimators import ESTIMATORS
     from .estimators.render_preset import describe, render_settings
 
     if args.plain or args.resume is not None:
         return
-    given = dict(args.option)
-    run = engine.run_params(args.method, args.photons, args.radius, args.seed, args.max_depth,
-                            given.get("extension"), given.get("count_emitted"))
     cam = engine.view_camera(None, args.width, args.height)
-    extra = render_settings(ESTIMATORS[run.method].family, {**given, "count_emitted": run.count_emitted},
-                            "spp" in args.named_settings, cam.width, cam.height)
+    extra = render_settings(*_preset_inputs(args, engine), "spp" in args.named_settings, cam.width, cam.height)
     if extra:
         args.spp = extra.pop("spp")
         args.settings["spp"] = args.spp
@@ -497,16 +503,11 @@ def _irradiance_output(args, est):
 def _sensor_preset(args, engine, n_points: int, say: bool) -> None:
     """The command's default estimate (oclgi/estimators/sensor_preset.py),
     added to the -O options unless --plain."""
-    from .estimators import ESTIMATORS
     from .estimators.sensor_preset import describe, sensor_options
 
     if args.plain:
         return
-    given = dict(args.option)
-    run = engine.run_params(args.method, args.photons, args.radius, args.seed, args.max_depth,
-                            given.get("extension"), given.get("count_emitted"))
-    extra = sensor_options(ESTIMATORS[run.method].family, {**given, "count_emitted": run.count_emitted},
-                           n_points)
+    extra = sensor_options(*_preset_inputs(args, engine), n_points)
     if extra:
         args.option = list(args.option) + list(extra.items())
         if say and not args.quiet:

@@ -63,7 +63,7 @@ from .. import budget
 from ..cl.programs import launch, read_buffer
 from ..errors import OclgiError
 from .base import Wrapping
-from .detp_direct import DIRECT_SAMPLES, DirectLight
+from .detp_direct import DIRECT_SAMPLES
 from .gather_options import spacing as check_spacing
 
 # A point whose records' weights sum to less than this (one record of the
@@ -108,10 +108,9 @@ class IrradianceCache(Wrapping):
         self.geometry = (np.int32(width), np.int32(height), np.int32(spacing), np.int32(gw), np.int32(gh),
                          self.upload(cells), self.upload(points.positions[self.grid_records]),
                          self.upload(points.normals[self.grid_records]), compiled.tri_material)
-        weights = self._weights()
-        alone = (weights < MIN_WEIGHT) & (points.tri >= 0)
+        self.irr = self.zeros(self.n * 16)  # the weights' pass first, then each resolve's irradiance
+        alone = np.nonzero((self._weights() < MIN_WEIGHT) & (points.tri >= 0))[0]
         own = np.full(self.n, -1, np.int32)
-        alone = np.nonzero(alone)[0]
         own[alone] = len(self.grid_records) + np.arange(len(alone), dtype=np.int32)
         self.own = self.upload(own)
         self.records = np.concatenate([self.grid_records, alone])
@@ -119,23 +118,20 @@ class IrradianceCache(Wrapping):
         budget.check(budget.Need(f"final gathering at {len(self.records):,} of the image's points with {gather:,} "
                                  f"rays each", device, host, "use fewer gather rays, a larger gather_spacing or "
                                  "a smaller width/height"), queue.device)
-        # The direct light at every point; the records gather the indirect alone.
-        self.direct = DirectLight(queue, compiled, self.count_emitted, self.local_size, direct_samples, direct_mis,
-                                  seed)
+        # The records gather the indirect alone; the gather's direct light
+        # (its points' own, left out there) serves every point here.
         self.gather = FinalGather(variant, queue, compiled, points.subset(self.records), radius, gather,
                                   direct=direct, direct_samples=direct_samples, direct_mis=direct_mis, seed=seed,
                                   point_direct=False, count_work=count_work, **kw)
+        self.direct = self.gather.direct
         self.radius = self.gather.radius
-        self.irr = self.zeros(self.n * 16)
 
     def _weights(self) -> np.ndarray:
-        """Each point's sum of weights (the geometry's alone)."""
-        out = self.zeros(self.n * 16)
-        none = self.upload(np.zeros(1, np.int32))
+        """Each point's sum of weights (the geometry's alone), through ``irr``."""
+        unread = self.zeros(16)  # ``own`` and the records' irradiance, not read by the weights' pass
         launch(self.queue, self.k_interpolate, self.n, self.positions, self.normals, np.int32(self.n),
-               *self.geometry, np.int32(1), none, self.upload(np.zeros(4, np.float32)), out,
-               local_size=self.local_size)
-        return read_buffer(self.queue, out, (self.n, 4), np.float32)[:, 0]
+               *self.geometry, np.int32(1), unread, unread, self.irr, local_size=self.local_size)
+        return read_buffer(self.queue, self.irr, (self.n, 4), np.float32)[:, 0]
 
     @property
     def wrapped(self):
@@ -147,8 +143,7 @@ class IrradianceCache(Wrapping):
         return len(self.records)
 
     def set_direct_samples(self, samples: int) -> None:
-        self.direct.samples = int(samples)
-        self.gather.set_direct_samples(samples)
+        self.gather.set_direct_samples(samples)  # its direct light is this one's too
 
     def replace_points(self, index, new) -> None:
         raise OclgiError("gather_spacing: a render's points cannot be replaced (a session gathers at every point)")
