@@ -24,10 +24,20 @@ import threading
 import aiohttp
 
 CHROMIUM = os.environ.get("OCLGI_CHROMIUM", "chromium")
-FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu-sandbox", "--use-angle=swiftshader",
-         "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist", "--no-first-run", "--no-default-browser-check",
-         "--disable-background-timer-throttling", "--disable-renderer-backgrounding",
-         "--disable-backgrounding-occluded-windows", "--window-size=1000,700"]
+COMMON = ["--headless=new", "--no-sandbox", "--no-first-run", "--no-default-browser-check",
+          "--disable-background-timer-throttling", "--disable-renderer-backgrounding",
+          "--disable-backgrounding-occluded-windows", "--window-size=1000,700"]
+# What Chromium chooses by itself on a machine without a GPU: WebGL2 on
+# SwiftShader (through ANGLE's Vulkan back end; current Chromium asks for
+# the flag before it falls back to it), the page composited in software
+# (SystemInfo.getInfo: gpu_compositing "disabled_software").
+SOFTWARE = COMMON + ["--enable-unsafe-swiftshader"]
+# Everything through SwiftShader, the compositor included (gpu_compositing
+# "enabled"): about 14 ms more CPU a frame shown on 2 cores
+# (bench/README.md, "Viewer"). The tests' browser.
+SWIFTSHADER = SOFTWARE + ["--disable-gpu-sandbox", "--use-angle=swiftshader", "--ignore-gpu-blocklist"]
+FLAGS = SWIFTSHADER
+CONFIGURATIONS = {"software": SOFTWARE, "swiftshader": SWIFTSHADER}
 
 
 def chromium_path() -> str | None:
@@ -39,8 +49,9 @@ class BrowserError(RuntimeError):
 
 
 class Browser:
-    def __init__(self, width: int = 1000, height: int = 700):
+    def __init__(self, width: int = 1000, height: int = 700, flags: list[str] | None = None):
         self.size = (width, height)
+        self.flags = FLAGS if flags is None else flags
         self.ids = itertools.count(1)
         self.waiting: dict[int, asyncio.Future] = {}
 
@@ -49,7 +60,7 @@ class Browser:
         if exe is None:
             raise BrowserError(f"{CHROMIUM} is not installed (tools/ensure-chromium.sh installs Debian's)")
         self.profile = tempfile.mkdtemp(prefix="oclgi-chromium-")
-        self.proc = subprocess.Popen([exe, *FLAGS, f"--user-data-dir={self.profile}", "--remote-debugging-port=0",
+        self.proc = subprocess.Popen([exe, *self.flags, f"--user-data-dir={self.profile}", "--remote-debugging-port=0",
                                       "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         loop = asyncio.get_running_loop()
         url = await asyncio.wait_for(loop.run_in_executor(None, self._devtools_url), 60)

@@ -127,6 +127,10 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
             await tab.wait(f"oclgiState.fullSeq === {synced['seq']} && oclgiState.drawnLevel === 0 && "
                            f"oclgiState.drawnSeq === {synced['seq']}")  # at rest: the tessellation again
             assert (await tab.eval("oclgiState.drawsByLevel"))[1] > 0, "the drag did not draw the level of detail"
+            # a pose alone, while its move's answer is on its way, waits at least MOTION_INTERVAL_MS after the
+            # frame before
+            interval = await tab.eval("MOTION_INTERVAL_MS")
+            assert interval >= 50 and all(g >= interval for g in await tab.eval("oclgiState.poseGaps"))
             assert (await tab.eval("oclgiState.levelSeqs"))[1] >= 0, "no frame of the level came during the drag"
             pose = np.array(synced["poses"]["bunny"]).reshape(4, 4)
             assert pose[0, 3] > 0.5 and abs(pose[1, 3]) < 1e-6, f"the bunny did not slide along the floor: {pose}"

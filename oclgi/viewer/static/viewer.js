@@ -35,12 +35,20 @@ const MAX_RANGE_UPLOADS = 64; // a frame's changed runs uploaded one by one up t
 const FRAME_BUDGET_MS = 8;
 const REST_MS = 250; // the view rests this long after the last motion: the full mesh again
 const MOTION_SCALE = 0.5; // a motion frame's pixels per canvas pixel, each way
-// A software browser's compositor spends about 15 ms of CPU on every frame
-// shown, whatever is drawn (headless Chromium, SwiftShader, 2 cores): while
-// the server computes a move of this page, a moving view without a GPU
-// shows a new pose at most every MOTION_INTERVAL_MS, so the server keeps its
-// share of the CPU; new colours are shown at once, an orbit at display rate.
-const MOTION_INTERVAL_MS = 33;
+// Without a GPU every frame shown costs the browser 10-25 ms of CPU
+// (SwiftShader's draw and the compositor's, headless Chromium on 2 cores),
+// taken from the server computing the move. So while a move of this page
+// is on its way, a moving view without a GPU shows a new pose alone only
+// once the answer is late: a frame after the server's usual time (the
+// median of its last answers), and no sooner than MOTION_INTERVAL_MS nor
+// later than POSE_INTERVAL_MAX_MS after the frame before. An answer on
+// time is drawn with its pose in one frame: one draw per update instead
+// of 1.2-2.3 (bench/README.md, "Viewer"); a slow server's drag still shows
+// the object at 10 poses a second. New colours are shown at once, an orbit
+// at display rate.
+const MOTION_INTERVAL_MS = 50;
+const POSE_INTERVAL_MAX_MS = 100;
+const DISPLAY_FRAME_MS = 1000 / 60;
 
 function halfToFloat(h) { // an IEEE float16's bits -> its value
   const e = (h >> 10) & 31, m = h & 1023, s = h & 0x8000 ? -1 : 1;
@@ -154,6 +162,7 @@ const state = window.oclgiState = { // what a test or a benchmark reads (and dri
   ready: false, seq: -1, frames: 0, updates: 0, draws: 0, drawnSeq: -1, errors: [], log: [],
   colours: null, poses: {}, serverPoses: {}, lastUpdate: null, hello: null, connection: null,
   lights: {}, serverLights: {}, renders: [],
+  poseGaps: [], // ms since the frame before, of each pose drawn alone while a move was on its way (the last 64)
 };
 
 function showError(text) {
@@ -520,6 +529,7 @@ async function main() {
   state.ws = ws;
   const pendingMoves = new Map(); // object name -> matrix: sent once a display frame, the latest only
   const pendingLights = new Map(); // light name -> position: likewise
+  const answers = []; // ms from a move sent to its answer, the last 8 (poseInterval)
   const waiting = new Map(); // sync id -> resolve
   let syncs = 0;
   const plot = [];
@@ -657,7 +667,11 @@ async function main() {
       describe(msg);
       plot.push({t: performance.now(), ms: 1e3 * (msg.seconds.server || msg.seconds.total)});
       statsDirty = true;
-      if (msg.kind === "move" || msg.kind === "light") moveInFlight = false;
+      if (msg.kind === "move" || msg.kind === "light") {
+        if (moveInFlight) answers.push(performance.now() - lastMoveSent);
+        if (answers.length > 8) answers.shift();
+        moveInFlight = false;
+      }
       $("error").textContent = "";
     } else if (msg.type === "synced") {
       describe(msg);
@@ -776,6 +790,10 @@ async function main() {
   // it waits (replacing any older one) for that answer: the page keeps at
   // most one move in flight, the server coalesces whatever queues up there.
   let moveInFlight = false;
+  function poseInterval() { // how long a pose alone waits after the frame before, while a move is on its way
+    const usual = answers.length ? answers.slice().sort((a, b) => a - b)[answers.length >> 1] : 0;
+    return Math.min(Math.max(usual + DISPLAY_FRAME_MS, MOTION_INTERVAL_MS), POSE_INTERVAL_MAX_MS);
+  }
   function flushMoves() {
     if ((!pendingMoves.size && !pendingLights.size) || moveInFlight || ws.readyState !== WebSocket.OPEN) return;
     for (const [name, matrix] of pendingMoves) send({type: "move", object: name, matrix});
@@ -894,16 +912,20 @@ async function main() {
     if (t) queueMove(name, mul(t, m));
   });
 
-  function tick() {
+  function tick(frameTime) {
     const want = wantedLevel();
     if (want !== serverLevel && ws.readyState === WebSocket.OPEN) { send({type: "level", level: want}); serverLevel = want; }
     const level = levelToShow(), motion = moving();
     if (level !== shown || motion !== shownMotion) { shown = level; shownMotion = motion; redraw = true; }
     upload(meshes[shown]); // a mesh not drawn keeps its changes until it is
     const newColours = meshes[shown].seq !== state.drawnSeq;
-    if (redraw && shownMotion && !newColours && moveInFlight && performance.now() - state.drawnAt < MOTION_INTERVAL_MS) {
+    if (redraw && shownMotion && !newColours && moveInFlight && performance.now() - state.drawnAt < poseInterval()) {
       // a new pose only, too soon after the last frame: at a later display frame (redraw stays set)
     } else if (redraw) {
+      if (shownMotion && !newColours && moveInFlight) { // a pose alone while its answer is on its way (for tests)
+        state.poseGaps.push(performance.now() - state.drawnAt);
+        if (state.poseGaps.length > 64) state.poseGaps.shift();
+      }
       draw(false);
       placeMarkers();
       redraw = false;
@@ -915,6 +937,7 @@ async function main() {
       if (state.drawnSeq !== meshes[shown].seq) { // a new update's colours on screen
         if (state.timeDraws) finish(); // (a benchmark's: when the frame is done, not just asked for)
         state.drawnDoneAt = performance.now();
+        state.drawnFrameAt = frameTime; // the display frame it is shown in (its rAF time)
         drawnTimes.push(state.drawnAt);
         state.drawnSeq = meshes[shown].seq;
       }
