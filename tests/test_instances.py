@@ -125,6 +125,19 @@ def test_fresh_engine_and_moved_back_share_every_normal(scenes_dir, rng):
     assert normals().tobytes() == first.tobytes()
 
 
+def test_placing_an_object_at_its_reported_pose_changes_no_bit(scenes_dir, rng):
+    """An object placed at the matrix its pose reports (a page's synced pose,
+    a checkpoint's) has the record it had, its inverse and box included: the
+    record is made from the float32 transform it keeps."""
+    engine = oclgi.Engine(_scene(scenes_dir))
+    engine.move("bunny", _rigid(rng))
+    pose = engine.compiled.pose
+    obj = engine.scene.object_id("bunny")
+    before = pose.instances_host.tobytes()
+    engine.move("bunny", pose.matrix(obj))
+    assert pose.instances_host.tobytes() == before
+
+
 def test_bad_moves(engine):
     with pytest.raises(oclgi.OclgiError, match="no movable object named 'teapot'"):
         engine.move("teapot", np.eye(4))

@@ -83,8 +83,10 @@ async def drag(tab, start, end, steps=12):
 
 
 def render_at(viewer, poses, request) -> np.ndarray:
-    """The API's render radiance at ``poses`` from the camera a page asks for."""
+    """The API's render radiance at ``poses`` from the camera a page asks for,
+    with ``oclgi render``'s default estimate (the page's unless it ticks "plain")."""
     import oclgi
+    from oclgi.estimators.render_preset import render_settings
 
     engine = viewer.engine.posed()
     for name, m in poses.items():
@@ -93,8 +95,9 @@ def render_at(viewer, poses, request) -> np.ndarray:
     cam = oclgi.Camera(position=tuple(c["position"]), look_at=tuple(c["look_at"]), up=tuple(c["up"]), fov=c["fov"],
                        width=request["width"], height=request["height"])
     r = viewer.run
+    preset = {} if request["plain"] else render_settings("detp", {}, False, request["width"], request["height"])
     return engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
-                         max_depth=r.max_depth).radiance
+                         max_depth=r.max_depth, **preset).radiance
 
 
 def test_view_in_headless_chromium(viewer, server, tmp_path):
@@ -182,6 +185,7 @@ def test_view_in_headless_chromium(viewer, server, tmp_path):
 
             # "render this view": the engine's image from the page's camera at the dragged pose
             request = await tab.eval("oclgiState.api.renderCamera(32)")
+            assert request["plain"] is False  # the command's default estimate unless the page asks
             got = await tab.eval("oclgiState.api.render(32).then(r => ({w: r.width, h: r.height, png: r.png.length, "
                                  "radiance: Array.from(r.radiance)}))")
             assert await tab.eval("document.querySelector('#render-result img') !== null")

@@ -111,6 +111,8 @@ BAD = [
       "fov": 40}, "width": 8, "height": 8}, "along the view"),
     ({"type": "render", "id": 1, "camera": [0, 1, 3], "width": 8, "height": 8}, "camera"),
     ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
+      "width": 8, "height": 8, "plain": "yes"}, "true or false"),
+    ({"type": "render", "id": 1, "camera": {"position": [0, 1, 3], "look_at": [0, 1, 0], "fov": 40},
       "width": 10**6, "height": 8}, "whole number"),
     ({"type": "estimator", "k": 8}, "Photon Map"),
     ({"type": "estimator"}, "give"),
@@ -343,10 +345,10 @@ def test_switching_to_photon_maps_and_back_opens_a_session_of_the_other_kind(vie
 CAMERA = {"position": [0.3, 1.1, 3.5], "look_at": [0.0, 0.9, 0.0], "up": [0, 1, 0], "fov": 42.0}
 
 
-async def render(ws, page, ident, width=24, height=16):
+async def render(ws, page, ident, width=24, height=16, plain=None):
     """Ask for a render; (the rendered message, the progress messages, png bytes, radiance)."""
     await ws.send_str(json.dumps({"type": "render", "id": ident, "camera": CAMERA, "width": width,
-                                  "height": height}))
+                                  "height": height, **({} if plain is None else {"plain": plain})}))
     seen = len(page.messages)
     done = await receive_until(ws, page, lambda m: m["type"] in ("rendered", "error"))
     assert done["type"] == "rendered", done
@@ -359,11 +361,32 @@ async def render(ws, page, ident, width=24, height=16):
     return done, progress, png, radiance
 
 
-@pytest.mark.parametrize("where", ["server", "process"])
-def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer, where, monkeypatch):
-    """In the server's process, or (large renders, oclgi/viewer/render_process.py) in one of its own."""
+def test_a_render_takes_the_commands_default_and_a_gathered_one_past_64x64_its_own_process(viewer):
+    from oclgi.viewer.render_process import IN_PROCESS_GATHERED, IN_PROCESS_PIXELS, elsewhere, render_args
+
+    detp = viewer.engine.run_params("detp_disc_index", 1000, 0.03, 1, 8, None, None)
+    args = render_args(detp, {}, 64, 64, plain=False)
+    assert args["spp"] == 16 and args["direct"] == "exact" and args["gather"] == 128 and args["radius"] == 0.03
+    assert not elsewhere(64, 64, args) and 64 * 64 == IN_PROCESS_GATHERED
+    assert elsewhere(65, 64, render_args(detp, {}, 65, 64, plain=False))
+    plain = render_args(detp, {}, 65, 64, plain=True)
+    assert "spp" not in plain and "gather" not in plain and not elsewhere(65, 64, plain)
+    assert elsewhere(IN_PROCESS_PIXELS + 1, 1, plain)
+    # Photon Maps and a run that counts no emitted light keep the method's own estimate
+    pm = viewer.engine.run_params("photon_map", 1000, None, 1, 8, None, None)
+    assert render_args(pm, {"k": 8}, 64, 64, plain=False) == dict(method="photon_map", photons=1000, seed=1,
+                                                                  max_depth=8, k=8)
+    dark = viewer.engine.run_params("detp_disc_index", 1000, 0.03, 1, 8, None, False)
+    assert "gather" not in render_args(dark, {}, 64, 64, plain=False)
+
+
+@pytest.mark.parametrize("where,plain", [("server", False), ("process", False), ("server", True)])
+def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer, where, plain, monkeypatch):
+    """In the server's process, or (large renders, oclgi/viewer/render_process.py) in one of its own;
+    with ``oclgi render``'s default estimate, or (``plain``) the photons' estimate alone."""
     import oclgi
     import oclgi.viewer.render_process as render_process
+    from oclgi.estimators.render_preset import render_settings
     from oclgi.io import png_bytes
 
     if where == "process":
@@ -373,16 +396,20 @@ def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer, w
         ws, page, _ = await connect(client, viewer)
         await move(ws, bunny_at(0.5, -0.2, 0.4))
         posed = await sync(ws, page)
-        done, progress, png, radiance = await render(ws, page, 7)
+        done, progress, png, radiance = await render(ws, page, 7, plain=plain or None)
         assert progress and progress[-1]["traced"] == progress[-1]["paths"] == PHOTONS
         engine = viewer.engine.posed()
         engine.place("bunny", np.array(posed["poses"]["bunny"]).reshape(4, 4))
         cam = oclgi.Camera(position=tuple(CAMERA["position"]), look_at=tuple(CAMERA["look_at"]), fov=CAMERA["fov"],
                            width=24, height=16)
         r = viewer.run
-        api = engine.render(cam, method=r.method, photons=r.photons, radius=r.radius, seed=r.seed,
-                            max_depth=r.max_depth)
+        args = dict(method=r.method, photons=r.photons, radius=r.radius, seed=r.seed, max_depth=r.max_depth)
+        preset = {} if plain else render_settings("detp", {}, False, 24, 16)
+        assert plain or preset["spp"] == 16 and preset["gather"] > 0
+        api = engine.render(cam, **args, **preset)
         assert np.array_equal(radiance, api.radiance), "the render is not the API's at that camera and pose"
+        if not plain:  # the default estimate, not the photons' alone
+            assert not np.array_equal(radiance, engine.render(cam, **args).radiance)
         assert png == png_bytes(api.pixels) and api.radiance.max() > 0
         # the session is untouched: still exact, still moving
         after = await sync(ws, page, 2)

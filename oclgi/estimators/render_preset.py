@@ -26,7 +26,9 @@ from about 256 x 256 x 4).
 
 Given --spp or any of PRESET_KEYS, or ``--plain``, the command takes the
 method's own defaults (one sample a pixel, the photons' estimate); the
-Python API always does (``Engine.render``).
+Python API always does (``Engine.render``). The viewer's "render this
+view" takes the preset unless the page asks for "plain"
+(oclgi/viewer/render_process.py, ``render_args``).
 """
 
 from __future__ import annotations

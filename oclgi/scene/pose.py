@@ -52,6 +52,12 @@ def place_record(record, box, m: np.ndarray, name: str) -> None:
     box as loaded is ``box`` = (lo, hi); refused, the record untouched, when
     the object would leave float32's range."""
     lo, hi = box
+    # From the transform as the record keeps it (float32): so placing an
+    # object at the pose it reports (Pose.matrix) gives the same record,
+    # its inverse and box included, bit for bit (a page's synced pose, a
+    # checkpoint's).
+    with np.errstate(over="ignore"):
+        m = np.asarray(m, np.float64).astype(np.float32).astype(np.float64)
     world = box_corners(lo, hi) @ m[:3, :3].T + m[:3, 3]
     if not np.isfinite(world).all() or np.abs(world).max() > MAX_LENGTH:  # checked before any change
         raise OclgiError(f"the transform places object {name!r} beyond {MAX_LENGTH:.0e} of the origin, past what "

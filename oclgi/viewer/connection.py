@@ -240,6 +240,8 @@ class Connection:
         and lights (``Engine.render``'s steps), booked in the server's
         budget: (the engine at those poses and lights, camera, run arguments)."""
         from .. import budget
+        from ..estimators.gather_options import requested_rays
+        from .render_process import render_args
         from ..scene.scene import Camera
 
         s = self.session
@@ -249,13 +251,10 @@ class Connection:
         p = s.params
         cam = Camera(position=fields["position"], look_at=fields["look_at"], up=fields["up"], fov=fields["fov"],
                      width=fields["width"], height=fields["height"])
-        args = dict(method=p.method, photons=p.photons, seed=p.seed, max_depth=p.max_depth)
-        if p.method == "photon_map":
-            args["k"] = s.options["k"]
-        else:
-            args["radius"] = p.radius
-        need = budget.render_need(cam.width, cam.height, p.method, p.photons, p.max_depth, engine.batch_bytes,
-                                  k=args.get("k"))
+        args = render_args(p, s.options, cam.width, cam.height, fields["plain"])
+        spp = args.get("spp", 1)
+        need = budget.render_need(cam.width, cam.height * spp, p.method, p.photons, p.max_depth, engine.batch_bytes,
+                                  k=args.get("k"), gather=requested_rays(args, spp))
         self.viewer.ledger.book((self, "render"), need.device_total + need.host,
                                 f"a {cam.width}x{cam.height} render")
         return engine, cam, args
@@ -437,13 +436,15 @@ class Connection:
         """Render, with a ``render_progress`` message a batch (at most ten a
         second), then ``rendered`` and the image (RENDER_MAGIC: uint32 id
         index, width, height, PNG length; the PNG; float32 radiance[H][W][3]).
-        A render of more than IN_PROCESS_PIXELS runs in a process of its own."""
-        from .render_process import IN_PROCESS_PIXELS
+        A render past IN_PROCESS_PIXELS (IN_PROCESS_GATHERED with the default estimate) runs in a process of its own."""
+        from .render_process import elsewhere, render_args
 
         ident, t0 = req.fields["id"], time.perf_counter()
         await self.send_json({"type": "render_started", "id": ident, "width": req.fields["width"],
                               "height": req.fields["height"]})
-        big = req.fields["width"] * req.fields["height"] > IN_PROCESS_PIXELS
+        f = req.fields
+        big = elsewhere(f["width"], f["height"], render_args(self.session.params, self.session.options, f["width"],
+                                                             f["height"], f["plain"]))
         try:
             image = await (self._render_elsewhere(req) if big else self._render_here(req))
         except OclgiError as exc:

@@ -19,7 +19,9 @@ Every message from the page is a JSON object with a ``type``:
                 ``position`` (3 numbers)
 ``render``      ``id`` (any number), ``camera`` (``position``,         answered by the
                 ``look_at``, ``up``, ``fov`` in degrees, vertical),    image: progress,
-                ``width``, ``height`` (pixels)                         then ``rendered``
+                ``width``, ``height`` (pixels), ``plain``              then ``rendered``
+                (optional, true: the photons' estimate alone, not
+                ``oclgi render``'s default)
 ``level``       ``level`` (0: the tessellation, k >= 1: its k-th       the colour frames
                 level of detail, oclgi/viewer/level_of_detail.py)      are of that mesh
 ``bake``        ``id`` (any number), ``exposure`` (optional, > 0)      answered by a glTF
@@ -208,5 +210,8 @@ def parse(text, movable: dict, methods: tuple, diagonal: float, lights: tuple = 
                              f"{', '.join(map(repr, lights)) or 'none'}")
         return Request("light", {"light": name, "position": _point(msg, "position", kind, lo, hi)})
     if kind == "render":
-        return Request("render", {"id": _number(msg, "id", kind), **_camera(msg, lo, hi)})
+        plain = msg.get("plain", False)
+        if not isinstance(plain, bool):
+            raise BadMessage(f"render: 'plain' must be true or false, got {_short(plain)}")
+        return Request("render", {"id": _number(msg, "id", kind), **_camera(msg, lo, hi), "plain": plain})
     raise BadMessage(f"unknown message type {_short(kind)} (move, estimator, photons, ack, sync, light, render, level, bake)")

@@ -16,7 +16,13 @@ placed at the session's poses and its lights at the page's, and
 ``Engine.render_run`` from the page's camera with the session's run
 parameters; the image is the same bit for bit (tests/test_viewer_socket.py).
 Small renders stay in the server's process (IN_PROCESS_PIXELS): a process
-costs about a second to start, and their steps are short.
+costs about a second to start, and their steps are short. A render takes
+``oclgi render``'s default estimate (oclgi/estimators/render_preset.py:
+several samples a pixel with exact direct light, the indirect light
+gathered) unless the page asks for the photons' estimate alone; its last
+step (the direct light and the gather of every sample) is one call of
+seconds past IN_PROCESS_GATHERED pixels, so such a render runs in a
+process of its own too.
 """
 
 from __future__ import annotations
@@ -29,6 +35,32 @@ import time
 from ..errors import OclgiError
 
 IN_PROCESS_PIXELS = 512 * 512  # at most this many pixels render in the server's own process
+IN_PROCESS_GATHERED = 64 * 64  # likewise with the default estimate (its last step is one call)
+
+
+def render_args(params, options: dict, width: int, height: int, plain: bool) -> dict:
+    """``Engine.render_run``'s arguments for a page's render with a
+    session's run parameters and options: its method, photons, seed,
+    depth and radius (or k), and unless ``plain`` the command's default
+    samples and options for a DETP method (``spp`` among them)."""
+    from ..estimators import ESTIMATORS
+    from ..estimators.render_preset import render_settings
+
+    args = dict(method=params.method, photons=params.photons, seed=params.seed, max_depth=params.max_depth)
+    if params.method == "photon_map":
+        args["k"] = options["k"]
+    else:
+        args["radius"] = params.radius
+    if not plain:
+        args.update(render_settings(ESTIMATORS[params.method].family, {"count_emitted": params.count_emitted},
+                                    False, width, height))
+    return args
+
+
+def elsewhere(width: int, height: int, args: dict) -> bool:
+    """Does a render of these arguments (render_args) run in a process of its own?"""
+    pixels = width * height
+    return pixels > IN_PROCESS_PIXELS or ("gather" in args and pixels > IN_PROCESS_GATHERED)
 PROGRESS_SECONDS = 0.1  # at most ten progress messages a second
 
 

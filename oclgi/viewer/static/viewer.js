@@ -707,11 +707,11 @@ async function main() {
   // "render this view": the engine's image from this camera, at the session's poses and lights
   let renders = 0, renderStarted = 0, renderInfo = null;
   const renderWaiting = new Map(); // render id -> resolve
-  function renderCamera(width) {
+  function renderCamera(width) { // the render request of this view (plain: the photons' estimate alone)
     const f = frame();
     const height = Math.max(1, Math.round(width * canvas.clientHeight / canvas.clientWidth));
     return {camera: {position: f.eye, look_at: camera.target.slice(), up: [0, 1, 0], fov: camera.fov * 180 / Math.PI},
-            width, height};
+            width, height, plain: $("render-plain").checked};
   }
   function requestRender(width) {
     const id = ++renders;
