@@ -245,7 +245,7 @@ def markdown(rows: list[dict], machine: str) -> str:
             f"{r['photons']:,} / {r['segments']:,} | {r['paths_median']:,.0f} | "
             + " | ".join(f"{r['stage_ms_median'].get(k, float('nan')):.1f}" for k in stages)
             + f" | {r['transfer_ms_median']:.1f} | {r['draw_ms_median']:.1f} | {r['user_ms_median']:.1f} | "
-            f"{r['frames_seen_median']:.0f} | {100 * r['within_2_frames']:.0f}% / {100 * r['within_3_frames']:.0f}% | "
+            f"{r['frames_seen_median']:g} | {100 * r['within_2_frames']:.0f}% / {100 * r['within_3_frames']:.0f}% | "
             f"**{r['updates_per_s']:.1f}** | {r['draws_per_update']:.2f} | {r['continuous_per_s']:.1f} |"
             for r in rows]
     out += ["", "The meshes the page draws: the tessellation and its levels of detail (faces); the draw times "
