@@ -398,6 +398,8 @@ def test_render_this_view_equals_the_api_render_at_the_camera_and_pose(viewer, w
         posed = await sync(ws, page)
         done, progress, png, radiance = await render(ws, page, 7, plain=plain or None)
         assert progress and progress[-1]["traced"] == progress[-1]["paths"] == PHOTONS
+        assert [m["stage"] for m in progress].count("final") == 1 and progress[-1]["stage"] == "final"
+        assert all(m["stage"] == "photons" for m in progress[:-1]) and len(progress) >= 2
         engine = viewer.engine.posed()
         engine.place("bunny", np.array(posed["poses"]["bunny"]).reshape(4, 4))
         cam = oclgi.Camera(position=tuple(CAMERA["position"]), look_at=tuple(CAMERA["look_at"]), fov=CAMERA["fov"],

@@ -434,7 +434,7 @@ class Connection:
 
     async def _send_render(self, req: Request) -> None:
         """Render, with a ``render_progress`` message a batch (at most ten a
-        second), then ``rendered`` and the image (RENDER_MAGIC: uint32 id
+        second) and one before the last step, then ``rendered`` and the image (RENDER_MAGIC: uint32 id
         index, width, height, PNG length; the PNG; float32 radiance[H][W][3]).
         A render past IN_PROCESS_PIXELS (IN_PROCESS_GATHERED with the default estimate) runs in a process of its own."""
         from .render_process import elsewhere, render_args
@@ -486,8 +486,11 @@ class Connection:
         if not self.ws.closed:
             await self.ws.send_bytes(BAKE_HEADER.pack(BAKE_MAGIC, len(glb)) + glb)
 
-    async def _progress(self, ident, traced: int, paths: int) -> None:
-        await self.send_json({"type": "render_progress", "id": ident, "traced": traced, "paths": paths})
+    async def _progress(self, ident, traced: int, paths: int, stage: str = "photons") -> None:
+        """``stage``: "photons" while they are traced, "final" once for the last step (the exact direct
+        light and the gather of the default estimate: seconds for a large image, with nothing to count)."""
+        await self.send_json({"type": "render_progress", "id": ident, "traced": traced, "paths": paths,
+                              "stage": stage})
 
     async def _render_here(self, req: Request):
         """(radiance, pixels) rendered on the device's thread a batch a call, or None if the page went away."""
@@ -501,6 +504,7 @@ class Connection:
             if now - last >= 0.1 or run.done:
                 last = now
                 await self._progress(ident, int(run.traced), int(run.paths.count))
+        await self._progress(ident, int(run.traced), int(run.paths.count), "final")
         image = await self.viewer.device(lambda: engine.render_result(run, run.finish()))
         return image.radiance, image.pixels
 
@@ -519,8 +523,8 @@ class Connection:
                     if self.ws.closed:
                         return None
                     raise OclgiError("the render's process ended without an image (killed, or out of memory?)")
-                if msg[0] == "progress":
-                    await self._progress(req.fields["id"], msg[1], msg[2])
+                if msg[0] in ("progress", "final"):
+                    await self._progress(req.fields["id"], msg[1], msg[2], "photons" if msg[0] == "progress" else "final")
                 elif msg[0] == "error":
                     raise OclgiError(msg[1])
                 else:

@@ -75,7 +75,8 @@ def job_of(engine, poses: dict, lights: dict, camera, args: dict, batch: int) ->
 
 def _render(pipe, job: dict) -> None:
     """The process: render ``job``, sending ("progress", traced, paths)
-    now and then and at last ("done", radiance, pixels) or ("error", text)."""
+    now and then, ("final", traced, paths) before the last step and at last
+    ("done", radiance, pixels) or ("error", text)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops this
     try:
         from ..engine import Engine
@@ -93,6 +94,7 @@ def _render(pipe, job: dict) -> None:
             if time.monotonic() - last >= PROGRESS_SECONDS:
                 last = time.monotonic()
                 pipe.send(("progress", int(run.traced), int(run.paths.count)))
+        pipe.send(("final", int(run.traced), int(run.paths.count)))
         image = engine.render_result(run, run.finish())
         pipe.send(("done", image.radiance, image.pixels))
     except OclgiError as exc:

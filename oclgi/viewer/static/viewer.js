@@ -684,9 +684,16 @@ async function main() {
       $("render-progress").value = 0;
       $("render-result").textContent = `rendering ${msg.width} x ${msg.height}...`;
     } else if (msg.type === "render_progress") {
-      $("render-progress").value = msg.traced / msg.paths;
-      $("render-result").textContent = `rendering: ${msg.traced.toLocaleString()} / ${msg.paths.toLocaleString()} ` +
-        `paths, ${((performance.now() - renderStarted) / 1000).toFixed(1)} s`;
+      const seconds = ((performance.now() - renderStarted) / 1000).toFixed(1);
+      if (msg.stage === "final") { // the last step: the exact direct light and the gather, nothing to count
+        $("render-progress").removeAttribute("value"); // an indeterminate bar
+        $("render-result").textContent = `rendering: ${msg.paths.toLocaleString()} paths traced; ` +
+          `the direct light and the gathered light (${seconds} s so far)`;
+      } else {
+        $("render-progress").value = msg.traced / msg.paths;
+        $("render-result").textContent = `rendering: ${msg.traced.toLocaleString()} / ${msg.paths.toLocaleString()} ` +
+          `paths, ${seconds} s`;
+      }
     } else if (msg.type === "rendered") {
       renderInfo = msg;
     } else if (msg.type === "baked") {
