@@ -552,11 +552,16 @@ class Engine:
         points, its memory checked first: (camera, spp, points)."""
         cam = self.view_camera(camera, width, height)
         spp = params.samples_per_pixel(spp)
+        budget.check(self.render_need(cam, spp, estimate_args), self.queue.device)
         r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
-        budget.check(budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth,
-                                        self.batch_bytes, estimate_args.get("k"), requested_rays(estimate_args, spp)),
-                     self.queue.device)
         return cam, spp, self.camera_points(cam, spp=spp, lift=r.radius)
+
+    def render_need(self, cam: Camera, spp: int, estimate_args: dict) -> "budget.Need":
+        """The memory a render of ``cam`` at ``spp`` samples a pixel with
+        ``estimate_args`` takes (its points, batches and gather rays)."""
+        r = self.run_params(*(estimate_args.get(k) for k in params.RUN_KEYS))
+        return budget.render_need(cam.width, cam.height * spp, r.method, r.photons, r.max_depth, self.batch_bytes,
+                                  estimate_args.get("k"), requested_rays(estimate_args, spp))
 
     def render_result(self, run: Run, est: Estimate, exposure: float = 1.0, layers: bool = False,
                       view: str = "srgb") -> Render:

@@ -235,42 +235,35 @@ class Connection:
         self.segments = int(new.store.path_len().sum())
         return {"switched": True, "seconds": {"total": time.perf_counter() - t0}}
 
-    def _render_plan(self, fields: dict):
+    def _render_plan(self, fields: dict, args: dict):
         """The engine's image from the page's camera at the session's poses
-        and lights (``Engine.render``'s steps), booked in the server's
-        budget: (the engine at those poses and lights, camera, run arguments)."""
-        from .. import budget
-        from ..estimators.gather_options import requested_rays
-        from .render_process import render_args
+        and lights (``Engine.render``'s steps) with the run arguments
+        ``args`` (render_process.render_args), booked in the server's
+        budget: (the engine at those poses and lights, camera)."""
         from ..scene.scene import Camera
 
-        s = self.session
-        engine = s.engine.posed()
+        engine = self.session.engine.posed()
         if self.session_stale:
             engine._apply_parameters(self.lights)
-        p = s.params
         cam = Camera(position=fields["position"], look_at=fields["look_at"], up=fields["up"], fov=fields["fov"],
                      width=fields["width"], height=fields["height"])
-        args = render_args(p, s.options, cam.width, cam.height, fields["plain"])
-        spp = args.get("spp", 1)
-        need = budget.render_need(cam.width, cam.height * spp, p.method, p.photons, p.max_depth, engine.batch_bytes,
-                                  k=args.get("k"), gather=requested_rays(args, spp))
+        need = engine.render_need(cam, args.get("spp", 1), args)
         self.viewer.ledger.book((self, "render"), need.device_total + need.host,
                                 f"a {cam.width}x{cam.height} render")
-        return engine, cam, args
+        return engine, cam
 
-    def _render_run(self, fields: dict):
+    def _render_run(self, fields: dict, args: dict):
         """(engine, run) of the render in this process, its batches of RENDER_BATCH paths left to step."""
-        engine, cam, args = self._render_plan(fields)
+        engine, cam = self._render_plan(fields, args)
         run = engine.render_run(cam, **args)
         run.set_batch(min(run.batch, RENDER_BATCH))
         return engine, run
 
-    def _render_job(self, fields: dict) -> dict:
+    def _render_job(self, fields: dict, args: dict) -> dict:
         """The render as a job for a process of its own (oclgi/viewer/render_process.py)."""
         from .render_process import job_of
 
-        engine, cam, args = self._render_plan(fields)
+        engine, cam = self._render_plan(fields, args)
         poses = {name: engine.pose_matrix(name) for name in self.viewer.movable}
         return job_of(engine, poses, self.lights, cam, args, RENDER_BATCH)
 
@@ -443,10 +436,10 @@ class Connection:
         await self.send_json({"type": "render_started", "id": ident, "width": req.fields["width"],
                               "height": req.fields["height"]})
         f = req.fields
-        big = elsewhere(f["width"], f["height"], render_args(self.session.params, self.session.options, f["width"],
-                                                             f["height"], f["plain"]))
+        args = render_args(self.session.params, self.session.options, f["width"], f["height"], f["plain"])
         try:
-            image = await (self._render_elsewhere(req) if big else self._render_here(req))
+            image = await (self._render_elsewhere if elsewhere(f["width"], f["height"], args)
+                           else self._render_here)(req, args)
         except OclgiError as exc:
             await self.error(str(exc), "render")
             return
@@ -492,10 +485,10 @@ class Connection:
         await self.send_json({"type": "render_progress", "id": ident, "traced": traced, "paths": paths,
                               "stage": stage})
 
-    async def _render_here(self, req: Request):
+    async def _render_here(self, req: Request, args: dict):
         """(radiance, pixels) rendered on the device's thread a batch a call, or None if the page went away."""
         ident, last = req.fields["id"], 0.0
-        engine, run = await self.viewer.device(self._render_run, req.fields)
+        engine, run = await self.viewer.device(self._render_run, req.fields, args)
         while not run.done:  # a batch a call: other pages' requests run in between
             if self.ws.closed:
                 return None  # the page went away: its render stops here
@@ -508,13 +501,13 @@ class Connection:
         image = await self.viewer.device(lambda: engine.render_result(run, run.finish()))
         return image.radiance, image.pixels
 
-    async def _render_elsewhere(self, req: Request):
+    async def _render_elsewhere(self, req: Request, args: dict):
         """(radiance, pixels) rendered by a process of its own, or None if
         the page went away (the process is then killed, as when the page's
         task is cancelled)."""
         from .render_process import RenderProcess
 
-        job = await self.viewer.device(self._render_job, req.fields)
+        job = await self.viewer.device(self._render_job, req.fields, args)
         worker = RenderProcess(job)
         try:
             while True:
@@ -523,8 +516,8 @@ class Connection:
                     if self.ws.closed:
                         return None
                     raise OclgiError("the render's process ended without an image (killed, or out of memory?)")
-                if msg[0] in ("progress", "final"):
-                    await self._progress(req.fields["id"], msg[1], msg[2], "photons" if msg[0] == "progress" else "final")
+                if msg[0] == "progress":
+                    await self._progress(req.fields["id"], *msg[1:])
                 elif msg[0] == "error":
                     raise OclgiError(msg[1])
                 else:

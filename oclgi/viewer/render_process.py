@@ -36,6 +36,7 @@ from ..errors import OclgiError
 
 IN_PROCESS_PIXELS = 512 * 512  # at most this many pixels render in the server's own process
 IN_PROCESS_GATHERED = 64 * 64  # likewise with the default estimate (its last step is one call)
+PROGRESS_SECONDS = 0.1  # at most ten progress messages a second
 
 
 def render_args(params, options: dict, width: int, height: int, plain: bool) -> dict:
@@ -61,7 +62,6 @@ def elsewhere(width: int, height: int, args: dict) -> bool:
     """Does a render of these arguments (render_args) run in a process of its own?"""
     pixels = width * height
     return pixels > IN_PROCESS_PIXELS or ("gather" in args and pixels > IN_PROCESS_GATHERED)
-PROGRESS_SECONDS = 0.1  # at most ten progress messages a second
 
 
 def job_of(engine, poses: dict, lights: dict, camera, args: dict, batch: int) -> dict:
@@ -74,9 +74,10 @@ def job_of(engine, poses: dict, lights: dict, camera, args: dict, batch: int) ->
 
 
 def _render(pipe, job: dict) -> None:
-    """The process: render ``job``, sending ("progress", traced, paths)
-    now and then, ("final", traced, paths) before the last step and at last
-    ("done", radiance, pixels) or ("error", text)."""
+    """The process: render ``job``, sending ("progress", traced, paths,
+    stage) now and then and once before the last step (stage "photons",
+    then "final": Connection._progress), and at last ("done", radiance,
+    pixels) or ("error", text)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops this
     try:
         from ..engine import Engine
@@ -93,8 +94,8 @@ def _render(pipe, job: dict) -> None:
             run.step()
             if time.monotonic() - last >= PROGRESS_SECONDS:
                 last = time.monotonic()
-                pipe.send(("progress", int(run.traced), int(run.paths.count)))
-        pipe.send(("final", int(run.traced), int(run.paths.count)))
+                pipe.send(("progress", int(run.traced), int(run.paths.count), "photons"))
+        pipe.send(("progress", int(run.traced), int(run.paths.count), "final"))
         image = engine.render_result(run, run.finish())
         pipe.send(("done", image.radiance, image.pixels))
     except OclgiError as exc:
